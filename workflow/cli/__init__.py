@@ -1,0 +1,81 @@
+"""The ``tactile`` command line (SPEC section 8).
+
+Each command lives in its own module with ``register(subparsers)`` that adds its parser
+and sets ``handler``.  A handler returns a JSON-able dict (printed on the last line of
+stdout with ``--json``) or ``None``.  Errors a user can act on are :class:`TactileError`
+(or argparse usage errors): one line on stderr, exit status 2, no traceback.
+"""
+
+import argparse
+import importlib
+import sys
+
+from ..errors import TactileError
+
+COMMANDS = ("evaluate", "optimize", "maps", "fit_damping", "simulate", "measure", "run")
+"""Modules of :mod:`workflow.cli`, one per command, in the order ``--help`` lists them."""
+
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors that name the command."""
+
+    def error(self, message):
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="tactile",
+        description="Design ultrasonic tactile plates: beam and FEM models, NLopt optimisation, "
+        "bench instruments and a Bayesian fit of the damping Q(v).",
+    )
+    from .. import __version__
+
+    parser.add_argument("--version", action="version", version=f"tactile {__version__}")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    subparsers.required = True
+    for name in COMMANDS:
+        try:
+            module = importlib.import_module(f".{name}", __name__)
+        except ModuleNotFoundError as error:
+            if error.name == f"{__name__}.{name}":
+                continue
+            raise
+        module.register(subparsers)
+    return parser
+
+
+def add_json_flag(parser: argparse.ArgumentParser) -> None:
+    """The common ``--json`` flag."""
+    parser.add_argument("--json", action="store_true", help="print one JSON object on the last line of stdout")
+
+
+def main(argv=None) -> int:
+    import json
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        result = args.handler(args)
+    except TactileError as error:
+        print(f"tactile {args.command.replace('_', '-')}: error: {error}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print(f"tactile {args.command.replace('_', '-')}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    if getattr(args, "json", False) and result is not None:
+        print(json.dumps(result, allow_nan=False, default=_jsonable))
+    return 0
+
+
+def _jsonable(value):
+    import numpy as np
+
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")

@@ -1,0 +1,1 @@
+"""Amplitude-dependent damping: Q(v) laws, the self-consistent harmonic solve, the fit."""

@@ -1,0 +1,108 @@
+"""Steady-state harmonic response with amplitude-dependent damping, solved self-consistently.
+
+A single resonant mode driven at frequency f has the deflection amplitude
+
+    w = w_s / sqrt((1 - r^2)^2 + (r / Q)^2),   r = f / f_r,
+
+with w_s the quasi-static deflection (at resonance w = Q w_s).  When Q depends on the
+velocity amplitude v = 2 pi f w, w appears on both sides.  Because every Q(v) law is
+non-increasing in v, h(w) = w - w(Q(2 pi f w)) is strictly increasing: the root is unique
+and bracketed by [0, w(Q(0))], so a bracketing iteration always converges.
+"""
+
+import numpy as np
+
+from ..errors import TactileError
+
+
+class HarmonicSolveError(TactileError):
+    """The self-consistent solve did not reach its tolerance."""
+
+
+def response_amplitude(static_amplitude, frequency_ratio, q):
+    """Deflection amplitude of a driven mode with constant Q [m].
+
+    Parameters
+    ----------
+    static_amplitude : array
+        Quasi-static deflection w_s [m] (w at resonance divided by Q).
+    frequency_ratio : array
+        r = f / f_r [-].
+    q : array
+        Quality factor [-].
+    """
+    r = np.asarray(frequency_ratio)
+    return np.asarray(static_amplitude) / np.sqrt((1 - r**2) ** 2 + (r / np.asarray(q)) ** 2)
+
+
+def self_consistent_amplitude(static_amplitude, frequency, resonance_frequency, quality_factor, rtol=1e-10, max_iter=200):
+    """Solve w = w_s / sqrt((1 - r^2)^2 + (r / Q(2 pi f w))^2) for w, elementwise [m].
+
+    Vectorised Illinois (modified regula falsi) iteration on the bracket [0, w(Q(0))]:
+    it always converges because the residual is monotone.
+
+    Parameters
+    ----------
+    static_amplitude : array
+        Quasi-static deflection w_s [m], >= 0.
+    frequency : array
+        Drive frequency f [Hz].
+    resonance_frequency : array
+        f_r [Hz].
+    quality_factor : callable
+        Q(v) with v the peak velocity amplitude [m/s]; non-increasing in v.
+    rtol : float
+        Relative tolerance on w.
+    max_iter : int
+
+    Returns
+    -------
+    numpy.ndarray
+        The deflection amplitude w [m], broadcast shape of the inputs.
+
+    Raises
+    ------
+    HarmonicSolveError
+        If the tolerance is not met (only with a law that is not non-increasing).
+    """
+    w_s, f, f_r = np.broadcast_arrays(
+        *(np.asarray(x, dtype=float) for x in (static_amplitude, frequency, resonance_frequency))
+    )
+    ratio = f / f_r
+    omega = 2 * np.pi * f
+
+    def residual(w):
+        return w - response_amplitude(w_s, ratio, quality_factor(omega * w))
+
+    low = np.zeros_like(w_s)
+    high = response_amplitude(w_s, ratio, quality_factor(np.zeros_like(w_s)))
+    high = np.broadcast_to(high, w_s.shape).astype(float)
+    r_low, r_high = residual(low), residual(high)
+    side = np.zeros(w_s.shape, dtype=int)
+    scale = np.maximum(high, np.finfo(float).tiny)
+    for _ in range(max_iter):
+        if np.all(high - low <= rtol * scale):
+            break
+        denominator = r_high - r_low
+        guess = np.where(denominator != 0, (low * r_high - high * r_low) / np.where(denominator != 0, denominator, 1), 0.5 * (low + high))
+        guess = np.clip(guess, low, high)
+        r_guess = residual(guess)
+        go_high = r_guess > 0  # root below guess: guess becomes the new high end
+        new_low = np.where(go_high, low, guess)
+        new_high = np.where(go_high, guess, high)
+        new_r_low = np.where(go_high, r_low, r_guess)
+        new_r_high = np.where(go_high, r_guess, r_high)
+        # Illinois: halve the residual of the end that stayed twice in a row.
+        r_low_kept = np.where(go_high & (side == 1), 0.5 * new_r_low, new_r_low)
+        r_high_kept = np.where(~go_high & (side == -1), 0.5 * new_r_high, new_r_high)
+        side = np.where(go_high, 1, -1)
+        exact = r_guess == 0
+        low, high = np.where(exact, guess, new_low), np.where(exact, guess, new_high)
+        r_low, r_high = np.where(exact, 0.0, r_low_kept), np.where(exact, 0.0, r_high_kept)
+    else:
+        if not np.all(high - low <= rtol * scale):
+            raise HarmonicSolveError(
+                f"self-consistent deflection did not converge to rtol={rtol:g} in {max_iter} iterations; "
+                "is the Q(v) law non-increasing in v?"
+            )
+    return 0.5 * (low + high)
