@@ -1,0 +1,56 @@
+"""``tactile evaluate``: deflection and resonance of one geometry."""
+
+from .. import analytical, materials
+from ..units import KHZ, MM, UM
+from . import add_json_flag
+from .options import (
+    add_ceramic_option,
+    add_model_option,
+    add_voltage_option,
+    add_width_option,
+    plate_from_args,
+    positive_float,
+)
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "evaluate",
+        help="deflection and resonance frequency of one plate",
+        description="Evaluate one plate geometry with the beam model or the FEM: the resonance "
+        "frequency and the antinode deflection amplitude at the drive voltage.",
+    )
+    add_model_option(parser)
+    parser.add_argument("--lambda-mm", type=positive_float, required=True, help="wavelength lambda [mm]")
+    parser.add_argument("--hi-mm", type=positive_float, required=True, help="resonator thickness h_i [mm]")
+    add_ceramic_option(parser, required=True)
+    add_width_option(parser)
+    parser.add_argument(
+        "--q", type=positive_float, default=materials.PLATE_Q, help=f"plate quality factor (default: {materials.PLATE_Q:g})"
+    )
+    add_voltage_option(parser)
+    add_json_flag(parser)
+    parser.set_defaults(handler=run)
+
+
+def run(args) -> dict:
+    plate = plate_from_args(args)
+    result = {
+        "model": args.model,
+        "lambda_mm": plate.wavelength / MM,
+        "h_i_mm": plate.resonator_thickness / MM,
+        "h_p_mm": plate.ceramic_thickness / MM,
+        "b_mm": plate.width / MM,
+        "q": args.q,
+        "voltage_v": args.voltage,
+    }
+    if args.model == "analytical":
+        result["w_dyn_um"] = float(analytical.dynamic_deflection(plate, args.voltage, args.q)) / UM
+        result["f_r_khz"] = float(analytical.resonance_frequency(plate)) / KHZ
+    if not args.json:
+        print(
+            f"{args.model}: lambda {result['lambda_mm']:g} mm, h_i {result['h_i_mm']:g} mm, h_p {result['h_p_mm']:g} mm, "
+            f"b {result['b_mm']:g} mm, Q {args.q:g}, {args.voltage:g} V -> "
+            f"w_dyn {result['w_dyn_um']:.4f} um at f_r {result['f_r_khz']:.3f} kHz"
+        )
+    return result

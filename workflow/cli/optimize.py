@@ -1,0 +1,77 @@
+"""``tactile optimize``: the geometry of maximum deflection with f_r >= 25 kHz."""
+
+from .. import materials
+from ..optimize import Optimum, optimise_analytical
+from ..units import KHZ, MM, UM
+from . import add_json_flag
+from .options import (
+    add_ceramic_option,
+    add_hi_min_option,
+    add_model_option,
+    add_voltage_option,
+    add_width_option,
+    ceramic_thicknesses,
+    design_problem,
+    positive_float,
+)
+
+METHODS = ("nlopt", "space-mapping")
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "optimize",
+        help="maximise the deflection subject to f_r >= 25 kHz",
+        description="Maximise the antinode deflection at the drive voltage over the wavelength and the "
+        "resonator thickness, subject to a resonance frequency of at least 25 kHz, for one ceramic "
+        "thickness (or all of them when --hp-mm is omitted).",
+    )
+    add_model_option(parser)
+    parser.add_argument(
+        "--method",
+        choices=METHODS,
+        default="nlopt",
+        help="for the FEM: direct NLopt from the analytical optimum, or aggressive space mapping (default: nlopt)",
+    )
+    add_ceramic_option(parser, required=False)
+    add_hi_min_option(parser)
+    add_width_option(parser)
+    parser.add_argument(
+        "--q", type=positive_float, default=materials.PLATE_Q, help=f"plate quality factor (default: {materials.PLATE_Q:g})"
+    )
+    add_voltage_option(parser)
+    add_json_flag(parser)
+    parser.set_defaults(handler=run)
+
+
+def optimum_record(optimum: Optimum, **counts) -> dict:
+    """The JSON keys of SPEC section 8 for one optimum."""
+    plate = optimum.plate
+    return {
+        "lambda_mm": plate.wavelength / MM,
+        "h_i_mm": plate.resonator_thickness / MM,
+        "h_p_mm": plate.ceramic_thickness / MM,
+        "b_mm": plate.width / MM,
+        "w_dyn_um": optimum.deflection / UM,
+        "f_r_khz": optimum.frequency / KHZ,
+        "constraint_active": optimum.constraint_active,
+        "status": optimum.status,
+        **counts,
+    }
+
+
+def run(args) -> dict:
+    records = []
+    for ceramic_thickness in ceramic_thicknesses(args):
+        problem = design_problem(args, ceramic_thickness)
+        if args.model == "analytical":
+            optimum = optimise_analytical(problem, q=args.q)
+            records.append(optimum_record(optimum, coarse_evaluations=optimum.evaluations))
+    if not args.json:
+        for r in records:
+            counts = ", ".join(f"{k.replace('_', ' ')} {r[k]}" for k in ("fine_evaluations", "coarse_evaluations") if k in r)
+            print(
+                f"h_p {r['h_p_mm']:g} mm: lambda {r['lambda_mm']:.4f} mm, h_i {r['h_i_mm']:.4f} mm -> "
+                f"w_dyn {r['w_dyn_um']:.4f} um at f_r {r['f_r_khz']:.3f} kHz ({counts})"
+            )
+    return records[0] if len(records) == 1 else {"optima": records}

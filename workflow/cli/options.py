@@ -1,0 +1,105 @@
+"""Command-line options shared by several commands, and their conversion to SI."""
+
+import argparse
+import math
+
+from .. import materials
+from ..errors import GeometryError
+from ..optimize import DesignProblem
+from ..plate import ORIGINAL_PLATE, Plate, check_design_space
+from ..units import MM
+
+MODELS = ("analytical", "fem")
+
+
+def finite_float(text: str) -> float:
+    """argparse type: a finite number."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0."""
+    value = finite_float(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return value
+
+
+def add_model_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--model", choices=MODELS, default="analytical", help="plate model (default: analytical)")
+
+
+def add_ceramic_option(parser: argparse.ArgumentParser, required: bool) -> None:
+    sizes = ", ".join(f"{t / MM:g}" for t in materials.CERAMIC_THICKNESSES)
+    parser.add_argument(
+        "--hp-mm",
+        type=positive_float,
+        required=required,
+        help=f"ceramic thickness h_p [mm], one of {sizes}" + ("" if required else " (default: all)"),
+    )
+
+
+def add_width_option(parser: argparse.ArgumentParser) -> None:
+    low, high = (x / MM for x in materials.WIDTH_RANGE)
+    parser.add_argument(
+        "--b-mm",
+        type=positive_float,
+        default=ORIGINAL_PLATE.width / MM,
+        help=f"plate width b [mm], {low:g} to {high:g} (default: {ORIGINAL_PLATE.width / MM:g})",
+    )
+
+
+def add_voltage_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--voltage",
+        type=positive_float,
+        default=materials.DESIGN_VOLTAGE,
+        help=f"drive amplitude across the ceramics [V peak] (default: {materials.DESIGN_VOLTAGE:g})",
+    )
+
+
+def add_hi_min_option(parser: argparse.ArgumentParser) -> None:
+    low, high = (x / MM for x in materials.RESONATOR_THICKNESS_RANGE)
+    parser.add_argument(
+        "--hi-min-mm",
+        type=positive_float,
+        default=materials.PRACTICAL_MIN_RESONATOR_THICKNESS / MM,
+        help=f"lower bound on the resonator thickness h_i [mm], >= {low:g} "
+        f"(default: the practical minimum {materials.PRACTICAL_MIN_RESONATOR_THICKNESS / MM:g})",
+    )
+
+
+def plate_from_args(args) -> Plate:
+    """The plate named by --lambda-mm, --hi-mm, --hp-mm, --b-mm, checked against Table 1."""
+    plate = Plate(
+        wavelength=args.lambda_mm * MM,
+        resonator_thickness=args.hi_mm * MM,
+        ceramic_thickness=args.hp_mm * MM,
+        width=args.b_mm * MM,
+    )
+    return check_design_space(plate)
+
+
+def ceramic_thicknesses(args) -> tuple:
+    """The h_p values [m] asked for: the one given by --hp-mm, else all commercial sizes."""
+    return materials.CERAMIC_THICKNESSES if args.hp_mm is None else (args.hp_mm * MM,)
+
+
+def design_problem(args, ceramic_thickness: float) -> DesignProblem:
+    """The optimisation problem for one h_p from --b-mm, --hi-min-mm and --voltage."""
+    hi_min = args.hi_min_mm * MM
+    low, high = materials.RESONATOR_THICKNESS_RANGE
+    if not low - 1e-12 <= hi_min < high:
+        raise GeometryError(f"--hi-min-mm {args.hi_min_mm:g} is outside {low / MM:g} to {high / MM:g} mm")
+    return DesignProblem(
+        ceramic_thickness=ceramic_thickness,
+        width=args.b_mm * MM,
+        voltage=getattr(args, "voltage", materials.DESIGN_VOLTAGE),
+        min_resonator_thickness=hi_min,
+    )
