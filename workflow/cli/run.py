@@ -1,0 +1,47 @@
+"""``tactile run``: the whole job on embedded defaults."""
+
+import sys
+from pathlib import Path
+
+from ..config import load_config, to_toml
+from ..pipeline import RunContext, run_steps
+from ..report import write_report
+from . import add_json_flag
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "run",
+        help="the whole job: campaign, Q(v) fit, optimisation, maps, report",
+        description="Run the whole workflow on the embedded defaults (no hardware needed): simulated "
+        "campaign (or --logs), Q(v) fit, optimisation with constant Q and with Q(v), maps, FEM steps, "
+        "and a markdown report with its figures.",
+    )
+    parser.add_argument("--config", type=Path, help="TOML file overriding the embedded defaults")
+    parser.add_argument("--out", type=Path, default=Path("reports"), help="output folder (default: reports/)")
+    parser.add_argument("--logs", type=Path, nargs="+", help="interferometer logs to fit instead of a simulated campaign")
+    parser.add_argument("--scheduler", help="tcp://host:port of a Dask scheduler (default: local cores)")
+    parser.add_argument("--print-config", action="store_true", help="print the effective configuration and exit")
+    add_json_flag(parser)
+    parser.set_defaults(handler=run)
+
+
+def run(args):
+    config = load_config(args.config)
+    if args.print_config:
+        print(to_toml(config), end="")
+        return None
+    context = RunContext(
+        config=config,
+        out=args.out,
+        scheduler=args.scheduler or config["run"]["scheduler"] or None,
+        logs=list(args.logs or config["campaign"]["logs"]),
+    )
+    run_steps(context)
+    report = write_report(context)
+    print(f"report: {report}", file=sys.stderr if args.json else sys.stdout)
+    return {
+        "report": str(report),
+        "figures": sorted(context.figures.values()),
+        "timings_s": {t.name: round(t.seconds, 3) for t in context.timings},
+    }

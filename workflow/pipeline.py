@@ -1,0 +1,100 @@
+"""``tactile run``: the whole job as a sequence of named, timed steps.
+
+Each step is a function ``step(context) -> result`` of a :class:`RunContext`; results are
+kept by step name for the steps after it and for the report.  A step that fails stops the
+run with a :class:`StepError` naming the step and the reason.
+"""
+
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Dict, List, Optional
+
+from .errors import TactileError
+from .optimize import DesignProblem, optimise_analytical
+from .units import KHZ, MM
+
+
+class StepError(TactileError):
+    """A step of ``tactile run`` failed."""
+
+
+@dataclass
+class StepTiming:
+    """How long a step took [s] and whether its result came from the cache."""
+
+    name: str
+    seconds: float
+    cached: bool = False
+
+
+@dataclass
+class RunContext:
+    """What the steps share: the configuration, the output folder, the results so far."""
+
+    config: dict
+    out: Path
+    scheduler: Optional[str] = None
+    logs: List[Path] = field(default_factory=list)
+    results: Dict[str, Any] = field(default_factory=dict)
+    timings: List[StepTiming] = field(default_factory=list)
+    figures: Dict[str, str] = field(default_factory=dict)
+
+    def figure_path(self, name: str) -> Path:
+        """Where the figure ``name`` (a PNG file name) is written; recorded for the report."""
+        self.figures[name] = name
+        return self.out / name
+
+
+def design_problems(config: dict) -> Dict[float, DesignProblem]:
+    """One :class:`DesignProblem` per h_p of the [design] section, keyed by h_p [m]."""
+    design = config["design"]
+    return {
+        thickness * MM: DesignProblem(
+            ceramic_thickness=thickness * MM,
+            width=design["width_mm"] * MM,
+            voltage=design["voltage_v"],
+            min_frequency=design["min_frequency_khz"] * KHZ,
+            min_resonator_thickness=design["hi_min_mm"] * MM,
+            max_resonator_thickness=design["hi_max_mm"] * MM,
+            wavelength_range=(design["wavelength_min_mm"] * MM, design["wavelength_max_mm"] * MM),
+        )
+        for thickness in design["ceramic_thicknesses_mm"]
+    }
+
+
+def analytical_optima(context: RunContext):
+    """The beam-model optimum with constant Q for every h_p."""
+    q = context.config["design"]["q"]
+    return {hp: optimise_analytical(problem, q=q) for hp, problem in design_problems(context.config).items()}
+
+
+Step = Callable[[RunContext], Any]
+
+STEPS: List[tuple] = [
+    ("analytical optimisation (constant Q)", "analytical_optima", analytical_optima),
+]
+"""(title, result key, function) in the order they run."""
+
+
+def run_steps(context: RunContext, steps=None, stream=sys.stderr) -> RunContext:
+    """Run ``steps`` (default :data:`STEPS`) in order, printing progress and timings to ``stream``."""
+    steps = STEPS if steps is None else steps
+    context.out.mkdir(parents=True, exist_ok=True)
+    for number, (title, key, function) in enumerate(steps, start=1):
+        print(f"[{number}/{len(steps)}] {title} ...", file=stream, flush=True)
+        start = time.perf_counter()
+        try:
+            context.results[key] = function(context)
+        except StepError:
+            raise
+        except TactileError as error:
+            raise StepError(f"step '{title}' failed: {error}") from None
+        except Exception as error:  # an unexpected failure still names its step
+            raise StepError(f"step '{title}' failed unexpectedly: {type(error).__name__}: {error}") from error
+        seconds = time.perf_counter() - start
+        context.timings.append(StepTiming(title, seconds))
+        print(f"[{number}/{len(steps)}] {title}: done in {seconds:.1f} s", file=stream, flush=True)
+    return context
+
