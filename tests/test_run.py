@@ -1,0 +1,74 @@
+"""``tactile run`` end to end on a tiny configuration; the report's links resolve."""
+
+import re
+
+
+import pytest
+
+from workflow.cli import main
+from workflow.config import default_config, tomllib
+
+TINY = """
+[design]
+ceramic_thicknesses_mm = [1.0]
+[maps]
+grid = 9
+fem_grid = 2
+fem_ceramic_thicknesses_mm = [1.0]
+[fem]
+mesh = "coarse"
+width_points = 3
+[campaign]
+voltages_v = [5.0, 15.0]
+points_per_sweep = 21
+[damping]
+laws = ["quadratic"]
+walkers = 16
+max_steps = 3000
+posterior_draws = 8
+"""
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("run")
+    config = folder / "tiny.toml"
+    config.write_text(TINY)
+    out = folder / "report"
+    status = main(["run", "--config", str(config), "--out", str(out)])
+    return status, out
+
+
+def test_tiny_run_writes_a_report(tiny_run):
+    status, out = tiny_run
+    assert status == 0
+    text = (out / "report.md").read_text()
+    assert "## Analytical optimum with constant Q" in text
+    assert "## Run time" in text
+
+
+def test_every_link_of_the_report_resolves(tiny_run):
+    _, out = tiny_run
+    text = (out / "report.md").read_text()
+    targets = re.findall(r"\]\(([^)]+)\)", text)
+    for target in targets:
+        if "://" not in target:
+            assert (out / target).is_file(), target
+
+
+def test_print_config_shows_the_effective_configuration(capsys, tmp_path):
+    path = tmp_path / "c.toml"
+    path.write_text("[design]\nvoltage_v = 10.0\n")
+    assert main(["run", "--config", str(path), "--print-config"]) == 0
+    printed = tomllib.loads(capsys.readouterr().out)
+    expected = default_config()
+    expected["design"]["voltage_v"] = 10.0
+    assert printed == expected
+
+
+def test_configuration_error_names_the_key(capsys, tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_text("[maps]\ngrid = 'many'\n")
+    assert main(["run", "--config", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "maps.grid" in err[0]
