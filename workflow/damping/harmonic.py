@@ -8,6 +8,10 @@ with w_s the quasi-static deflection (at resonance w = Q w_s).  When Q depends o
 velocity amplitude v = 2 pi f w, w appears on both sides.  Because every Q(v) law is
 non-increasing in v, h(w) = w - w(Q(2 pi f w)) is strictly increasing: the root is unique
 and bracketed by [0, w(Q(0))], so a bracketing iteration always converges.
+
+Two solvers: :func:`self_consistent_amplitude` needs only Q(v) (Illinois iteration);
+:func:`self_consistent_amplitude_newton` uses the law's loss 1/Q and its slope for a
+safeguarded Newton iteration on s = w^2, several times faster (the fit's inner loop).
 """
 
 import numpy as np
@@ -68,6 +72,10 @@ def self_consistent_amplitude(static_amplitude, frequency, resonance_frequency, 
     w_s, f, f_r = np.broadcast_arrays(
         *(np.asarray(x, dtype=float) for x in (static_amplitude, frequency, resonance_frequency))
     )
+    high = response_amplitude(w_s, f / f_r, quality_factor(np.zeros_like(w_s)))
+    # The law's parameters may add dimensions (e.g. one row per walker).
+    w_s, f, f_r, high = np.broadcast_arrays(w_s, f, f_r, high)
+    high = high.astype(float)
     ratio = f / f_r
     omega = 2 * np.pi * f
 
@@ -75,8 +83,6 @@ def self_consistent_amplitude(static_amplitude, frequency, resonance_frequency, 
         return w - response_amplitude(w_s, ratio, quality_factor(omega * w))
 
     low = np.zeros_like(w_s)
-    high = response_amplitude(w_s, ratio, quality_factor(np.zeros_like(w_s)))
-    high = np.broadcast_to(high, w_s.shape).astype(float)
     r_low, r_high = residual(low), residual(high)
     side = np.zeros(w_s.shape, dtype=int)
     scale = np.maximum(high, np.finfo(float).tiny)
@@ -106,3 +112,68 @@ def self_consistent_amplitude(static_amplitude, frequency, resonance_frequency, 
                 "is the Q(v) law non-increasing in v?"
             )
     return 0.5 * (low + high)
+
+
+def self_consistent_amplitude_newton(static_amplitude, frequency, resonance_frequency, law, rtol=1e-10, max_iter=100):
+    """Solve w = w_s / sqrt((1 - r^2)^2 + (r / Q(2 pi f w))^2) for w with Newton's method [m].
+
+    With s = w^2, eta = 1/Q and v = 2 pi f sqrt(s), the root of
+    G(s) = s ((1 - r^2)^2 + r^2 eta(v)^2) - w_s^2 is sought from the bracket's upper end
+    s = w(Q(0))^2, where G >= 0.  G is increasing, and convex for the quadratic and linear
+    laws, so the Newton iterates fall monotonically onto the root; a step that leaves the
+    bracket [low, high] is replaced by bisection, so any non-increasing Q(v) converges.
+
+    Parameters
+    ----------
+    static_amplitude : array
+        Quasi-static deflection w_s [m], >= 0.
+    frequency : array
+        Drive frequency f [Hz].
+    resonance_frequency : array
+        f_r [Hz].
+    law : object
+        A Q(v) law with ``loss(v)`` = 1/Q [-] and ``loss_slope(v)`` = d(1/Q)/dv [s/m]
+        (see :mod:`workflow.damping.laws`); parameters may be arrays that broadcast.
+    rtol : float
+        Relative tolerance on w.
+    max_iter : int
+
+    Returns
+    -------
+    numpy.ndarray
+        The deflection amplitude w [m], broadcast shape of the inputs and the law's parameters.
+
+    Raises
+    ------
+    HarmonicSolveError
+        If the tolerance is not met in ``max_iter`` iterations.
+    """
+    w_s, f, f_r = (np.asarray(x, dtype=float) for x in (static_amplitude, frequency, resonance_frequency))
+    ratio2 = (f / f_r) ** 2
+    detuning2 = (1 - ratio2) ** 2
+    omega = 2 * np.pi * f
+    target = w_s**2
+    high = target / (detuning2 + ratio2 * law.loss(0.0 * omega) ** 2)
+    shape = np.broadcast(high, omega, law.loss(omega)).shape
+    high = np.broadcast_to(high, shape).copy()
+    low = np.zeros(shape)
+    s = high.copy()
+    for _ in range(max_iter):
+        velocity = omega * np.sqrt(s)
+        loss = law.loss(velocity)
+        residual = s * (detuning2 + ratio2 * loss**2) - target
+        slope = detuning2 + ratio2 * loss * (loss + law.loss_slope(velocity) * velocity)
+        above = residual > 0
+        high = np.where(above, s, high)
+        low = np.where(above, low, s)
+        step = residual / slope
+        newton = s - step
+        inside = (newton >= low) & (newton <= high)
+        s_new = np.where(inside, newton, 0.5 * (low + high))
+        converged = np.abs(s_new - s) <= 2 * rtol * s_new
+        s = s_new
+        if np.all(converged | (residual == 0)):
+            return np.sqrt(s)
+    raise HarmonicSolveError(
+        f"self-consistent deflection (Newton) did not converge to rtol={rtol:g} in {max_iter} iterations"
+    )

@@ -1,0 +1,240 @@
+"""Reading and validating interferometer logs (SPEC section 7, format version 1).
+
+The reader only opens files for reading: an input file is never modified.  Anything a
+user must fix raises :class:`~workflow.errors.InputFileError` naming the file, the line
+and the problem.  Two things are tolerated with a warning (collected on the result, the
+CLI prints each as one line): rows whose velocity is missing or ``nan`` (vibrometer
+dropouts) are dropped and counted, and an incomplete last line without a newline (a
+writer interrupted mid-row) is ignored.
+"""
+
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence, Tuple
+
+import numpy as np
+
+from .. import logformat
+from ..errors import InputFileError
+
+_QUANTITY_STEMS = {
+    logformat.FREQUENCY: ("frequency", "freq"),
+    logformat.DRIVE_VOLTAGE: ("drive_voltage", "voltage", "drive"),
+    logformat.VELOCITY: ("velocity", "vel"),
+}
+"""Column-name stems that reveal a required quantity given in another unit."""
+
+_MISSING = {"", "nan", "NaN", "NAN"}
+
+
+@dataclass(frozen=True)
+class CampaignLog:
+    """Sweeps read from one or more logs, as arrays of equal length (one entry per row).
+
+    Attributes
+    ----------
+    frequency : numpy.ndarray
+        Drive frequency [Hz].
+    drive_voltage : numpy.ndarray
+        Peak voltage across the ceramics [V].
+    velocity : numpy.ndarray
+        Peak velocity amplitude at the measurement point [m/s].
+    sweep : numpy.ndarray of int
+        Sweep index 0 .. n_sweeps - 1, numbered in reading order across files.
+    sources : tuple of str
+        The files read.
+    warnings : tuple of str
+        One line per tolerated problem (dropped dropouts, ignored partial line).
+    """
+
+    frequency: np.ndarray
+    drive_voltage: np.ndarray
+    velocity: np.ndarray
+    sweep: np.ndarray
+    sources: Tuple[str, ...]
+    warnings: Tuple[str, ...] = ()
+
+    @property
+    def n_sweeps(self) -> int:
+        """Number of sweeps [-]."""
+        return int(self.sweep.max()) + 1
+
+    def sweep_voltages(self) -> np.ndarray:
+        """Median drive voltage of each sweep [V]."""
+        return np.array([np.median(self.drive_voltage[self.sweep == k]) for k in range(self.n_sweeps)])
+
+
+def read_logs(paths: Sequence) -> CampaignLog:
+    """Read and concatenate several logs; sweeps are renumbered so they never collide.
+
+    Raises
+    ------
+    InputFileError
+        On the first malformed file, naming it.
+    """
+    if not paths:
+        raise InputFileError("no log file given")
+    logs = [read_log(path) for path in paths]
+    offsets = np.cumsum([0] + [log.n_sweeps for log in logs[:-1]])
+    return CampaignLog(
+        frequency=np.concatenate([log.frequency for log in logs]),
+        drive_voltage=np.concatenate([log.drive_voltage for log in logs]),
+        velocity=np.concatenate([log.velocity for log in logs]),
+        sweep=np.concatenate([log.sweep + offset for log, offset in zip(logs, offsets)]),
+        sources=tuple(source for log in logs for source in log.sources),
+        warnings=tuple(warning for log in logs for warning in log.warnings),
+    )
+
+
+def read_log(path) -> CampaignLog:
+    """Read one interferometer log.
+
+    Without a ``sweep`` column, a new sweep starts wherever the drive voltage changes
+    between consecutive rows.
+
+    Raises
+    ------
+    InputFileError
+        Unreadable, empty, binary or non-UTF-8 file; no header or no data rows; a
+        required column missing, duplicated or given in an unknown unit; a row with the
+        wrong number of fields; a non-numeric or non-physical value.
+    """
+    path = Path(path)
+    lines, warnings = _text_lines(path)
+    body = [(number, line) for number, line in lines if line.strip() and not line.lstrip().startswith("#")]
+    if not body:
+        raise InputFileError(f"{path}: no header row (expected columns {', '.join(logformat.REQUIRED_COLUMNS)})")
+    header_number, header_line = body[0]
+    header = [name.strip() for name in next(csv.reader([header_line]))]
+    columns = _column_indices(path, header_number, header)
+    rows = body[1:]
+    if not rows:
+        raise InputFileError(f"{path}: header only, no data rows")
+    table = {name: [] for name in columns}
+    line_numbers, dropouts = [], 0
+    for number, line in rows:
+        cells = next(csv.reader([line]))
+        if len(cells) != len(header):
+            raise InputFileError(f"{path}, line {number}: expected {len(header)} fields, got {len(cells)}")
+        values = {name: _number(path, number, name, cells[index]) for name, index in columns.items()}
+        if math.isnan(values[logformat.VELOCITY]):
+            dropouts += 1
+            continue
+        line_numbers.append(number)
+        for name, value in values.items():
+            table[name].append(value)
+    if dropouts:
+        warnings.append(f"{path}: dropped {dropouts} row(s) without a velocity reading (vibrometer dropouts)")
+    if not table[logformat.VELOCITY]:
+        raise InputFileError(f"{path}: no data row has a velocity reading")
+    arrays = {name: np.asarray(values, dtype=float) for name, values in table.items()}
+    _check_physical(path, arrays, np.asarray(line_numbers))
+    return CampaignLog(
+        frequency=arrays[logformat.FREQUENCY],
+        drive_voltage=arrays[logformat.DRIVE_VOLTAGE],
+        velocity=arrays[logformat.VELOCITY],
+        sweep=_sweep_index(path, arrays),
+        sources=(str(path),),
+        warnings=tuple(warnings),
+    )
+
+
+def _text_lines(path: Path):
+    """(line number, text) pairs of a UTF-8 file, and the warnings about it."""
+    try:
+        raw = path.read_bytes()
+    except OSError as error:
+        raise InputFileError(f"{path}: cannot read ({error.strerror or error})") from None
+    if not raw.strip():
+        raise InputFileError(f"{path}: empty file")
+    if b"\x00" in raw:
+        raise InputFileError(f"{path}: binary data (NUL bytes), not a CSV log")
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as error:
+        line = raw[: error.start].count(b"\n") + 1
+        raise InputFileError(
+            f"{path}, line {line}: not UTF-8 (byte 0x{raw[error.start]:02x} at offset {error.start})"
+        ) from None
+    lines = list(enumerate(text.split("\n"), start=1))
+    warnings = []
+    if lines and lines[-1][1] == "":
+        lines.pop()
+    elif not text.endswith("\n") and _is_data_line(lines):
+        number, _ = lines.pop()
+        warnings.append(f"{path}, line {number}: ignored an incomplete last line (no newline; interrupted writer?)")
+    return [(number, line.rstrip("\r")) for number, line in lines], warnings
+
+
+def _is_data_line(lines) -> bool:
+    """Whether the last line comes after a header (so it is a row, not the header)."""
+    content = [line for _, line in lines if line.strip() and not line.lstrip().startswith("#")]
+    return len(content) >= 2 and content[-1] == lines[-1][1]
+
+
+def _column_indices(path: Path, line: int, header) -> dict:
+    """Required and known optional column name -> index in the header."""
+    indices = {}
+    for name in logformat.COLUMNS:
+        positions = [i for i, column in enumerate(header) if column == name]
+        if len(positions) > 1:
+            raise InputFileError(f"{path}, line {line}: column '{name}' appears {len(positions)} times (ambiguous)")
+        if positions:
+            indices[name] = positions[0]
+    for name in logformat.REQUIRED_COLUMNS:
+        if name in indices:
+            continue
+        lookalikes = [c for c in header if c.lower().replace(" ", "_").startswith(_QUANTITY_STEMS[name])]
+        if lookalikes:
+            raise InputFileError(
+                f"{path}, line {line}: column '{lookalikes[0]}' has an unknown unit or name; expected '{name}'"
+            )
+        raise InputFileError(
+            f"{path}, line {line}: missing required column '{name}' (header: {', '.join(header) or 'empty'})"
+        )
+    return {name: index for name, index in indices.items() if name != logformat.PHASE}
+
+
+def _number(path: Path, line: int, column: str, cell: str) -> float:
+    """A cell as a float; empty and nan are NaN (allowed only for the velocity)."""
+    text = cell.strip()
+    if text in _MISSING:
+        if column == logformat.VELOCITY:
+            return math.nan
+        raise InputFileError(f"{path}, line {line}: missing value in column '{column}'")
+    try:
+        value = float(text)
+    except ValueError:
+        raise InputFileError(f"{path}, line {line}: non-numeric value {text!r} in column '{column}'") from None
+    if not math.isfinite(value):
+        raise InputFileError(f"{path}, line {line}: non-finite value {text!r} in column '{column}'")
+    return value
+
+
+def _check_physical(path: Path, arrays: dict, line_numbers: np.ndarray) -> None:
+    """Refuse non-positive frequencies and negative voltages or velocities."""
+    checks = (
+        (logformat.FREQUENCY, arrays[logformat.FREQUENCY] <= 0, "a frequency must be positive"),
+        (logformat.DRIVE_VOLTAGE, arrays[logformat.DRIVE_VOLTAGE] < 0, "a peak voltage must be >= 0"),
+        (logformat.VELOCITY, arrays[logformat.VELOCITY] < 0, "a velocity amplitude must be >= 0"),
+    )
+    for column, bad, reason in checks:
+        if bad.any():
+            value = arrays[column][bad][0]
+            line = line_numbers[np.argmax(bad)]
+            raise InputFileError(f"{path}, line {line}: {column} = {value:g}: {reason}")
+
+
+def _sweep_index(path: Path, arrays: dict) -> np.ndarray:
+    """0-based sweep index per row, from the ``sweep`` column or from voltage changes."""
+    if logformat.SWEEP in arrays:
+        ids = arrays[logformat.SWEEP]
+        if not np.all(ids == np.round(ids)):
+            raise InputFileError(f"{path}: column '{logformat.SWEEP}' must hold integer sweep ids")
+        starts = np.r_[True, ids[1:] != ids[:-1]]
+    else:
+        voltage = arrays[logformat.DRIVE_VOLTAGE]
+        starts = np.r_[True, ~np.isclose(voltage[1:], voltage[:-1], rtol=1e-6, atol=1e-9)]
+    return np.cumsum(starts) - 1
