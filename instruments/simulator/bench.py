@@ -1,0 +1,182 @@
+"""The simulated bench: a plate, the amplifier, a generator and a vibrometer sharing one clock.
+
+Time is simulated: each vibrometer readout takes ``measurement_time`` of bench time and
+:meth:`Bench.sleep` advances it, so simulated campaigns run as fast as the CPU allows
+and are reproducible from their seeds.
+"""
+
+import itertools
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from workflow.damping.laws import law_parameters
+from workflow.plate import ORIGINAL_PLATE, Plate
+
+from ..amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT, DEFAULT_GAIN, PowerAmplifier
+from .faults import Fault, FaultInjector, FaultSettings
+from .generator import GeneratorDevice
+from .physics import PlateResponse, plate_response
+from .vibrometer import VibrometerDevice
+
+INSTRUMENTS = ("generator", "vibrometer")
+DEFAULT_DRIFT_RATE = -0.02
+"""Thermal drift of the simulated resonance [Hz/s] (the plate warms while driven)."""
+
+
+class SimulatedDisconnect(Exception):
+    """The simulated port went dead (fault injection)."""
+
+
+@dataclass(frozen=True)
+class BenchSettings:
+    """Everything that defines a simulated bench.
+
+    Attributes
+    ----------
+    response : PlateResponse
+        The plate's physics (f_r, gain, Q(v) law, drift).
+    amplifier_gain : float
+        Voltage gain between generator and ceramics [V/V].
+    ceramic_voltage_limit : float
+        Safety limit on the peak voltage across the ceramics [V]; the simulated generator
+        refuses settings beyond it (translated through the gain).
+    measurement_time : float
+        Bench time one vibrometer readout takes (settling and lock-in integration) [s].
+    relative_noise : float
+        Relative standard deviation of the velocity amplitude [-].
+    floor_fraction : float
+        Additive velocity noise as a fraction of the decoder's full scale [-].
+    phase_noise : float
+        Phase noise [deg].
+    seed : int
+        Seed of the measurement noise.
+    faults : FaultSettings
+    """
+
+    response: PlateResponse
+    amplifier_gain: float = DEFAULT_GAIN
+    ceramic_voltage_limit: float = DEFAULT_CERAMIC_VOLTAGE_LIMIT
+    measurement_time: float = 1.0
+    relative_noise: float = 0.005
+    floor_fraction: float = 1e-3
+    phase_noise: float = 0.2
+    seed: int = 0
+    faults: FaultSettings = field(default_factory=FaultSettings)
+
+    def metadata(self) -> dict:
+        """Flat ``simulator_*`` metadata for log headers: law, parameters, noise, drift, seeds."""
+        response = self.response
+        items = {
+            "law": response.law.name,
+            **{f"law_{name}": value for name, value in law_parameters(response.law).items()},
+            "resonance_frequency_hz": response.resonance_frequency,
+            "deflection_per_volt_m_v": response.deflection_per_volt,
+            "drift_rate_hz_s": response.drift_rate,
+            "amplifier_gain": self.amplifier_gain,
+            "ceramic_voltage_limit_v": self.ceramic_voltage_limit,
+            "measurement_time_s": self.measurement_time,
+            "relative_noise": self.relative_noise,
+            "floor_fraction": self.floor_fraction,
+            "phase_noise_deg": self.phase_noise,
+            "seed": self.seed,
+            **{f"fault_{name}": value for name, value in asdict(self.faults).items()},
+        }
+        return {f"simulator_{key}": value for key, value in items.items()}
+
+
+def default_bench_settings(plate: Plate = ORIGINAL_PLATE, law=None, drift_rate: float = DEFAULT_DRIFT_RATE, **changes) -> BenchSettings:
+    """Bench settings for ``plate`` (default law: :func:`.physics.default_law`); ``changes`` override fields."""
+    return BenchSettings(response=plate_response(plate, law, drift_rate), **changes)
+
+
+class Bench:
+    """One simulated bench (state, clock, devices, faults)."""
+
+    def __init__(self, settings: BenchSettings):
+        self.settings = settings
+        self.time = 0.0
+        self.amplifier = PowerAmplifier(settings.amplifier_gain)
+        self.generator = GeneratorDevice(self.amplifier.generator_peak_limit(settings.ceramic_voltage_limit))
+        self.vibrometer = VibrometerDevice(
+            self._surface_velocity,
+            np.random.default_rng(settings.seed),
+            settings.relative_noise,
+            settings.floor_fraction,
+            settings.phase_noise,
+        )
+        self.faults = FaultInjector(settings.faults)
+        self._pending = {name: b"" for name in INSTRUMENTS}
+
+    def clock(self) -> float:
+        """Bench time [s]."""
+        return self.time
+
+    def sleep(self, seconds: float) -> None:
+        """Let ``seconds`` of bench time pass, instantly."""
+        self.time += seconds
+
+    def ceramic_voltage(self) -> float:
+        """Peak voltage across the ceramics now [V] (0 when the output is off or not a sine)."""
+        state = self.generator.state
+        if not state.output or state.function != "SIN":
+            return 0.0
+        return float(self.amplifier.ceramic_voltage(state.amplitude_vpp))
+
+    def _surface_velocity(self):
+        self.time += self.settings.measurement_time
+        velocity, phase = self.settings.response.velocity(self.generator.state.frequency, self.ceramic_voltage(), self.time)
+        return float(velocity), float(phase)
+
+    def reset_input(self, instrument: str) -> None:
+        """Forget a partial command line (a port was reopened)."""
+        self._pending[instrument] = b""
+
+    def receive(self, instrument: str, data: bytes) -> bytes:
+        """Feed bytes written to ``instrument``; the reply bytes its complete lines produce.
+
+        Raises
+        ------
+        SimulatedDisconnect
+            When fault injection cuts the line; the command is not executed.
+        """
+        device = getattr(self, instrument)
+        buffer = self._pending[instrument] + data
+        *lines, self._pending[instrument] = buffer.split(b"\n")
+        out = b""
+        for raw in lines:
+            line = raw.decode("ascii", errors="replace").strip()
+            if not line:
+                continue
+            fault = self.faults.next_fault()
+            if fault is Fault.DISCONNECT:
+                self._pending[instrument] = b""
+                raise SimulatedDisconnect(f"simulated {instrument} disconnected at command {self.faults.commands}")
+            reply = device.handle_line(line)
+            if reply is None or fault is Fault.DROP:
+                continue
+            encoded = reply.encode("ascii") + b"\n"
+            out += self.faults.garble(encoded) if fault is Fault.GARBLE else encoded
+        return out
+
+
+_BENCHES: dict[str, Bench] = {}
+_NAMES = (f"bench{index}" for index in itertools.count(1))
+DEFAULT_BENCH = "default"
+
+
+def register_bench(bench: Bench, name: str | None = None) -> str:
+    """Make ``bench`` reachable as ``tactile-sim://NAME/...``; returns NAME."""
+    name = name or next(_NAMES)
+    _BENCHES[name] = bench
+    return name
+
+
+def get_bench(name: str) -> Bench:
+    """The bench registered as ``name``; ``default`` is created on first use with default settings."""
+    if name == DEFAULT_BENCH and name not in _BENCHES:
+        register_bench(Bench(default_bench_settings()), DEFAULT_BENCH)
+    try:
+        return _BENCHES[name]
+    except KeyError:
+        raise KeyError(f"no simulated bench named {name!r}; known: {', '.join(sorted(_BENCHES)) or 'none'}") from None

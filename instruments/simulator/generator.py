@@ -1,0 +1,217 @@
+"""Simulated function generator: the 33500-series SCPI subset of SPEC section 7, one channel.
+
+State changes that would exceed the output's peak-voltage limit (amplitude/2 + |offset|)
+are refused with ``-222,"Data out of range"`` in the error queue; the output keeps its
+previous value.
+"""
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .scpi import header_regex, split_program
+
+IDENTITY = "Agilent Technologies,33521A,TACTILE-SIM,1.0-sim"
+"""``*IDN?`` reply (manufacturer, model, serial, firmware), as the 33500 series formats it."""
+MAX_ERRORS = 20
+"""Depth of the error queue; further errors replace the last one with -350 (queue overflow)."""
+FREQUENCY_RANGE = (1e-6, 20e6)
+"""Sine frequency range [Hz]."""
+AMPLITUDE_RANGE = (1e-3, 10.0)
+"""Amplitude range of the output stage [V peak-to-peak]."""
+FUNCTIONS = ("SIN", "SQU", "TRI", "RAMP", "PULS", "PRBS", "NOIS", "ARB", "DC")
+FUNCTION_LONG_FORMS = {"SINUSOID": "SIN", "SQUARE": "SQU", "TRIANGLE": "TRI", "PULSE": "PULS", "NOISE": "NOIS"}
+NO_ERROR = '+0,"No error"'
+VRMS_PER_VPP = 1 / (2 * np.sqrt(2))
+"""Sine: V_rms / V_pp [-]."""
+
+
+@dataclass(frozen=True)
+class GeneratorState:
+    """What the output produces.
+
+    Attributes
+    ----------
+    function : str
+    frequency : float
+        [Hz]
+    amplitude_vpp : float
+        [V peak-to-peak]
+    unit : str
+        ``VPP`` or ``VRMS``: the unit of ``VOLT`` and ``VOLT?``.
+    offset : float
+        [V]
+    output : bool
+    """
+
+    function: str = "SIN"
+    frequency: float = 1000.0
+    amplitude_vpp: float = 0.1
+    unit: str = "VPP"
+    offset: float = 0.0
+    output: bool = False
+
+    @property
+    def peak_voltage(self) -> float:
+        """Largest |output voltage| = amplitude/2 + |offset| [V]."""
+        return self.amplitude_vpp / 2 + abs(self.offset)
+
+
+class CommandError(Exception):
+    """A SCPI error: code and message for the error queue."""
+
+    def __init__(self, code: int, message: str):
+        super().__init__(f'{code:+d},"{message}"')
+        self.code = code
+
+
+def _number(argument: str) -> float:
+    try:
+        value = float(argument)
+    except ValueError:
+        raise CommandError(-104, "Data type error") from None
+    if not np.isfinite(value):
+        raise CommandError(-224, "Illegal parameter value")
+    return value
+
+
+def _format(value: float) -> str:
+    return f"{value:+.14E}"
+
+
+def _channel(suffix: str | None) -> None:
+    if suffix not in (None, "", "1"):
+        raise CommandError(-114, "Header suffix out of range")
+
+
+class GeneratorDevice:
+    """The generator's command interpreter and state.
+
+    Parameters
+    ----------
+    peak_voltage_limit : float
+        Largest output peak voltage accepted, amplitude/2 + |offset| [V]: the safety limit
+        translated through the amplifier gain.
+    """
+
+    def __init__(self, peak_voltage_limit: float):
+        self.peak_voltage_limit = peak_voltage_limit
+        self.state = GeneratorState()
+        self.errors: list[str] = []
+        self._commands = [
+            (header_regex(pattern), handler)
+            for pattern, handler in (
+                ("*IDN", self._identify),
+                ("*RST", self._reset),
+                ("*CLS", self._clear),
+                ("*OPC", self._operation_complete),
+                ("SYSTem:ERRor[:NEXT]", self._next_error),
+                ("[SOURce#:]FUNCtion[:SHAPe]", self._function),
+                ("[SOURce#:]FREQuency[:CW]", self._frequency),
+                ("[SOURce#:]VOLTage:UNIT", self._unit),
+                ("[SOURce#:]VOLTage[:LEVel][:IMMediate]:OFFSet", self._offset),
+                ("[SOURce#:]VOLTage[:LEVel][:IMMediate][:AMPLitude]", self._amplitude),
+                ("OUTPut#[:STATe]", self._output),
+            )
+        ]
+
+    def handle_line(self, line: str) -> str | None:
+        """Execute one program line; the reply line (queries joined by ``;``) or None."""
+        replies = []
+        for header, argument in split_program(line):
+            try:
+                reply = self._dispatch(header if header.startswith(":") else ":" + header, argument)
+            except CommandError as error:
+                self._push_error(str(error))
+                break
+            if reply is not None:
+                replies.append(reply)
+        return ";".join(replies) if replies else None
+
+    def _dispatch(self, header: str, argument: str):
+        for regex, handler in self._commands:
+            match = regex.fullmatch(header)
+            if match:
+                *suffixes, query = match.groups()
+                for suffix in suffixes:
+                    _channel(suffix)
+                if query and argument:
+                    raise CommandError(-108, "Parameter not allowed")
+                if not query and not argument and handler not in (self._reset, self._clear, self._operation_complete):
+                    raise CommandError(-109, "Missing parameter")
+                return handler(argument if not query else None)
+        raise CommandError(-113, "Undefined header")
+
+    def _push_error(self, error: str) -> None:
+        if len(self.errors) < MAX_ERRORS:
+            self.errors.append(error)
+        else:
+            self.errors[-1] = '-350,"Queue overflow"'
+
+    def _apply(self, **changes) -> None:
+        candidate = replace(self.state, **changes)
+        if candidate.peak_voltage > self.peak_voltage_limit + 1e-12:
+            raise CommandError(-222, "Data out of range")
+        self.state = candidate
+
+    def _identify(self, argument):
+        return IDENTITY if argument is None else None
+
+    def _reset(self, argument):
+        self.state = GeneratorState()
+
+    def _clear(self, argument):
+        self.errors.clear()
+
+    def _operation_complete(self, argument):
+        return "1" if argument is None else None
+
+    def _next_error(self, argument):
+        return self.errors.pop(0) if self.errors else NO_ERROR
+
+    def _function(self, argument):
+        if argument is None:
+            return self.state.function
+        name = argument.upper()
+        name = FUNCTION_LONG_FORMS.get(name, name)
+        if name not in FUNCTIONS:
+            raise CommandError(-224, "Illegal parameter value")
+        self._apply(function=name)
+
+    def _frequency(self, argument):
+        if argument is None:
+            return _format(self.state.frequency)
+        value = _number(argument)
+        if not FREQUENCY_RANGE[0] <= value <= FREQUENCY_RANGE[1]:
+            raise CommandError(-222, "Data out of range")
+        self._apply(frequency=value)
+
+    def _unit(self, argument):
+        if argument is None:
+            return self.state.unit
+        unit = argument.upper()
+        if unit not in ("VPP", "VRMS"):
+            raise CommandError(-224, "Illegal parameter value")
+        self._apply(unit=unit)
+
+    def _amplitude(self, argument):
+        per_vpp = VRMS_PER_VPP if self.state.unit == "VRMS" else 1.0
+        if argument is None:
+            return _format(self.state.amplitude_vpp * per_vpp)
+        value = _number(argument) / per_vpp
+        if not AMPLITUDE_RANGE[0] <= value <= AMPLITUDE_RANGE[1]:
+            raise CommandError(-222, "Data out of range")
+        self._apply(amplitude_vpp=value)
+
+    def _offset(self, argument):
+        if argument is None:
+            return _format(self.state.offset)
+        self._apply(offset=_number(argument))
+
+    def _output(self, argument):
+        if argument is None:
+            return "1" if self.state.output else "0"
+        states = {"1": True, "ON": True, "0": False, "OFF": False}
+        if argument.upper() not in states:
+            raise CommandError(-224, "Illegal parameter value")
+        self._apply(output=states[argument.upper()])

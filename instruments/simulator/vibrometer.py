@@ -1,0 +1,90 @@
+"""Simulated laser vibrometer: Polytec-style ``Get``/``Set`` lines and a lock-in velocity readout.
+
+The protocol is documented in ``docs/instruments.md``.  Every command line gets exactly
+one reply line (``Set`` replies with the value now in effect, as Polytec controllers do
+with acknowledge on).  The readout is over-range when the velocity exceeds the decoder's
+full scale; it is then reported as ``OVER`` with the full-scale value, never clipped silently.
+"""
+
+from collections.abc import Callable
+
+import numpy as np
+
+CONTROLLER_NAME = "OFV-5000 tactile-sim"
+CONTROLLER_VERSION = "1.0-sim"
+DECODER_NAME = "VD-09"
+DECODER_RANGES_MM_S_V = (1, 2, 5, 10, 20, 50, 100)
+"""Velocity decoder ranges [mm/s per volt of analog output]."""
+FULL_SCALE_OUTPUT = 10.0
+"""Decoder analog output at full scale [V]: full-scale velocity = range x 10 V."""
+DEFAULT_RANGE_MM_S_V = 100
+
+
+def format_range(mm_s_v: int) -> str:
+    """Wire form of a decoder range, e.g. ``25mm/s/V``."""
+    return f"{mm_s_v}mm/s/V"
+
+
+def full_scale_velocity(mm_s_v: float) -> float:
+    """Largest velocity amplitude a decoder range reads [m/s]."""
+    return mm_s_v * 1e-3 * FULL_SCALE_OUTPUT
+
+
+class VibrometerDevice:
+    """The vibrometer's command interpreter.
+
+    Parameters
+    ----------
+    signal : callable
+        () -> (velocity amplitude [m/s], phase [deg]) of the true surface velocity at the
+        drive frequency; called once per readout (it may advance the bench clock).
+    rng : numpy.random.Generator
+        Measurement noise.
+    relative_noise : float
+        Standard deviation of the relative amplitude error [-].
+    floor_fraction : float
+        Standard deviation of the additive noise, as a fraction of the range's full scale [-].
+    phase_noise : float
+        Standard deviation of the phase error [deg].
+    """
+
+    def __init__(self, signal: Callable, rng, relative_noise: float, floor_fraction: float, phase_noise: float):
+        self.signal = signal
+        self.rng = rng
+        self.relative_noise = relative_noise
+        self.floor_fraction = floor_fraction
+        self.phase_noise = phase_noise
+        self.range_mm_s_v = DEFAULT_RANGE_MM_S_V
+        self._gets = {
+            ("GetDevInfo", "Controller", "0", "Name"): lambda: CONTROLLER_NAME,
+            ("GetDevInfo", "Controller", "0", "Version"): lambda: CONTROLLER_VERSION,
+            ("GetDevInfo", "VeloDec", "1", "Name"): lambda: DECODER_NAME,
+            ("GetDevInfo", "VeloDec", "1", "Ranges"): lambda: ";".join(map(format_range, DECODER_RANGES_MM_S_V)),
+            ("Get", "VeloDec", "1", "Range"): lambda: format_range(self.range_mm_s_v),
+            ("Get", "LockIn", "0", "Velocity"): self._readout,
+        }
+
+    def handle_line(self, line: str) -> str:
+        """Execute one command line and return its reply line."""
+        fields = tuple(field.strip() for field in line.strip().split(","))
+        if fields in self._gets:
+            return self._gets[fields]()
+        if fields[:4] == ("Set", "VeloDec", "1", "Range") and len(fields) == 5:
+            choices = {format_range(r).lower(): r for r in DECODER_RANGES_MM_S_V}
+            if fields[4].lower() not in choices:
+                return "Error,2,Invalid value"
+            self.range_mm_s_v = choices[fields[4].lower()]
+            return format_range(self.range_mm_s_v)
+        return "Error,1,Unknown command"
+
+    def _readout(self) -> str:
+        amplitude, phase = self.signal()
+        full_scale = full_scale_velocity(self.range_mm_s_v)
+        noise = self.rng.standard_normal(4)
+        phasor = amplitude * (1 + self.relative_noise * noise[0]) * np.exp(1j * np.radians(phase + self.phase_noise * noise[1]))
+        phasor += self.floor_fraction * full_scale * (noise[2] + 1j * noise[3]) / np.sqrt(2)
+        measured, measured_phase = abs(phasor), float(np.degrees(np.angle(phasor)))
+        status = "OK"
+        if measured > full_scale:
+            measured, status = full_scale, "OVER"
+        return f"{measured:.6E},{measured_phase:+.3f},{status}"
