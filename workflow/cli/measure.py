@@ -1,0 +1,167 @@
+"""``tactile measure``: run a bench procedure on serial ports or on the in-process simulator.
+
+Logs go under ``data/`` by default; running the same command again resumes its log.
+"""
+
+import argparse
+from pathlib import Path
+
+from ..errors import TactileError
+from . import add_json_flag
+from .simulate import add_bench_arguments, bench_settings
+
+DEFAULT_DATA_DIR = Path("data")
+PROCEDURES = ("resonance", "campaign", "voltage-sweep")
+
+
+def _voltages(text: str) -> tuple:
+    try:
+        values = tuple(float(item) for item in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated volts, e.g. 2.5,5,7.5; got {text!r}") from None
+    if not values or any(not v > 0 for v in values):
+        raise argparse.ArgumentTypeError(f"voltages must be positive, got {text!r}")
+    return values
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "measure",
+        help="run a bench procedure (resonance, campaign, voltage-sweep) and log it",
+        description="Run a measurement procedure against serial ports (--generator/--vibrometer) or the in-process "
+        "simulator (--simulate). Each point is appended to a CSV log (SPEC section 7) at once; rerunning the "
+        "same command resumes an interrupted log.",
+    )
+    procedures = parser.add_subparsers(dest="procedure", metavar="PROCEDURE", parser_class=type(parser))
+    procedures.required = True
+    common = argparse.ArgumentParser(add_help=False)
+    ports = common.add_argument_group("instruments")
+    ports.add_argument("--generator", metavar="PORT", help="serial port (or pyserial URL) of the signal generator")
+    ports.add_argument("--vibrometer", metavar="PORT", help="serial port (or pyserial URL) of the vibrometer")
+    ports.add_argument("--simulate", action="store_true", help="use the in-process bench simulator instead of ports")
+    ports.add_argument("--baudrate", type=int, default=9600, help="serial baud rate (default 9600)")
+    ports.add_argument("--timeout", type=float, default=1.0, help="reply timeout [s] (default 1)")
+    ports.add_argument("--retries", type=int, default=3, help="retries of a point after a timeout or garbled reply (default 3)")
+    ports.add_argument("--amplifier-gain", type=float, default=10.0, help="power amplifier voltage gain (default 10)")
+    ports.add_argument("--max-voltage", type=float, default=30.0, metavar="VOLTS",
+                       help="safety limit, peak volts across the ceramics (default 30)")
+    ports.add_argument("--out", type=Path, help="log file (default data/<procedure>.csv)")
+    ports.add_argument("--restart", action="store_true", help="overwrite an existing log instead of resuming it")
+    add_bench_arguments(common)
+    add_json_flag(common)
+
+    resonance = procedures.add_parser("resonance", parents=[common], help="coarse then fine sweep to find f_r",
+                                      description="Find the resonance: a coarse sweep then a fine one around its peak.")
+    resonance.add_argument("--start-hz", type=float, default=25e3, help="coarse sweep start [Hz] (default 25000)")
+    resonance.add_argument("--stop-hz", type=float, default=40e3, help="coarse sweep stop [Hz] (default 40000)")
+    resonance.add_argument("--coarse-points", type=int, default=61, help="points of the coarse sweep (default 61)")
+    resonance.add_argument("--fine-points", type=int, default=41, help="points of the fine sweep (default 41)")
+    resonance.add_argument("--voltage", type=float, default=2.0, help="drive, peak volts across the ceramics (default 2)")
+
+    campaign = procedures.add_parser("campaign", parents=[common], help="Q(v) campaign: sweeps at several voltages",
+                                     description="Frequency sweeps around the resonance at several drive voltages "
+                                     "(sweep id = voltage index). Without --center-hz the centre comes from the log "
+                                     "being resumed or from a resonance search logged to <out>-resonance.csv.")
+    campaign.add_argument("--voltages", type=_voltages, default=(2.5, 5.0, 7.5, 10.0, 12.5, 15.0),
+                          help="peak volts across the ceramics, comma-separated (default 2.5,5,7.5,10,12.5,15)")
+    campaign.add_argument("--points", type=int, default=51, help="frequency points per sweep (default 51)")
+    campaign.add_argument("--span-hz", type=float, default=1600.0, help="sweep width [Hz] (default 1600)")
+    campaign.add_argument("--center-hz", type=float, help="sweep centre [Hz] (default: see above)")
+
+    sweep = procedures.add_parser("voltage-sweep", parents=[common], help="deflection versus voltage at resonance",
+                                  description="Velocity and deflection at one frequency for several voltages. Without "
+                                  "--frequency-hz the frequency comes from the log being resumed or from a resonance "
+                                  "search logged to <out>-resonance.csv.")
+    sweep.add_argument("--voltages", type=_voltages, default=tuple(float(v) for v in range(1, 16)),
+                       help="peak volts across the ceramics, comma-separated (default 1,2,...,15)")
+    sweep.add_argument("--frequency-hz", type=float, help="drive frequency [Hz] (default: see above)")
+    for sub in (resonance, campaign, sweep):
+        sub.set_defaults(handler=run)
+
+
+def _open_station(args):
+    """(station, extra log metadata) for real ports or the simulator."""
+    import serial
+
+    from instruments.amplifier import PowerAmplifier
+    from instruments.campaign import simulated_station, simulation_metadata
+    from instruments.procedures import open_station
+    from instruments.simulator import register_url_handler
+
+    if not args.max_voltage > 0:
+        raise TactileError(f"--max-voltage must be positive, got {args.max_voltage:g}")
+    if not args.amplifier_gain > 0:
+        raise TactileError(f"--amplifier-gain must be positive, got {args.amplifier_gain:g}")
+    if args.retries < 0:
+        raise TactileError(f"--retries must be >= 0, got {args.retries}")
+    options = {"retries": args.retries}
+    if args.simulate:
+        if args.generator or args.vibrometer:
+            raise TactileError("give either --simulate or --generator/--vibrometer, not both")
+        settings = bench_settings(args)
+        station, _ = simulated_station(settings, args.max_voltage, settle_time=0.0, **options)
+        return station, simulation_metadata(settings)
+    if not (args.generator and args.vibrometer):
+        raise TactileError("need --generator PORT and --vibrometer PORT (or --simulate)")
+    register_url_handler()
+    ports = []
+    for flag, name in (("--generator", args.generator), ("--vibrometer", args.vibrometer)):
+        try:
+            ports.append(serial.serial_for_url(name, baudrate=args.baudrate, timeout=args.timeout))
+        except (serial.SerialException, ValueError, OSError) as error:
+            raise TactileError(f"cannot open {flag} {name}: {error}") from None
+    return open_station(*ports, PowerAmplifier(args.amplifier_gain), args.max_voltage, **options), {"simulated": "no"}
+
+
+def _planned(path: Path, key: str):
+    """A ``plan_*`` value from an existing log, or None."""
+    from instruments.logwriter import read_log
+
+    if not path.exists():
+        return None
+    metadata, _, _ = read_log(path)
+    value = metadata.get(key)
+    return float(value) if value is not None else None
+
+
+def _resonance_of(args, station, metadata, out: Path) -> float:
+    from instruments.procedures import ResonancePlan, resonance_search
+
+    path = out.with_name(f"{out.stem}-resonance{out.suffix}")
+    result = resonance_search(station, path, ResonancePlan(), metadata=metadata, restart=args.restart)
+    return result.summary["resonance_frequency_hz"]
+
+
+def run(args):
+    from instruments import procedures
+
+    out = args.out or DEFAULT_DATA_DIR / f"{args.procedure}.csv"
+    station, metadata = _open_station(args)
+    if args.procedure == "resonance":
+        plan = procedures.ResonancePlan(args.start_hz, args.stop_hz, args.coarse_points, args.fine_points, args.voltage)
+        result = procedures.resonance_search(station, out, plan, metadata, args.restart)
+    elif args.procedure == "campaign":
+        centre = args.center_hz or (None if args.restart else _planned(out, "plan_center_frequency"))
+        centre = centre or _resonance_of(args, station, metadata, out)
+        plan = procedures.CampaignPlan(centre, args.span_hz, args.points, args.voltages)
+        result = procedures.q_campaign(station, out, plan, metadata, args.restart)
+    else:
+        frequency = args.frequency_hz or (None if args.restart else _planned(out, "plan_frequency"))
+        frequency = frequency or _resonance_of(args, station, metadata, out)
+        plan = procedures.VoltageSweepPlan(frequency, args.voltages)
+        result = procedures.voltage_sweep(station, out, plan, metadata, args.restart)
+    summary = {
+        "log": str(result.path),
+        "procedure": result.procedure,
+        "planned": result.planned,
+        "measured": result.measured,
+        "resumed": result.resumed,
+        "truncated_bytes": result.truncated_bytes,
+        **result.summary,
+    }
+    if not args.json:
+        print(f"{result.procedure}: {result.measured} points measured, {result.resumed} already in {result.path} "
+              f"({result.planned} planned)")
+        for key, value in result.summary.items():
+            print(f"  {key}: {value}")
+    return summary

@@ -1,0 +1,83 @@
+"""``tactile simulate``: the bench simulator, on pseudo-terminals or as a summary of its physics."""
+
+import json
+import signal
+
+from ..errors import TactileError
+from . import add_json_flag
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "simulate",
+        help="run the bench simulator (generator + vibrometer over one simulated plate)",
+        description="Serve the simulated generator and vibrometer on pseudo-terminals (--pty), or print the "
+        "simulated plate's physics (resonance, Q(v) law, working point). Protocols: docs/instruments.md.",
+    )
+    parser.add_argument("--pty", action="store_true",
+                        help='serve on pseudo-terminals: print {"generator": PATH, "vibrometer": PATH} and serve until '
+                        "interrupted (SIGTERM stops it cleanly)")
+    add_bench_arguments(parser)
+    add_json_flag(parser)
+    parser.set_defaults(handler=run)
+
+
+def add_bench_arguments(parser) -> None:
+    """Flags that configure a simulated bench (shared with ``tactile measure --simulate``)."""
+    group = parser.add_argument_group("simulated bench")
+    group.add_argument("--seed", type=int, default=0, help="seed of the measurement noise (default 0)")
+    group.add_argument("--drop-rate", type=float, default=0.0, help="probability of a dropped reply (default 0)")
+    group.add_argument("--garble-rate", type=float, default=0.0, help="probability of a garbled reply (default 0)")
+    group.add_argument("--disconnect-at", type=int, default=None, metavar="N",
+                       help="cut the line at the N-th command (once; default never)")
+    group.add_argument("--bench-limit", type=float, default=None, metavar="VOLTS",
+                       help="the simulated generator's own limit, peak volts across the ceramics (default 30)")
+
+
+def bench_settings(args):
+    """BenchSettings from the flags of :func:`add_bench_arguments` (and ``--amplifier-gain`` if present)."""
+    from instruments.amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT, DEFAULT_GAIN
+    from instruments.simulator import FaultSettings, default_bench_settings
+
+    try:
+        faults = FaultSettings(args.drop_rate, args.garble_rate, args.disconnect_at, seed=args.seed)
+    except ValueError as error:
+        raise TactileError(f"bad fault flag: {error}") from None
+    limit = DEFAULT_CERAMIC_VOLTAGE_LIMIT if args.bench_limit is None else args.bench_limit
+    if not limit > 0:
+        raise TactileError(f"--bench-limit must be positive, got {limit:g}")
+    gain = getattr(args, "amplifier_gain", DEFAULT_GAIN)
+    return default_bench_settings(seed=args.seed, faults=faults, ceramic_voltage_limit=limit, amplifier_gain=gain)
+
+
+def run(args):
+    from instruments.simulator import Bench
+    from instruments.simulator.physics import working_point_velocity
+    from instruments.simulator.ptyserver import open_ptys, serve
+    from workflow.materials import DESIGN_VOLTAGE, PLATE_Q
+
+    settings = bench_settings(args)
+    if args.pty:
+        ptys = open_ptys()
+        print(json.dumps({name: pair.path for name, pair in ptys.items()}), flush=True)
+        terminated = []
+        signal.signal(signal.SIGTERM, lambda signum, frame: terminated.append(signum))
+        try:
+            serve(Bench(settings), ptys, should_stop=lambda: bool(terminated))
+        finally:
+            for pair in ptys.values():
+                pair.close()
+        return None
+    response = settings.response
+    v_work = working_point_velocity(q=PLATE_Q, voltage=DESIGN_VOLTAGE)
+    result = {
+        **settings.metadata(),
+        "working_voltage_v": DESIGN_VOLTAGE,
+        "working_velocity_m_s": v_work,
+        "working_q": float(response.law.quality_factor(v_work)),
+    }
+    if not args.json:
+        print(f"simulated plate: f_r = {response.resonance_frequency:.1f} Hz, w_s/V = {response.deflection_per_volt * 1e9:.4f} nm/V")
+        print(f"Q(v) law {response.law.name}: {response.law}")
+        print(f"working point {DESIGN_VOLTAGE:g} V: v = {v_work:.4f} m/s, Q = {result['working_q']:.2f}")
+    return result
