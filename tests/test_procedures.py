@@ -1,0 +1,210 @@
+"""Procedures and logs: campaigns through the simulator, safety, faults, resume, the CLI."""
+
+import csv
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import serial
+
+from instruments.campaign import simulate_campaign, simulated_station
+from instruments.errors import ConnectionLost, InstrumentError, SafetyLimitError
+from instruments.logwriter import LogWriter, read_log
+from instruments.procedures import (
+    CampaignPlan,
+    ResonancePlan,
+    VoltageSweepPlan,
+    open_station,
+    q_campaign,
+    resonance_search,
+    voltage_sweep,
+)
+from instruments.simulator import FaultSettings, default_bench_settings
+from workflow import logformat
+from workflow.cli import main
+from workflow.damping.logs import read_log as read_for_fit
+from workflow.errors import InputFileError
+
+ROOT = Path(__file__).resolve().parent.parent
+PLAN = CampaignPlan(32126.0, span=1200.0, points_per_sweep=21, voltages=(2.5, 7.5, 15.0))
+
+
+def keys(path):
+    _, rows, _ = read_log(Path(path))
+    return [(r[logformat.SWEEP], r[logformat.FREQUENCY], r[logformat.DRIVE_VOLTAGE]) for r in rows]
+
+
+def test_simulate_campaign_is_fast_complete_and_readable_by_the_fit(tmp_path):
+    start = time.perf_counter()
+    result = simulate_campaign(tmp_path / "c.csv", seed=3)
+    elapsed = time.perf_counter() - start
+    assert elapsed < 5
+    assert result.planned == result.measured == 6 * 51
+    log = read_for_fit(result.path)
+    assert log.n_sweeps == 6 and len(log.velocity) == 306
+    metadata, _, _ = read_log(result.path)
+    assert metadata["simulated"] == "yes" and metadata["simulator_law"] == "quadratic"
+    assert metadata["simulator_seed"] == "3" and metadata["format_version"] == "1"
+    peaks = [s["peak_velocity_m_s"] for s in result.summary["sweeps"]]
+    assert peaks == sorted(peaks) and 0.2 < peaks[-1] < 0.235  # ~0.216 m/s at 15 V
+
+
+def test_simulate_campaign_is_deterministic(tmp_path):
+    a = simulate_campaign(tmp_path / "a.csv", voltages=(5.0,), points_per_sweep=11, seed=1)
+    b = simulate_campaign(tmp_path / "b.csv", voltages=(5.0,), points_per_sweep=11, seed=1)
+    assert a.path.read_text() == b.path.read_text()
+
+
+def test_resonance_search_finds_the_simulated_resonance_and_low_drive_q(tmp_path):
+    station, bench = simulated_station(default_bench_settings(), settle_time=0.0)
+    result = resonance_search(station, tmp_path / "r.csv", ResonancePlan(voltage=0.5), fsync=False)
+    f_r = bench.settings.response.resonance_at(bench.time)
+    assert result.summary["resonance_frequency_hz"] == pytest.approx(f_r, abs=10)
+    assert result.summary["q_estimate"] == pytest.approx(bench.settings.response.law.q0, rel=0.1)
+    assert bench.ceramic_voltage() == 0.0  # output off at the end
+
+
+def test_voltage_sweep_deflection_grows_sublinearly(tmp_path):
+    station, bench = simulated_station(default_bench_settings(), settle_time=0.0)
+    f_r = bench.settings.response.resonance_frequency
+    result = voltage_sweep(station, tmp_path / "v.csv", VoltageSweepPlan(f_r, (1.0, 15.0)), fsync=False)
+    w1, w15 = result.summary["deflection_um"]
+    assert w15 == pytest.approx(1.07, rel=0.05)  # Q = 54 at 15 V: the beam model's deflection
+    assert w15 / w1 < 15 / 1.5  # Q falls with velocity
+
+
+def test_procedure_refuses_a_plan_above_the_limit_before_touching_anything(tmp_path):
+    station, bench = simulated_station(default_bench_settings(), voltage_limit=12.0)
+    with pytest.raises(SafetyLimitError, match="safety limit 12 V"):
+        q_campaign(station, tmp_path / "c.csv", PLAN)
+    assert not (tmp_path / "c.csv").exists() and bench.faults.commands == 0
+
+
+def test_instrument_limit_holds_when_the_software_limit_is_set_too_high(tmp_path):
+    settings = default_bench_settings(ceramic_voltage_limit=10.0)
+    station, bench = simulated_station(settings, voltage_limit=20.0, settle_time=0.0)
+    with pytest.raises(InstrumentError, match=r"-222,Data out of range after setting 15 V"):
+        q_campaign(station, tmp_path / "c.csv", PLAN, fsync=False)
+    assert bench.generator.state.amplitude_vpp * bench.amplifier.gain / 2 <= 10.0
+    assert keys(tmp_path / "c.csv")  # the sweeps below the limit were logged
+
+
+def test_campaign_survives_dropped_and_garbled_replies(tmp_path):
+    faults = FaultSettings(drop_rate=0.05, garble_rate=0.05, seed=2)
+    station, bench = simulated_station(default_bench_settings(faults=faults), settle_time=0.0, retries=5)
+    result = q_campaign(station, tmp_path / "c.csv", PLAN, fsync=False)
+    assert result.measured == result.planned == 63
+    assert sorted(keys(tmp_path / "c.csv")) == sorted(set(keys(tmp_path / "c.csv")))
+    assert bench.faults.commands > 63 * 3
+
+
+def test_retries_are_bounded_with_a_clear_error(tmp_path):
+    faults = FaultSettings(drop_rate=0.95, seed=1)
+    station, _ = simulated_station(default_bench_settings(faults=faults), settle_time=0.0, retries=2)
+    with pytest.raises(InstrumentError, match="giving up after 3 attempts"):
+        q_campaign(station, tmp_path / "c.csv", PLAN, fsync=False)
+
+
+def test_disconnect_mid_campaign_then_resume_gives_every_row_once(tmp_path):
+    path = tmp_path / "c.csv"
+    settings = default_bench_settings(faults=FaultSettings(disconnect_at=120))
+    station, bench = simulated_station(settings, settle_time=0.0)
+    with pytest.raises(ConnectionLost, match="disconnected"):
+        q_campaign(station, path, PLAN, fsync=False)
+    partial = keys(path)
+    assert 0 < len(partial) < 63
+    with open(path, "a") as file:  # a crash in the middle of a row
+        file.write("32126.3,15,0.2")
+    # reconnect to the same bench (the fault fired once) and resume
+    ports = [serial.serial_for_url(p.port.port, timeout=1) for p in (station.generator, station.vibrometer)]
+    again = open_station(*ports, station.amplifier, station.voltage_limit, clock=bench.clock, sleep=bench.sleep, settle_time=0)
+    result = q_campaign(again, path, PLAN, fsync=False)
+    assert result.resumed == len(partial) and result.truncated_bytes == len("32126.3,15,0.2")
+    final = keys(path)
+    assert len(final) == len(set(final)) == 63
+    assert final[: len(partial)] == partial
+    assert len(read_for_fit(path).velocity) == 63
+
+
+def test_resume_with_another_plan_is_refused(tmp_path):
+    path = tmp_path / "c.csv"
+    simulate_campaign(path, voltages=(5.0,), points_per_sweep=5)
+    with pytest.raises(InputFileError, match="cannot resume"):
+        simulate_campaign(path, voltages=(5.0, 10.0), points_per_sweep=5, restart=False)
+    text = path.read_text()
+    simulate_campaign(path, voltages=(5.0,), points_per_sweep=5, restart=False)
+    assert path.read_text() == text  # nothing left to measure, nothing changed
+
+
+def test_log_writer_restarts_a_log_cut_inside_its_header(tmp_path):
+    path = tmp_path / "c.csv"
+    path.write_text("# tactile interferometer log\n# format_ver")
+    with LogWriter(path, {"procedure": "campaign"}) as log:
+        log.append({logformat.FREQUENCY: 1.0, logformat.DRIVE_VOLTAGE: 2.0, logformat.VELOCITY: 0.1})
+    rows = list(csv.reader(line for line in path.read_text().splitlines() if not line.startswith("#")))
+    assert rows == [list(logformat.COLUMNS), ["1", "2", "0.1", "", "", ""]]
+
+
+def run_cli(capsys, *argv):
+    try:
+        code = main(list(argv))
+    except SystemExit as exit:  # argparse usage errors
+        code = exit.code
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def test_cli_measure_simulated_campaign_and_resume(tmp_path, capsys):
+    out = tmp_path / "c.csv"
+    args = ["measure", "campaign", "--simulate", "--points", "9", "--voltages", "5,10", "--out", str(out), "--json"]
+    code, stdout, _ = run_cli(capsys, *args)
+    assert code == 0 and '"measured": 18' in stdout.splitlines()[-1]
+    assert (tmp_path / "c-resonance.csv").exists()
+    code, stdout, _ = run_cli(capsys, *args)
+    assert code == 0 and '"measured": 0' in stdout.splitlines()[-1] and '"resumed": 18' in stdout
+
+
+def test_cli_safety_limit_refuses_with_one_line(tmp_path, capsys):
+    code, _, err = run_cli(capsys, "measure", "voltage-sweep", "--simulate", "--frequency-hz", "32126",
+                           "--voltages", "10,35", "--out", str(tmp_path / "v.csv"))
+    assert code == 2 and err.count("\n") == 1 and "safety limit 30 V" in err
+    code, _, err = run_cli(capsys, "measure", "voltage-sweep", "--simulate", "--frequency-hz", "32126",
+                           "--voltages", "35", "--max-voltage", "40", "--out", str(tmp_path / "w.csv"))
+    assert code == 2 and "-222" in err and err.count("\n") == 1
+
+
+def test_cli_bad_port_and_garbled_replies_are_one_line_errors(tmp_path, capsys):
+    code, _, err = run_cli(capsys, "measure", "resonance", "--generator", "/dev/nonexistent-tty",
+                           "--vibrometer", "/dev/nonexistent-tty2", "--out", str(tmp_path / "r.csv"))
+    assert code == 2 and err.startswith("tactile measure: error: cannot open --generator /dev/nonexistent-tty")
+    code, _, err = run_cli(capsys, "measure", "resonance", "--simulate", "--garble-rate", "0.9", "--retries", "1",
+                           "--out", str(tmp_path / "g.csv"))
+    assert code == 2 and "garbled" in err and err.count("\n") == 1
+    code, _, err = run_cli(capsys, "measure", "campaign", "--simulate", "--voltages", "5,x")
+    assert code == 2 and "comma-separated" in err
+
+
+def test_shipped_sample_campaign_regenerates_identically(tmp_path):
+    shipped = ROOT / "data" / "sample_campaign.csv"
+    out = tmp_path / "sample_campaign.csv"
+    subprocess.run([sys.executable, "-c", "import sys; from workflow.cli import main; sys.exit(main())", "measure",
+                    "campaign", "--simulate", "--seed", "0", "--restart", "--out", str(out)],
+                   check=True, capture_output=True, cwd=tmp_path)
+    assert out.read_text() == shipped.read_text()
+    metadata, rows, _ = read_log(shipped)
+    assert metadata["simulated"] == "yes" and len(rows) == 306
+
+
+@pytest.mark.hardware
+def test_real_generator_identifies():
+    """Opt-in (``pytest -m hardware``): a real 33500-series generator on $TACTILE_GENERATOR_PORT."""
+    import os
+
+    from instruments.generator import FunctionGenerator
+
+    port = os.environ.get("TACTILE_GENERATOR_PORT")
+    if not port:
+        pytest.skip("set TACTILE_GENERATOR_PORT to a real 33500-series generator")
+    assert FunctionGenerator(serial.Serial(port, timeout=2), 0.5).identity
