@@ -22,10 +22,10 @@ from tqdm import tqdm
 from workflow import logformat
 
 from .amplifier import PowerAmplifier
-from .errors import CommunicationError, ConnectionLost, InstrumentError, SafetyLimitError
+from .errors import CommunicationError, InstrumentError, SafetyLimitError
 from .generator import FunctionGenerator
 from .logwriter import LogWriter, point_key
-from .vibrometer import VelocityReading, Vibrometer
+from .vibrometer import VelocityReading, Vibrometer, full_scale
 
 DEFAULT_RETRIES = 3
 """Retries of one point after a timeout or a garbled reply."""
@@ -152,7 +152,7 @@ class Station:
             if not larger:
                 raise InstrumentError(f"vibrometer over range on its largest range {self._range * 1e3:g} mm/s/V")
             self._set_range(larger[0])
-        holding = [r for r in self._ranges if self.vibrometer.full_scale(r) > RANGE_HEADROOM * reading.amplitude]
+        holding = [r for r in self._ranges if full_scale(r) > RANGE_HEADROOM * reading.amplitude]
         if holding and holding[0] < self._range:
             self._set_range(holding[0])
         return reading
@@ -174,7 +174,7 @@ class Station:
         """Output off (best effort: a lost connection cannot be helped here)."""
         try:
             self.retry(lambda: setattr(self.generator, "output", False), "switching the output off")
-        except (InstrumentError, ConnectionLost):
+        except InstrumentError:
             pass
         self._voltage = None
 

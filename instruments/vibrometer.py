@@ -29,6 +29,11 @@ def format_range(m_s_v: float) -> str:
     return f"{m_s_v * 1e3:g}mm/s/V"
 
 
+def full_scale(decoder_range: float) -> float:
+    """Largest readable velocity amplitude [m/s] on ``decoder_range`` [m/s/V]."""
+    return decoder_range * FULL_SCALE_OUTPUT
+
+
 @dataclass(frozen=True)
 class VelocityReading:
     """One lock-in readout at the drive frequency.
@@ -90,10 +95,6 @@ class Vibrometer(LineInstrument):
         reply = self.query(command)
         if reply.strip().lower() != sent.lower():
             raise GarbledReply(f"{self._where()}: acknowledged {reply!r} to {command!r}")
-
-    def full_scale(self, decoder_range: float) -> float:
-        """Largest readable velocity amplitude [m/s] on ``decoder_range`` [m/s/V]."""
-        return decoder_range * FULL_SCALE_OUTPUT
 
     def read_velocity(self) -> VelocityReading:
         """Velocity amplitude and phase at the drive frequency, flagged when over range."""

@@ -10,24 +10,13 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ..vibrometer import format_range, full_scale
+
 CONTROLLER_NAME = "OFV-5000 tactile-sim"
 CONTROLLER_VERSION = "1.0-sim"
 DECODER_NAME = "VD-09"
-DECODER_RANGES_MM_S_V = (1, 2, 5, 10, 20, 50, 100)
-"""Velocity decoder ranges [mm/s per volt of analog output]."""
-FULL_SCALE_OUTPUT = 10.0
-"""Decoder analog output at full scale [V]: full-scale velocity = range x 10 V."""
-DEFAULT_RANGE_MM_S_V = 100
-
-
-def format_range(mm_s_v: int) -> str:
-    """Wire form of a decoder range, e.g. ``25mm/s/V``."""
-    return f"{mm_s_v}mm/s/V"
-
-
-def full_scale_velocity(mm_s_v: float) -> float:
-    """Largest velocity amplitude a decoder range reads [m/s]."""
-    return mm_s_v * 1e-3 * FULL_SCALE_OUTPUT
+DECODER_RANGES = tuple(mm_s_v * 1e-3 for mm_s_v in (1, 2, 5, 10, 20, 50, 100))
+"""Velocity decoder ranges [m/s per volt of analog output]."""
 
 
 class VibrometerDevice:
@@ -54,13 +43,13 @@ class VibrometerDevice:
         self.relative_noise = relative_noise
         self.floor_fraction = floor_fraction
         self.phase_noise = phase_noise
-        self.range_mm_s_v = DEFAULT_RANGE_MM_S_V
+        self.decoder_range = DECODER_RANGES[-1]
         self._gets = {
             ("GetDevInfo", "Controller", "0", "Name"): lambda: CONTROLLER_NAME,
             ("GetDevInfo", "Controller", "0", "Version"): lambda: CONTROLLER_VERSION,
             ("GetDevInfo", "VeloDec", "1", "Name"): lambda: DECODER_NAME,
-            ("GetDevInfo", "VeloDec", "1", "Ranges"): lambda: ";".join(map(format_range, DECODER_RANGES_MM_S_V)),
-            ("Get", "VeloDec", "1", "Range"): lambda: format_range(self.range_mm_s_v),
+            ("GetDevInfo", "VeloDec", "1", "Ranges"): lambda: ";".join(map(format_range, DECODER_RANGES)),
+            ("Get", "VeloDec", "1", "Range"): lambda: format_range(self.decoder_range),
             ("Get", "LockIn", "0", "Velocity"): self._readout,
         }
 
@@ -70,21 +59,21 @@ class VibrometerDevice:
         if fields in self._gets:
             return self._gets[fields]()
         if fields[:4] == ("Set", "VeloDec", "1", "Range") and len(fields) == 5:
-            choices = {format_range(r).lower(): r for r in DECODER_RANGES_MM_S_V}
+            choices = {format_range(r).lower(): r for r in DECODER_RANGES}
             if fields[4].lower() not in choices:
                 return "Error,2,Invalid value"
-            self.range_mm_s_v = choices[fields[4].lower()]
-            return format_range(self.range_mm_s_v)
+            self.decoder_range = choices[fields[4].lower()]
+            return format_range(self.decoder_range)
         return "Error,1,Unknown command"
 
     def _readout(self) -> str:
         amplitude, phase = self.signal()
-        full_scale = full_scale_velocity(self.range_mm_s_v)
+        limit = full_scale(self.decoder_range)
         noise = self.rng.standard_normal(4)
         phasor = amplitude * (1 + self.relative_noise * noise[0]) * np.exp(1j * np.radians(phase + self.phase_noise * noise[1]))
-        phasor += self.floor_fraction * full_scale * (noise[2] + 1j * noise[3]) / np.sqrt(2)
+        phasor += self.floor_fraction * limit * (noise[2] + 1j * noise[3]) / np.sqrt(2)
         measured, measured_phase = abs(phasor), float(np.degrees(np.angle(phasor)))
         status = "OK"
-        if measured > full_scale:
-            measured, status = full_scale, "OVER"
+        if measured > limit:
+            measured, status = limit, "OVER"
         return f"{measured:.6E},{measured_phase:+.3f},{status}"

@@ -58,10 +58,10 @@ def run(args):
 
     settings = bench_settings(args)
     if args.pty:
-        ptys = open_ptys()
-        print(json.dumps({name: pair.path for name, pair in ptys.items()}), flush=True)
         terminated = []
         signal.signal(signal.SIGTERM, lambda signum, frame: terminated.append(signum))
+        ptys = open_ptys()
+        print(json.dumps({name: pair.path for name, pair in ptys.items()}), flush=True)
         try:
             serve(Bench(settings), ptys, should_stop=lambda: bool(terminated))
         finally:
