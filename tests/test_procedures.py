@@ -208,3 +208,20 @@ def test_real_generator_identifies():
     if not port:
         pytest.skip("set TACTILE_GENERATOR_PORT to a real 33500-series generator")
     assert FunctionGenerator(serial.Serial(port, timeout=2), 0.5).identity
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["campaign", "--points", "2"], "--points must be at least 3"),
+        (["resonance", "--start-hz", "40000", "--stop-hz", "30000"], "must be below --stop-hz"),
+        (["voltage-sweep", "--frequency-hz", "-3"], "--frequency-hz must be positive"),
+        (["campaign", "--max-voltage", "0"], "--max-voltage must be positive"),
+        (["campaign", "--drop-rate", "1.5"], "bad fault flag"),
+        (["campaign", "--generator", "/dev/ttyUSB0"], "not both"),
+    ],
+)
+def test_cli_bad_plan_flags(tmp_path, capsys, argv, message):
+    code, _, err = run_cli(capsys, "measure", *argv, "--simulate", "--out", str(tmp_path / "x.csv"))
+    assert code == 2 and message in err and err.count("\n") == 1
+    assert not (tmp_path / "x.csv").exists()

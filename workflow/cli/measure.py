@@ -132,9 +132,24 @@ def _resonance_of(args, station, metadata, out: Path) -> float:
     return result.summary["resonance_frequency_hz"]
 
 
+def _check_plan_flags(args) -> None:
+    positive = {flag: getattr(args, flag.lstrip("-").replace("-", "_"), None)
+                for flag in ("--start-hz", "--stop-hz", "--voltage", "--span-hz", "--center-hz", "--frequency-hz")}
+    for flag, value in positive.items():
+        if value is not None and not value > 0:
+            raise TactileError(f"{flag} must be positive, got {value:g}")
+    for flag in ("--coarse-points", "--fine-points", "--points"):
+        value = getattr(args, flag.lstrip("-").replace("-", "_"), None)
+        if value is not None and value < 3:
+            raise TactileError(f"{flag} must be at least 3 (a peak needs neighbours), got {value}")
+    if args.procedure == "resonance" and not args.start_hz < args.stop_hz:
+        raise TactileError(f"--start-hz {args.start_hz:g} must be below --stop-hz {args.stop_hz:g}")
+
+
 def run(args):
     from instruments import procedures
 
+    _check_plan_flags(args)
     out = args.out or DEFAULT_DATA_DIR / f"{args.procedure}.csv"
     station, metadata = _open_station(args)
     if args.procedure == "resonance":
