@@ -96,7 +96,7 @@ class Station:
 
     def retry(self, action: Callable, what: str):
         """``action()``, retried after timeouts and garbled replies; then :class:`InstrumentError`."""
-        for attempt in range(self.retries + 1):
+        for _ in range(self.retries + 1):
             try:
                 return action()
             except CommunicationError as error:

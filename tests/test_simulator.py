@@ -110,12 +110,19 @@ def test_over_range_is_reported_not_clipped_silently():
     assert status == "OVER" and float(amplitude) == pytest.approx(0.01)
 
 
-def test_faults_are_seeded_and_disconnect_once():
-    bench, generator, _ = open_bench(faults=FaultSettings(drop_rate=0.3, garble_rate=0.3, disconnect_at=50, seed=4))
+def idn_replies(generator, count):
     replies = []
-    for _ in range(49):
+    for _ in range(count):
         generator.write(b"*IDN?\n")
         replies.append(generator.read_until(b"\n"))
+    return replies
+
+
+def test_faults_are_seeded_and_disconnect_once():
+    faults = FaultSettings(drop_rate=0.3, garble_rate=0.3, disconnect_at=50, seed=4)
+    bench, generator, _ = open_bench(faults=faults)
+    replies = idn_replies(generator, 49)
+    assert replies == idn_replies(open_bench(faults=faults)[1], 49)
     assert b"" in replies and any(not set(r.strip()) <= set(range(32, 127)) for r in replies)
     with pytest.raises(serial.SerialException, match="disconnected"):
         generator.write(b"*IDN?\n")
