@@ -180,6 +180,12 @@ def test_pty_server_end_to_end():
         assert vibrometer.readline() == b"50mm/s/V\n"
         amplitude, _, status = vibrometer.readline().decode().strip().split(",")
         assert 0.19 < float(amplitude) < 0.24 and status == "OK"
+        pymeasure = pytest.importorskip("pymeasure.instruments.agilent")
+        from pymeasure.adapters import SerialAdapter
+
+        client = pymeasure.Agilent33500(SerialAdapter(generator, write_termination="\n", read_termination="\n"))
+        client.ch_1.frequency = 31500.5
+        assert client.frequency == 31500.5 and client.output is True
         generator.close()
         vibrometer.close()
     finally:
