@@ -78,9 +78,10 @@ STEPS: List[tuple] = [
 """(title, result key, function) in the order they run."""
 
 
-def run_steps(context: RunContext, steps=None, stream=sys.stderr) -> RunContext:
-    """Run ``steps`` (default :data:`STEPS`) in order, printing progress and timings to ``stream``."""
+def run_steps(context: RunContext, steps=None, stream=None) -> RunContext:
+    """Run ``steps`` (default :data:`STEPS`) in order, printing progress and timings to ``stream`` (stderr)."""
     steps = STEPS if steps is None else steps
+    stream = sys.stderr if stream is None else stream
     context.out.mkdir(parents=True, exist_ok=True)
     for number, (title, key, function) in enumerate(steps, start=1):
         print(f"[{number}/{len(steps)}] {title} ...", file=stream, flush=True)
