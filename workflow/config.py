@@ -6,6 +6,7 @@ keys, with values of the same type (an int is accepted where a float is expected
 
 import copy
 import sys
+from dataclasses import MISSING, fields
 from importlib import resources
 from pathlib import Path
 
@@ -23,7 +24,38 @@ else:  # pragma: no cover
 def default_config() -> dict:
     """The embedded defaults, as nested dicts: Table 1 for [design], ``defaults.toml`` for the rest."""
     embedded = tomllib.loads(resources.files(__package__).joinpath("defaults.toml").read_text(encoding="utf-8"))
-    return {"design": design_defaults(), **embedded}
+    return {"design": design_defaults(), **embedded, "campaign": campaign_defaults(), "simulator": simulator_defaults()}
+
+
+def campaign_defaults() -> dict:
+    """The [campaign] section from the Q(v) campaign procedure's defaults."""
+    from instruments.procedures import CampaignPlan
+
+    return {
+        "logs": [],
+        "voltages_v": list(CampaignPlan.voltages),
+        "points_per_sweep": CampaignPlan.points_per_sweep,
+        "span_hz": CampaignPlan.span,
+        "seed": 0,
+    }
+
+
+def simulator_defaults() -> dict:
+    """The [simulator] section from the bench simulator's defaults."""
+    from instruments.simulator.bench import DEFAULT_DRIFT_RATE, BenchSettings
+    from instruments.simulator.physics import DEFAULT_LOW_VELOCITY_Q
+
+    bench = {f.name: f.default for f in fields(BenchSettings) if f.default is not MISSING}
+    return {
+        "low_velocity_q": DEFAULT_LOW_VELOCITY_Q,
+        "working_q": materials.PLATE_Q,
+        "drift_hz_per_s": DEFAULT_DRIFT_RATE,
+        "amplifier_gain": float(bench["amplifier_gain"]),
+        "ceramic_voltage_limit_v": float(bench["ceramic_voltage_limit"]),
+        "relative_noise": bench["relative_noise"],
+        "floor_fraction": bench["floor_fraction"],
+        "phase_noise_deg": bench["phase_noise"],
+    }
 
 
 def design_defaults() -> dict:

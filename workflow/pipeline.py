@@ -70,9 +70,50 @@ def analytical_optima(context: RunContext):
     return {hp: optimise_analytical(problem, q=q) for hp, problem in design_problems(context.config).items()}
 
 
+def bench_settings(config: dict):
+    """The simulated bench of the [simulator] section (original plate)."""
+    from instruments.simulator.bench import default_bench_settings
+    from instruments.simulator.physics import default_law
+
+    simulator = config["simulator"]
+    law = default_law(low_velocity_q=simulator["low_velocity_q"], working_q=simulator["working_q"])
+    return default_bench_settings(
+        law=law,
+        drift_rate=simulator["drift_hz_per_s"],
+        amplifier_gain=simulator["amplifier_gain"],
+        ceramic_voltage_limit=simulator["ceramic_voltage_limit_v"],
+        relative_noise=simulator["relative_noise"],
+        floor_fraction=simulator["floor_fraction"],
+        phase_noise=simulator["phase_noise_deg"],
+        seed=config["campaign"]["seed"],
+    )
+
+
+def campaign_logs(context: RunContext) -> List[Path]:
+    """The interferometer logs to fit: the given ones, or a campaign on the simulated bench."""
+    if context.logs:
+        missing = [str(path) for path in context.logs if not Path(path).is_file()]
+        if missing:
+            raise TactileError(f"no such log file: {', '.join(missing)}")
+        return [Path(path) for path in context.logs]
+    from instruments.campaign import simulate_campaign
+
+    campaign = context.config["campaign"]
+    path = context.out / "simulated_campaign.csv"
+    simulate_campaign(
+        path,
+        settings=bench_settings(context.config),
+        voltages=tuple(campaign["voltages_v"]),
+        points_per_sweep=campaign["points_per_sweep"],
+        span=campaign["span_hz"],
+    )
+    return [path]
+
+
 Step = Callable[[RunContext], Any]
 
 STEPS: List[tuple] = [
+    ("interferometer logs (simulated campaign unless --logs)", "logs", campaign_logs),
     ("analytical optimisation (constant Q)", "analytical_optima", analytical_optima),
 ]
 """(title, result key, function) in the order they run."""
