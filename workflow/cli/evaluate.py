@@ -1,12 +1,12 @@
 """``tactile evaluate``: deflection and resonance of one geometry."""
 
-from .. import analytical, materials
+from .. import analytical
 from ..units import KHZ, MM, UM
 from . import add_json_flag
 from .options import (
     add_ceramic_option,
     add_model_option,
-    add_voltage_option,
+    add_drive_options,
     add_width_option,
     plate_from_args,
     positive_float,
@@ -25,10 +25,7 @@ def register(subparsers) -> None:
     parser.add_argument("--hi-mm", type=positive_float, required=True, help="resonator thickness h_i [mm]")
     add_ceramic_option(parser, required=True)
     add_width_option(parser)
-    parser.add_argument(
-        "--q", type=positive_float, default=materials.PLATE_Q, help=f"plate quality factor (default: {materials.PLATE_Q:g})"
-    )
-    add_voltage_option(parser)
+    add_drive_options(parser)
     add_json_flag(parser)
     parser.set_defaults(handler=run)
 

@@ -1,6 +1,5 @@
 """``tactile optimize``: the geometry of maximum deflection with f_r >= 25 kHz."""
 
-from .. import materials
 from ..optimize import Optimum, optimise_analytical
 from ..units import KHZ, MM, UM
 from . import add_json_flag
@@ -8,11 +7,10 @@ from .options import (
     add_ceramic_option,
     add_hi_min_option,
     add_model_option,
-    add_voltage_option,
+    add_drive_options,
     add_width_option,
     ceramic_thicknesses,
     design_problem,
-    positive_float,
 )
 
 METHODS = ("nlopt", "space-mapping")
@@ -36,10 +34,7 @@ def register(subparsers) -> None:
     add_ceramic_option(parser, required=False)
     add_hi_min_option(parser)
     add_width_option(parser)
-    parser.add_argument(
-        "--q", type=positive_float, default=materials.PLATE_Q, help=f"plate quality factor (default: {materials.PLATE_Q:g})"
-    )
-    add_voltage_option(parser)
+    add_drive_options(parser)
     add_json_flag(parser)
     parser.set_defaults(handler=run)
 

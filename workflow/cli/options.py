@@ -55,7 +55,11 @@ def add_width_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def add_voltage_option(parser: argparse.ArgumentParser) -> None:
+def add_drive_options(parser: argparse.ArgumentParser) -> None:
+    """--q (the plate's quality factor) and --voltage."""
+    parser.add_argument(
+        "--q", type=positive_float, default=materials.PLATE_Q, help=f"plate quality factor (default: {materials.PLATE_Q:g})"
+    )
     parser.add_argument(
         "--voltage",
         type=positive_float,
