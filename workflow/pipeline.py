@@ -5,6 +5,7 @@ kept by step name for the steps after it and for the report.  A step that fails 
 run with a :class:`StepError` naming the step and the reason.
 """
 
+import hashlib
 import sys
 import time
 from dataclasses import dataclass, field
@@ -12,6 +13,7 @@ from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional
 
 from .errors import TactileError
+from .evaluation_cache import EvaluationCache, content_key, source_version
 from .optimize import DesignProblem, optimise_analytical
 from .units import KHZ, MM
 
@@ -40,6 +42,7 @@ class RunContext:
     results: Dict[str, Any] = field(default_factory=dict)
     timings: List[StepTiming] = field(default_factory=list)
     figures: Dict[str, str] = field(default_factory=dict)
+    cache: Optional[EvaluationCache] = None
 
     def figure_path(self, name: str) -> Path:
         """Where the figure ``name`` (a PNG file name) is written; recorded for the report."""
@@ -110,13 +113,64 @@ def campaign_logs(context: RunContext) -> List[Path]:
     return [path]
 
 
-Step = Callable[[RunContext], Any]
+@dataclass(frozen=True)
+class Step:
+    """One step of the run.
 
-STEPS: List[tuple] = [
-    ("interferometer logs (simulated campaign unless --logs)", "logs", campaign_logs),
-    ("analytical optimisation (constant Q)", "analytical_optima", analytical_optima),
+    Attributes
+    ----------
+    title : str
+        Shown in the progress lines, the timings and the error message.
+    key : str
+        Name of the result in ``context.results``.
+    compute : callable
+        ``compute(context) -> result`` (no figures).
+    figures : callable or None
+        ``figures(context, result)`` writes the step's figures into the output folder.
+    cacheable : bool
+        Keep the result in the evaluation cache, keyed by the configuration, the logs'
+        contents and the code, so that a rerun reuses it.
+    """
+
+    title: str
+    key: str
+    compute: Callable[[RunContext], Any]
+    figures: Optional[Callable[[RunContext, Any], None]] = None
+    cacheable: bool = True
+
+
+STEPS: List[Step] = [
+    Step("interferometer logs (simulated campaign unless --logs)", "logs", campaign_logs, cacheable=False),
+    Step("analytical optimisation (constant Q)", "analytical_optima", analytical_optima, cacheable=False),
 ]
-"""(title, result key, function) in the order they run."""
+"""The steps in the order they run."""
+
+
+def _step_key(context: RunContext, step: Step) -> str:
+    """Content key of a step's result: step, configuration, logs' bytes, code."""
+    package = Path(__file__).resolve().parent
+    logs = [hashlib.sha256(Path(path).read_bytes()).hexdigest() for path in context.results.get("logs", [])]
+    return content_key(
+        {
+            "step": step.key,
+            "config": context.config,
+            "logs": logs,
+            "code": [source_version(str(package)), source_version(str(package.parent / "instruments"))],
+        }
+    )
+
+
+def _compute(context: RunContext, step: Step):
+    """(result, from cache) of a step, through the cache when it may be used."""
+    if not (step.cacheable and context.cache is not None):
+        return step.compute(context), False
+    key = _step_key(context, step)
+    found, value = context.cache.load(key)
+    if found:
+        return value, True
+    value = step.compute(context)
+    context.cache.store(key, value)
+    return value, False
 
 
 def run_steps(context: RunContext, steps=None, stream=None) -> RunContext:
@@ -124,19 +178,22 @@ def run_steps(context: RunContext, steps=None, stream=None) -> RunContext:
     steps = STEPS if steps is None else steps
     stream = sys.stderr if stream is None else stream
     context.out.mkdir(parents=True, exist_ok=True)
-    for number, (title, key, function) in enumerate(steps, start=1):
-        print(f"[{number}/{len(steps)}] {title} ...", file=stream, flush=True)
+    for number, step in enumerate(steps, start=1):
+        print(f"[{number}/{len(steps)}] {step.title} ...", file=stream, flush=True)
         start = time.perf_counter()
         try:
-            context.results[key] = function(context)
+            result, cached = _compute(context, step)
+            context.results[step.key] = result
+            if step.figures is not None:
+                step.figures(context, result)
         except StepError:
             raise
         except TactileError as error:
-            raise StepError(f"step '{title}' failed: {error}") from None
+            raise StepError(f"step '{step.title}' failed: {error}") from None
         except Exception as error:  # an unexpected failure still names its step
-            raise StepError(f"step '{title}' failed unexpectedly: {type(error).__name__}: {error}") from error
+            raise StepError(f"step '{step.title}' failed unexpectedly: {type(error).__name__}: {error}") from error
         seconds = time.perf_counter() - start
-        context.timings.append(StepTiming(title, seconds))
-        print(f"[{number}/{len(steps)}] {title}: done in {seconds:.1f} s", file=stream, flush=True)
+        context.timings.append(StepTiming(step.title, seconds, cached))
+        note = " (from cache)" if cached else ""
+        print(f"[{number}/{len(steps)}] {step.title}: done in {seconds:.1f} s{note}", file=stream, flush=True)
     return context
-

@@ -4,6 +4,7 @@ import sys
 from pathlib import Path
 
 from ..config import load_config, to_toml
+from ..evaluation_cache import EvaluationCache
 from ..pipeline import RunContext, run_steps
 from ..report import write_report
 from . import add_json_flag
@@ -36,6 +37,7 @@ def run(args):
         out=args.out,
         scheduler=args.scheduler or config["run"]["scheduler"] or None,
         logs=list(args.logs or config["campaign"]["logs"]),
+        cache=EvaluationCache() if config["run"]["cache"] else None,
     )
     run_steps(context)
     report = write_report(context)
