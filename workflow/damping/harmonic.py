@@ -11,7 +11,7 @@ and bracketed by [0, w(Q(0))], so a bracketing iteration always converges.
 
 Two solvers: :func:`self_consistent_amplitude` needs only Q(v) (Illinois iteration);
 :func:`self_consistent_amplitude_newton` uses the law's loss 1/Q and its slope for a
-safeguarded Newton iteration on s = w^2, several times faster (the fit's inner loop).
+safeguarded Newton iteration, several times faster (the fit's inner loop).
 """
 
 import numpy as np
@@ -117,11 +117,12 @@ def self_consistent_amplitude(static_amplitude, frequency, resonance_frequency, 
 def self_consistent_amplitude_newton(static_amplitude, frequency, resonance_frequency, law, rtol=1e-10, max_iter=100):
     """Solve w = w_s / sqrt((1 - r^2)^2 + (r / Q(2 pi f w))^2) for w with Newton's method [m].
 
-    With s = w^2, eta = 1/Q and v = 2 pi f sqrt(s), the root of
-    G(s) = s ((1 - r^2)^2 + r^2 eta(v)^2) - w_s^2 is sought from the bracket's upper end
-    s = w(Q(0))^2, where G >= 0.  G is increasing, and convex for the quadratic and linear
-    laws, so the Newton iterates fall monotonically onto the root; a step that leaves the
-    bracket [low, high] is replaced by bisection, so any non-increasing Q(v) converges.
+    With eta = 1/Q and D(w) = (1 - r^2)^2 + r^2 eta(2 pi f w)^2, the root of
+    F(w) = w sqrt(D(w)) - w_s is sought from the bracket's upper end w = w(Q(0)), where
+    F >= 0.  F is increasing, and convex for the quadratic and linear laws (a product of
+    increasing convex functions), so the Newton iterates fall monotonically onto the
+    root; a step that leaves the bracket [low, high] is replaced by bisection, so any
+    non-increasing Q(v) converges.
 
     Parameters
     ----------
@@ -152,28 +153,26 @@ def self_consistent_amplitude_newton(static_amplitude, frequency, resonance_freq
     ratio2 = (f / f_r) ** 2
     detuning2 = (1 - ratio2) ** 2
     omega = 2 * np.pi * f
-    target = w_s**2
-    high = target / (detuning2 + ratio2 * law.loss(0.0 * omega) ** 2)
+    high = w_s / np.sqrt(detuning2 + ratio2 * law.loss(0.0 * omega) ** 2)
     shape = np.broadcast(high, omega, law.loss(omega)).shape
     high = np.broadcast_to(high, shape).copy()
     low = np.zeros(shape)
-    s = high.copy()
+    w = high.copy()
     for _ in range(max_iter):
-        velocity = omega * np.sqrt(s)
+        velocity = omega * w
         loss = law.loss(velocity)
-        residual = s * (detuning2 + ratio2 * loss**2) - target
-        slope = detuning2 + ratio2 * loss * (loss + law.loss_slope(velocity) * velocity)
+        root = np.sqrt(detuning2 + ratio2 * loss**2)
+        residual = w * root - w_s
+        slope = root + ratio2 * loss * law.loss_slope(velocity) * velocity / root
         above = residual > 0
-        high = np.where(above, s, high)
-        low = np.where(above, low, s)
-        step = residual / slope
-        newton = s - step
-        inside = (newton >= low) & (newton <= high)
-        s_new = np.where(inside, newton, 0.5 * (low + high))
-        converged = np.abs(s_new - s) <= 2 * rtol * s_new
-        s = s_new
+        high = np.where(above, w, high)
+        low = np.where(above, low, w)
+        newton = w - residual / slope
+        w_new = np.where((newton >= low) & (newton <= high), newton, 0.5 * (low + high))
+        converged = np.abs(w_new - w) <= rtol * w_new
+        w = w_new
         if np.all(converged | (residual == 0)):
-            return np.sqrt(s)
+            return w
     raise HarmonicSolveError(
         f"self-consistent deflection (Newton) did not converge to rtol={rtol:g} in {max_iter} iterations"
     )

@@ -100,6 +100,11 @@ LAWS = {law.name: law for law in (QuadraticLoss, LinearLoss, ConstantQ)}
 """The Q(v) laws by name."""
 
 
+def parameter_names(law_class) -> tuple:
+    """Names of a law class's parameters, e.g. ("q0", "alpha")."""
+    return tuple(f.name for f in fields(law_class))
+
+
 def law_parameters(law) -> dict:
     """Parameter name -> value of a law instance."""
     return {f.name: getattr(law, f.name) for f in fields(law)}

@@ -19,13 +19,13 @@ Priors are flat on these coordinates within :attr:`FitData.lower` .. :attr:`FitD
 Every function here is module-level and takes arrays, so emcee can pickle it.
 """
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Tuple
 
 import numpy as np
 
 from .harmonic import self_consistent_amplitude_newton
-from .laws import LAWS
+from .laws import LAWS, parameter_names
 from .logs import CampaignLog
 
 SAMPLED_LAW_PARAMETERS = {"q0": "ln_q0", "alpha": "alpha"}
@@ -53,7 +53,7 @@ class ParameterLayout:
     @property
     def law_parameters(self) -> Tuple[str, ...]:
         """The law's own parameter names (``q0``, ``alpha``)."""
-        return tuple(f.name for f in fields(LAWS[self.law_name]))
+        return parameter_names(LAWS[self.law_name])
 
     @property
     def names(self) -> Tuple[str, ...]:

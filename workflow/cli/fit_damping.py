@@ -1,0 +1,141 @@
+"""``tactile fit-damping``: Bayesian fit of Q(v) to interferometer logs (SPEC sections 6, 8).
+
+Also the ``--damping POSTERIOR`` option shared by ``evaluate``, ``optimize`` and ``maps``:
+:func:`add_damping_option` and :func:`load_damping`.
+"""
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from ..damping.fit import DEFAULT_LAWS, fit_damping, fit_summary
+from ..damping.laws import LAWS
+from ..damping.logs import read_logs
+from ..damping.posterior import POSTERIOR_FILE, load_posterior, save_posterior
+from ..errors import InputFileError
+from . import add_json_flag
+
+SAMPLED_LAWS = tuple(name for name in LAWS if name != "constant")
+"""Laws ``--law`` accepts; the constant-Q baseline is always in the comparison (BIC at the MAP)."""
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "fit-damping",
+        help="fit Q(v) to interferometer logs with emcee",
+        description="Infer the amplitude-dependent quality factor Q(v) from frequency sweeps at several "
+        "drive voltages (interferometer logs, SPEC section 7), with the resonance of each sweep, the "
+        "drive-to-deflection gain and the noise as nuisance parameters.  Laws are compared with WAIC "
+        "(BIC at the MAP also reported).  Writes posterior.npz (what --damping reads), fit.json and "
+        "figures into --out.",
+    )
+    parser.add_argument("logs", nargs="+", metavar="LOG.csv", help="interferometer log(s), SPEC section 7 format")
+    parser.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
+    parser.add_argument(
+        "--law",
+        choices=SAMPLED_LAWS + ("all",),
+        default="all",
+        help=f"Q(v) law to sample; 'all' samples {', '.join(SAMPLED_LAWS)} and keeps the best by WAIC (default: all)",
+    )
+    parser.add_argument("--seed", type=int, default=0, help="random seed of the walkers and the sampler (default: 0)")
+    parser.add_argument("--max-steps", type=_positive_int, default=20000, help="cap on each chain's length (default: 20000)")
+    parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    add_json_flag(parser)
+    parser.set_defaults(handler=run)
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return value
+
+
+def run(args) -> dict:
+    log = read_logs(args.logs)
+    for warning in log.warnings:
+        print(f"tactile fit-damping: warning: {warning}", file=sys.stderr)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputFileError(f"--out {out}: exists and is not a folder")
+    input_paths = {Path(p).resolve() for p in args.logs}
+    laws = SAMPLED_LAWS if args.law == "all" else (args.law,)
+    fit = fit_damping(log, laws=laws, seed=args.seed, max_steps=args.max_steps, progress=sys.stderr.isatty())
+    summary = fit_summary(fit)
+    out.mkdir(parents=True, exist_ok=True)
+    outputs = {POSTERIOR_FILE: fit.best, **{f"posterior_{name}.npz": law_fit for name, law_fit in fit.fits.items()}}
+    for name, law_fit in outputs.items():
+        _refuse_overwriting_input(out / name, input_paths)
+        save_posterior(law_fit.posterior(), out / name, law_fit.samples, law_fit.data.layout.names)
+    figures = [] if args.no_figures else _write_figures(fit, out, input_paths)
+    summary["files"] = {"posterior": str(out / POSTERIOR_FILE), "figures": figures}
+    _refuse_overwriting_input(out / "fit.json", input_paths)
+    (out / "fit.json").write_text(json.dumps(summary, indent=2, default=_plain) + "\n")
+    if not args.json:
+        _print_human(summary)
+    return summary
+
+
+def _write_figures(fit, out: Path, input_paths) -> list:
+    import matplotlib.pyplot as plt
+
+    from ..figures.damping import fit_figures
+
+    written = []
+    for name, figure in fit_figures(fit).items():
+        _refuse_overwriting_input(out / name, input_paths)
+        figure.savefig(out / name, dpi=120)
+        plt.close(figure)
+        written.append(str(out / name))
+    return written
+
+
+def _refuse_overwriting_input(path: Path, input_paths) -> None:
+    if path.resolve() in input_paths:
+        raise InputFileError(f"--out: writing {path} would overwrite an input log; choose another folder")
+
+
+def _plain(value):
+    import numpy as np
+
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+def _print_human(summary: dict) -> None:
+    d = summary["diagnostics"]
+    print(f"Q(v) law: {summary['law']} ({summary['n_points']} points, {summary['n_sweeps']} sweeps)")
+    for name, p in summary["parameters"].items():
+        if not name.startswith("f_r_"):
+            print(f"  {name:10s} {p['median']:.5g}  [{p['p05']:.5g}, {p['p95']:.5g}] {p['unit']}  (median, 90 %)")
+    print(
+        f"  chain: {d['n_steps']} steps x {d['n_walkers']} walkers, tau_max {d['tau_max']:.1f}, "
+        f"acceptance {d['acceptance']:.2f}, {'converged' if d['converged'] else 'NOT converged'} ({d['seconds']:.1f} s)"
+    )
+    for name, c in summary["comparison"]["laws"].items():
+        waic = f"WAIC {c['waic']:.1f}, " if "waic" in c else ""
+        print(f"  {name:10s} {waic}BIC {c['bic']:.1f}")
+    print(f"  preferred by WAIC: {summary['comparison']['preferred']}; posterior: {summary['files']['posterior']}")
+
+
+def add_damping_option(parser: argparse.ArgumentParser) -> None:
+    """The ``--damping POSTERIOR`` option: design with the fitted Q(v) instead of a constant Q."""
+    parser.add_argument(
+        "--damping",
+        metavar="POSTERIOR",
+        help="posterior.npz (or its folder) from 'tactile fit-damping': use the posterior-median Q(v) law, "
+        "solved self-consistently, instead of a constant Q",
+    )
+
+
+def load_damping(args):
+    """The :class:`~workflow.damping.posterior.DampingPosterior` named by ``--damping``, or None."""
+    path = getattr(args, "damping", None)
+    return None if path is None else load_posterior(path)
