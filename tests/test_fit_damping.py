@@ -1,0 +1,166 @@
+"""The Q(v) fit: recovery of a known law, model comparison, the CLI and its bad input."""
+
+import json
+import os
+
+import numpy as np
+import pytest
+
+from workflow.cli import main
+from workflow.damping.fit import fit_damping, fit_law, fit_summary, sweep_estimates
+from workflow.damping.laws import QuadraticLoss
+from workflow.damping.likelihood import fit_data, log_probability, log_probability_single
+from workflow.damping.posterior import load_posterior
+from workflow.damping.synthetic import TRUE_LAW, campaign_csv, simulate_campaign
+from workflow.errors import InputFileError
+
+SMALL = dict(voltages=(3.0, 9.0, 15.0, 18.0), points_per_sweep=30)
+
+
+@pytest.fixture(scope="module")
+def campaign():
+    return simulate_campaign(seed=11, **SMALL)
+
+
+@pytest.fixture(scope="module")
+def fit(campaign):
+    return fit_damping(campaign, laws=("quadratic", "linear"), seed=3, max_steps=2500)
+
+
+def test_vectorised_log_probability_matches_the_single_walker_one(campaign):
+    data = fit_data(campaign, "quadratic")
+    rng = np.random.default_rng(0)
+    theta = data.lower + (data.upper - data.lower) * rng.uniform(0.3, 0.7, (6, len(data.lower)))
+    batch = log_probability(theta, data)
+    assert np.allclose(batch, [log_probability_single(t, data) for t in theta])
+    outside = theta[0].copy()
+    outside[1] = -1.0  # alpha < 0
+    assert log_probability_single(outside, data) == -np.inf
+
+
+def test_recovers_the_true_law_within_the_credible_band(fit, campaign):
+    quadratic = fit.fits["quadratic"]
+    posterior = quadratic.posterior()
+    for name, truth in (("q0", TRUE_LAW.q0), ("alpha", TRUE_LAW.alpha)):
+        low, median, high = np.quantile(posterior.parameters[name], [0.005, 0.5, 0.995])
+        assert low <= truth <= high, name
+        assert median == pytest.approx(truth, rel=0.08), name
+    velocity = np.linspace(0.02, campaign.velocity.max(), 7)
+    q_low, q_high = quadratic.quality_factor_quantiles(velocity, (0.005, 0.995))
+    truth = TRUE_LAW.quality_factor(velocity)
+    assert np.all((q_low <= truth) & (truth <= q_high))
+
+
+def test_chain_diagnostics_are_reported_honestly(fit):
+    d = fit.fits["quadratic"].diagnostics
+    assert 0.1 < d.acceptance < 0.7
+    assert d.n_steps <= 2500
+    assert len(d.tau) == fit.fits["quadratic"].data.layout.dimension
+    # converged implies the chain is at least 50 autocorrelation times long
+    assert d.n_steps >= 50 * d.tau_max or not d.converged
+
+
+def test_quadratic_data_prefer_the_quadratic_law(fit):
+    assert fit.preferred == "quadratic"
+    criteria = fit.map_criteria
+    assert criteria["quadratic"]["bic"] < criteria["linear"]["bic"] < criteria["constant"]["bic"]
+
+
+def test_summary_has_the_contract_keys(fit):
+    summary = json.loads(json.dumps(fit_summary(fit), default=lambda a: a.tolist()))
+    q = summary["q_of_v"]
+    assert len(q["v_m_s"]) == len(q["q_p05"]) == len(q["q_p50"]) == len(q["q_p95"]) > 10
+    assert np.all(np.array(q["q_p05"]) <= np.array(q["q_p50"])) and np.all(np.array(q["q_p50"]) <= np.array(q["q_p95"]))
+    for key in ("tau_max", "n_steps", "acceptance", "converged"):
+        assert key in summary["diagnostics"]
+    assert {"median", "p05", "p95"} <= set(summary["parameters"]["q0"])
+    assert "WAIC" in summary["comparison"]["criterion"]
+
+
+def test_half_power_estimates_fall_with_voltage(campaign):
+    estimates = sweep_estimates(campaign)
+    assert np.all(np.diff(estimates.quality_factor) < 0)
+    assert np.all(np.diff(estimates.peak_velocity) > 0)
+
+
+def run_cli(capsys, *argv):
+    try:
+        status = main([str(a) for a in argv])
+    except SystemExit as exit_:
+        status = exit_.code
+    out, err = capsys.readouterr()
+    return status, out, err
+
+
+def test_cli_writes_posterior_figures_and_leaves_the_log_alone(tmp_path, capsys):
+    text = campaign_csv(simulate_campaign(seed=5, **SMALL))
+    lines = text.splitlines(keepends=True)
+    lines[10] = lines[10].rsplit(",", 1)[0] + ",nan\n"  # a vibrometer dropout
+    log = tmp_path / "campaign.csv"
+    log.write_text("".join(lines))
+    before = (log.read_bytes(), os.stat(log).st_mtime_ns)
+    out_dir = tmp_path / "fit"
+    status, out, err = run_cli(capsys, "fit-damping", log, "--out", out_dir, "--law", "quadratic", "--max-steps", "600", "--json")
+    assert status == 0, err
+    assert (log.read_bytes(), os.stat(log).st_mtime_ns) == before
+    assert len(err.strip().splitlines()) == 1 and "dropped 1 row" in err
+    summary = json.loads(out.strip().splitlines()[-1])
+    assert summary["law"] == "quadratic"
+    for name in ("posterior.npz", "fit.json", "q_of_v.png", "resonance_curves.png", "corner_quadratic.png", "trace_quadratic.png"):
+        assert (out_dir / name).is_file(), name
+    posterior = load_posterior(out_dir)
+    assert isinstance(posterior.median_law(), QuadraticLoss)
+    assert posterior.median_law().q0 == pytest.approx(summary["parameters"]["q0"]["median"])
+
+
+BAD_LOGS = {
+    "empty": b"",
+    "header only": b"frequency_hz,drive_voltage_v,velocity_m_s\n",
+    "missing column": b"frequency_hz,velocity_m_s\n31000,0.1\n",
+    "ambiguous column": b"frequency_hz,drive_voltage_v,velocity_m_s,velocity_m_s\n31000,5,0.1,0.2\n",
+    "non-numeric": b"frequency_hz,drive_voltage_v,velocity_m_s\n31000,5,abc\n",
+    "negative frequency": b"frequency_hz,drive_voltage_v,velocity_m_s\n-5,5,0.1\n",
+    "binary": bytes(range(256)),
+    "non-utf8": b"frequency_hz,drive_voltage_v,velocity_m_s\n31000,5,0.1\xff\n",
+}
+
+
+@pytest.mark.parametrize("content", BAD_LOGS.values(), ids=BAD_LOGS.keys())
+def test_cli_bad_log_is_one_line_without_traceback(tmp_path, capsys, content):
+    log = tmp_path / "bad.csv"
+    log.write_bytes(content)
+    before = os.stat(log).st_mtime_ns
+    status, out, err = run_cli(capsys, "fit-damping", log, "--out", tmp_path / "fit", "--json")
+    assert status != 0
+    assert len(err.strip().splitlines()) == 1
+    assert "Traceback" not in err and str(log) in err
+    assert log.read_bytes() == content and os.stat(log).st_mtime_ns == before
+    assert not (tmp_path / "fit").exists()
+
+
+def test_cli_missing_log_is_one_line(tmp_path, capsys):
+    status, _, err = run_cli(capsys, "fit-damping", tmp_path / "absent.csv", "--out", tmp_path / "fit")
+    assert status != 0 and len(err.strip().splitlines()) == 1 and "absent.csv" in err
+
+
+def test_a_bad_posterior_file_is_an_input_error(tmp_path):
+    garbage = tmp_path / "posterior.npz"
+    garbage.write_bytes(b"not a zip")
+    with pytest.raises(InputFileError, match="posterior"):
+        load_posterior(garbage)
+    with pytest.raises(InputFileError, match="no such posterior"):
+        load_posterior(tmp_path / "missing.npz")
+
+
+@pytest.mark.slow
+def test_coverage_of_the_90_percent_interval_over_seeds():
+    hits, seeds = [], range(8)
+    for seed in seeds:
+        campaign = simulate_campaign(seed=100 + seed, **SMALL)
+        law_fit = fit_law(campaign, "quadratic", seed=seed, max_steps=4000)
+        samples = law_fit.posterior().parameters
+        for name, truth in (("q0", TRUE_LAW.q0), ("alpha", TRUE_LAW.alpha)):
+            low, high = np.quantile(samples[name], [0.05, 0.95])
+            hits.append(low <= truth <= high)
+    # 16 Bernoulli(0.9) trials: fewer than 11 hits has probability < 2 %.
+    assert sum(hits) >= 11, hits
