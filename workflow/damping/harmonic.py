@@ -69,22 +69,54 @@ def self_consistent_amplitude(static_amplitude, frequency, resonance_frequency, 
     HarmonicSolveError
         If the tolerance is not met (only with a law that is not non-increasing).
     """
-    w_s, f, f_r = np.broadcast_arrays(
-        *(np.asarray(x, dtype=float) for x in (static_amplitude, frequency, resonance_frequency))
-    )
-    high = response_amplitude(w_s, f / f_r, quality_factor(np.zeros_like(w_s)))
-    # The law's parameters may add dimensions (e.g. one row per walker).
-    w_s, f, f_r, high = np.broadcast_arrays(w_s, f, f_r, high)
-    high = high.astype(float)
+    w_s, f, f_r = (np.asarray(x, dtype=float) for x in (static_amplitude, frequency, resonance_frequency))
     ratio = f / f_r
-    omega = 2 * np.pi * f
+    return self_consistent_deflection(
+        lambda q: response_amplitude(w_s, ratio, q), quality_factor, 2 * np.pi * f, rtol, max_iter
+    )
+
+
+def self_consistent_deflection(deflection_at_q, quality_factor, angular_frequency, rtol=1e-10, max_iter=200):
+    """Solve w = D(Q(omega w)) for w, elementwise, with D increasing in Q [m].
+
+    The general form of the self-consistent solve, for any deflection-versus-Q function
+    (e.g. the FEM's ``FemResult.deflection_at_q``): vectorised Illinois (modified regula
+    falsi) iteration on the bracket [0, D(Q(0))].  Because D increases with Q and Q(v) is
+    non-increasing, the residual w - D(Q(omega w)) is increasing and the root unique.
+
+    Parameters
+    ----------
+    deflection_at_q : callable
+        D(Q) [m], vectorised.
+    quality_factor : callable
+        Q(v) with v the peak velocity amplitude [m/s]; non-increasing in v.
+    angular_frequency : array
+        omega = 2 pi f [rad/s], so that v = omega w.
+    rtol : float
+        Relative tolerance on w.
+    max_iter : int
+
+    Returns
+    -------
+    numpy.ndarray
+        w [m], broadcast shape of D's output and omega.
+
+    Raises
+    ------
+    HarmonicSolveError
+        If the tolerance is not met (only with a law that is not non-increasing).
+    """
+    omega = np.asarray(angular_frequency, dtype=float)
+    high = np.asarray(deflection_at_q(quality_factor(np.zeros_like(omega))), dtype=float)
+    omega, high = np.broadcast_arrays(omega, high)
+    high = high.astype(float)
 
     def residual(w):
-        return w - response_amplitude(w_s, ratio, quality_factor(omega * w))
+        return w - deflection_at_q(quality_factor(omega * w))
 
-    low = np.zeros_like(w_s)
+    low = np.zeros_like(high)
     r_low, r_high = residual(low), residual(high)
-    side = np.zeros(w_s.shape, dtype=int)
+    side = np.zeros(high.shape, dtype=int)
     scale = np.maximum(high, np.finfo(float).tiny)
     for _ in range(max_iter):
         if np.all(high - low <= rtol * scale):

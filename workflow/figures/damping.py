@@ -9,6 +9,7 @@ import matplotlib
 matplotlib.use("Agg")
 
 import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.colors import LogNorm  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ..damping.fit import DampingFit, LawFit, velocity_grid  # noqa: E402
@@ -152,8 +153,12 @@ def design_map_figure(maps, quantity: str = "deflection"):
     label = "deflection with Q(v) [um]" if quantity == "deflection" else "voltage for the target deflection [V]"
     figure, ax = plt.subplots(figsize=(6, 4.5))
     x, y = maps.wavelength / MM, maps.resonator_thickness / MM
-    contour = ax.contourf(x, y, values.T, levels=20, cmap="viridis" if quantity == "deflection" else "magma_r")
-    figure.colorbar(contour, ax=ax, label=label)
+    if quantity == "deflection":
+        contour = ax.contourf(x, y, values.T, levels=20, cmap="viridis")
+    else:  # spans orders of magnitude: logarithmic levels
+        levels = np.geomspace(np.min(values), np.max(values), 21)
+        contour = ax.contourf(x, y, values.T, levels=levels, norm=LogNorm(levels[0], levels[-1]), cmap="magma_r")
+    figure.colorbar(contour, ax=ax, label=label, format="%.3g", ticks=contour.levels[::4])
     lines = ax.contour(x, y, maps.frequency.T / KHZ, levels=[maps.min_frequency / KHZ], colors="w", linewidths=1.5)
     ax.clabel(lines, fmt=lambda f: f"{f:g} kHz", fontsize=8)
     ax.axhline(maps.min_resonator_thickness / MM, color="w", ls="--", lw=1, label=f"h_i = {maps.min_resonator_thickness / MM:g} mm")
