@@ -3,6 +3,7 @@
 from .. import analytical
 from ..units import KHZ, MM, UM
 from . import add_json_flag
+from .fit_damping import add_damping_option, damping_record, load_damping
 from .options import (
     add_ceramic_option,
     add_model_option,
@@ -26,6 +27,7 @@ def register(subparsers) -> None:
     add_ceramic_option(parser, required=True)
     add_width_option(parser)
     add_drive_options(parser)
+    add_damping_option(parser)
     add_json_flag(parser)
     parser.set_defaults(handler=run)
 
@@ -44,10 +46,23 @@ def run(args) -> dict:
     if args.model == "analytical":
         result["w_dyn_um"] = float(analytical.dynamic_deflection(plate, args.voltage, args.q)) / UM
         result["f_r_khz"] = float(analytical.resonance_frequency(plate)) / KHZ
+        posterior = load_damping(args)
+        if posterior is not None:
+            result.update(damping_record(posterior, plate, args.voltage))
+    else:
+        from ..fem import evaluate_fem
+
+        fem = evaluate_fem(plate, q=args.q, voltage=args.voltage)
+        result["w_dyn_um"] = fem.deflection / UM
+        result["f_r_khz"] = fem.frequency / KHZ
+        result["modes"] = [
+            {"f_khz": m.frequency / KHZ, "w_um": m.deflection / UM, "transverse": m.transverse_indicator}
+            for m in fem.modes
+        ]
     if not args.json:
         print(
             f"{args.model}: lambda {result['lambda_mm']:g} mm, h_i {result['h_i_mm']:g} mm, h_p {result['h_p_mm']:g} mm, "
-            f"b {result['b_mm']:g} mm, Q {args.q:g}, {args.voltage:g} V -> "
+            f"b {result['b_mm']:g} mm, Q {result['q']:g}, {args.voltage:g} V -> "
             f"w_dyn {result['w_dyn_um']:.4f} um at f_r {result['f_r_khz']:.3f} kHz"
         )
     return result

@@ -9,12 +9,19 @@ import json
 import sys
 from pathlib import Path
 
-from ..damping.fit import DEFAULT_LAWS, fit_damping, fit_summary
-from ..damping.laws import LAWS
+import numpy as np
+
+from ..analytical import resonance_frequency
+from ..damping.design import damped_deflection, damped_model, required_voltage
+from ..damping.fit import fit_damping, fit_summary
+from ..damping.laws import LAWS, law_parameters
 from ..damping.logs import read_logs
 from ..damping.posterior import POSTERIOR_FILE, load_posterior, save_posterior
 from ..errors import InputFileError
-from . import add_json_flag
+from ..materials import TARGET_DEFLECTION
+from ..optimize import maximise_deflection
+from ..units import UM
+from . import _jsonable, add_json_flag
 
 SAMPLED_LAWS = tuple(name for name in LAWS if name != "constant")
 """Laws ``--law`` accepts; the constant-Q baseline is always in the comparison (BIC at the MAP)."""
@@ -74,7 +81,7 @@ def run(args) -> dict:
     figures = [] if args.no_figures else _write_figures(fit, out, input_paths)
     summary["files"] = {"posterior": str(out / POSTERIOR_FILE), "figures": figures}
     _refuse_overwriting_input(out / "fit.json", input_paths)
-    (out / "fit.json").write_text(json.dumps(summary, indent=2, default=_plain) + "\n")
+    (out / "fit.json").write_text(json.dumps(summary, indent=2, default=_jsonable) + "\n")
     if not args.json:
         _print_human(summary)
     return summary
@@ -97,16 +104,6 @@ def _write_figures(fit, out: Path, input_paths) -> list:
 def _refuse_overwriting_input(path: Path, input_paths) -> None:
     if path.resolve() in input_paths:
         raise InputFileError(f"--out: writing {path} would overwrite an input log; choose another folder")
-
-
-def _plain(value):
-    import numpy as np
-
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
 
 
 def _print_human(summary: dict) -> None:
@@ -139,3 +136,36 @@ def load_damping(args):
     """The :class:`~workflow.damping.posterior.DampingPosterior` named by ``--damping``, or None."""
     path = getattr(args, "damping", None)
     return None if path is None else load_posterior(path)
+
+
+def damping_record(posterior, plate, voltage: float, draws: int = 200) -> dict:
+    """JSON keys for a beam-model evaluation with Q(v): the posterior-median law's deflection,
+    the Q it settles at, 90 % intervals over posterior draws and the voltage for the target."""
+    law, drawn = posterior.median_law(), posterior.draws(draws)
+    deflection = float(damped_deflection(plate, voltage, law))
+    frequency = float(resonance_frequency(plate))
+    w05, w95 = np.quantile(damped_deflection(plate, voltage, drawn), [0.05, 0.95])
+    return {
+        "w_dyn_um": deflection / UM,
+        "w_dyn_um_p05": w05 / UM,
+        "w_dyn_um_p95": w95 / UM,
+        "q": float(law.quality_factor(2 * np.pi * frequency * deflection)),
+        **_damping_keys(posterior, plate, draws),
+    }
+
+
+def _damping_keys(posterior, plate, draws: int) -> dict:
+    """The voltage for the target deflection at ``plate`` (median and 90 % over draws) and the law used."""
+    v05, v50, v95 = np.quantile(required_voltage(plate, posterior.draws(draws)), [0.05, 0.5, 0.95])
+    return {
+        "required_voltage_v": {"target_um": TARGET_DEFLECTION / UM, "p05": v05, "p50": v50, "p95": v95},
+        "damping": {"law": posterior.law_name, "median": law_parameters(posterior.median_law()), "posterior": posterior.source},
+    }
+
+
+def damped_optimum(posterior, problem, draws: int = 200):
+    """The beam optimum with the posterior-median Q(v), and JSON keys on the damping:
+    the voltage for the target deflection there (median law and 90 % interval over draws)."""
+    law = posterior.median_law()
+    optimum = maximise_deflection(damped_model(law, problem.voltage), problem)
+    return optimum, _damping_keys(posterior, optimum.plate, draws)

@@ -3,6 +3,7 @@
 from ..optimize import Optimum, optimise_analytical
 from ..units import KHZ, MM, UM
 from . import add_json_flag
+from .fit_damping import add_damping_option, damped_optimum, load_damping
 from .options import (
     add_ceramic_option,
     add_hi_min_option,
@@ -35,6 +36,7 @@ def register(subparsers) -> None:
     add_hi_min_option(parser)
     add_width_option(parser)
     add_drive_options(parser)
+    add_damping_option(parser)
     add_json_flag(parser)
     parser.set_defaults(handler=run)
 
@@ -57,9 +59,13 @@ def optimum_record(optimum: Optimum, **counts) -> dict:
 
 def run(args) -> dict:
     records = []
+    posterior = load_damping(args)
     for ceramic_thickness in ceramic_thicknesses(args):
         problem = design_problem(args, ceramic_thickness)
-        if args.model == "analytical":
+        if args.model == "analytical" and posterior is not None:
+            optimum, extra = damped_optimum(posterior, problem)
+            records.append(optimum_record(optimum, coarse_evaluations=optimum.evaluations, **extra))
+        elif args.model == "analytical":
             optimum = optimise_analytical(problem, q=args.q)
             records.append(optimum_record(optimum, coarse_evaluations=optimum.evaluations))
     if not args.json:
