@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..analytical import resonance_frequency
-from ..damping.design import damped_deflection, damped_model, required_voltage
+from ..damping.design import damped_deflection, damped_model, fem_damped_deflection, fem_required_voltage, required_voltage
 from ..damping.fit import fit_damping, fit_summary
 from ..damping.laws import LAWS, law_parameters
 from ..damping.logs import read_logs
@@ -169,3 +169,17 @@ def damped_optimum(posterior, problem, draws: int = 200):
     law = posterior.median_law()
     optimum = maximise_deflection(damped_model(law, problem.voltage), problem)
     return optimum, _damping_keys(posterior, optimum.plate, draws)
+
+
+def fem_damping_record(posterior, result) -> dict:
+    """JSON keys for a FEM evaluation with Q(v): the best mode's self-consistent deflection with
+    the posterior-median law, the Q it settles at, and the voltage for the target deflection."""
+    law = posterior.median_law()
+    deflection = float(fem_damped_deflection(result, law))
+    v05, v50, v95 = np.quantile(fem_required_voltage(result, posterior.draws(200)), [0.05, 0.5, 0.95])
+    return {
+        "w_dyn_um": deflection / UM,
+        "q": float(law.quality_factor(2 * np.pi * result.frequency * deflection)),
+        "required_voltage_v": {"target_um": TARGET_DEFLECTION / UM, "p05": v05, "p50": v50, "p95": v95},
+        "damping": {"law": posterior.law_name, "median": law_parameters(law), "posterior": posterior.source},
+    }
