@@ -3,7 +3,7 @@
 from .. import analytical
 from ..units import KHZ, MM, UM
 from . import add_json_flag
-from .fit_damping import add_damping_option, damping_record, load_damping
+from .fit_damping import add_damping_option, damping_record, fem_damping_record, load_damping
 from .options import (
     add_ceramic_option,
     add_model_option,
@@ -59,10 +59,15 @@ def run(args) -> dict:
             {"f_khz": m.frequency / KHZ, "w_um": m.deflection / UM, "transverse": m.transverse_indicator}
             for m in fem.modes
         ]
+        posterior = load_damping(args)
+        if posterior is not None:
+            result.update(fem_damping_record(posterior, fem))
     if not args.json:
         print(
             f"{args.model}: lambda {result['lambda_mm']:g} mm, h_i {result['h_i_mm']:g} mm, h_p {result['h_p_mm']:g} mm, "
             f"b {result['b_mm']:g} mm, Q {result['q']:g}, {args.voltage:g} V -> "
             f"w_dyn {result['w_dyn_um']:.4f} um at f_r {result['f_r_khz']:.3f} kHz"
         )
+        for mode in result.get("modes", []):
+            print(f"  mode {mode['f_khz']:8.3f} kHz: {mode['w_um']:.4f} um, transverse indicator {mode['transverse']:.2f}")
     return result

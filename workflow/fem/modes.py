@@ -37,11 +37,29 @@ class ShiftedModes:
         return np.sqrt(np.abs(self.eigenvalues)) / (2 * np.pi)
 
 
+def rigid_translation(system: PlateSystem) -> np.ndarray:
+    """The free plate's one rigid-body motion left by the symmetry planes: unit-mass translation along z."""
+    translation = np.zeros(system.stiffness.shape[0])
+    translation[system.free_dofs % 3 == 2] = 1.0
+    return translation / np.sqrt(translation @ (system.mass @ translation))
+
+
 def nearest_modes(system: PlateSystem, frequency: float, n_modes: int) -> ShiftedModes:
-    """The ``n_modes`` eigenpairs of K phi = omega^2 M phi with omega^2 nearest (2 pi frequency)^2."""
+    """The ``n_modes`` elastic eigenpairs of K phi = omega^2 M phi with omega^2 nearest (2 pi frequency)^2.
+
+    The rigid translation along z is projected out of the shift-invert operator, so it is never
+    returned even when the shift is low.
+    """
     shift = (2 * np.pi * frequency) ** 2
     factor = sla.splu((system.stiffness - shift * system.mass).tocsc(), permc_spec="MMD_AT_PLUS_A")
-    operator = sla.LinearOperator(system.stiffness.shape, matvec=factor.solve, dtype=float)
+    rigid = rigid_translation(system)
+    rigid_mass = system.mass @ rigid
+
+    def solve_elastic(rhs):
+        solution = factor.solve(rhs)
+        return solution - rigid * (rigid_mass @ solution)
+
+    operator = sla.LinearOperator(system.stiffness.shape, matvec=solve_elastic, dtype=float)
     start = np.ones(system.stiffness.shape[0])
     with threadpool_limits(limits=1, user_api="blas"):  # ARPACK's small dense steps only lose from threads
         eigenvalues, vectors = sla.eigsh(
