@@ -66,25 +66,50 @@ def run(args) -> dict:
     log = read_logs(args.logs)
     for warning in log.warnings:
         print(f"tactile fit-damping: warning: {warning}", file=sys.stderr)
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputFileError(f"--out {out}: exists and is not a folder")
+    out = _output_folder(args.out)
     input_paths = {Path(p).resolve() for p in args.logs}
     laws = SAMPLED_LAWS if args.law == "all" else (args.law,)
     fit = fit_damping(log, laws=laws, seed=args.seed, max_steps=args.max_steps, progress=sys.stderr.isatty())
-    summary = fit_summary(fit)
-    out.mkdir(parents=True, exist_ok=True)
-    outputs = {POSTERIOR_FILE: fit.best, **{f"posterior_{name}.npz": law_fit for name, law_fit in fit.fits.items()}}
-    for name, law_fit in outputs.items():
-        _refuse_overwriting_input(out / name, input_paths)
-        save_posterior(law_fit.posterior(), out / name, law_fit.samples, law_fit.data.layout.names)
-    figures = [] if args.no_figures else _write_figures(fit, out, input_paths)
-    summary["files"] = {"posterior": str(out / POSTERIOR_FILE), "figures": figures}
-    _refuse_overwriting_input(out / "fit.json", input_paths)
-    (out / "fit.json").write_text(json.dumps(summary, indent=2, default=_jsonable) + "\n")
+    summary = dict(fit_summary(fit), files=write_fit(fit, out, figures=not args.no_figures, protect=input_paths))
     if not args.json:
         _print_human(summary)
     return summary
+
+
+def write_fit(fit, out, figures: bool = True, protect=()) -> dict:
+    """Write a fit's posterior files, ``fit.json`` and (optionally) its figures into ``out``.
+
+    Parameters
+    ----------
+    fit : DampingFit
+    out : path-like
+        Folder, created if missing.
+    figures : bool
+    protect : collection of Path
+        Resolved paths that must not be overwritten (the input logs).
+
+    Returns
+    -------
+    dict
+        {"posterior": path of posterior.npz, "figures": [paths]}.
+    """
+    out = _output_folder(out)
+    out.mkdir(parents=True, exist_ok=True)
+    outputs = {POSTERIOR_FILE: fit.best, **{f"posterior_{name}.npz": law_fit for name, law_fit in fit.fits.items()}}
+    for name, law_fit in outputs.items():
+        _refuse_overwriting_input(out / name, protect)
+        save_posterior(law_fit.posterior(), out / name, law_fit.samples, law_fit.data.layout.names)
+    files = {"posterior": str(out / POSTERIOR_FILE), "figures": _write_figures(fit, out, protect) if figures else []}
+    _refuse_overwriting_input(out / "fit.json", protect)
+    (out / "fit.json").write_text(json.dumps(dict(fit_summary(fit), files=files), indent=2, default=_jsonable) + "\n")
+    return files
+
+
+def _output_folder(out) -> Path:
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InputFileError(f"--out {out}: exists and is not a folder")
+    return out
 
 
 def _write_figures(fit, out: Path, input_paths) -> list:

@@ -459,6 +459,7 @@ def fit_damping(
     max_steps: int = 20000,
     max_seconds: Optional[float] = None,
     progress: bool = False,
+    n_walkers: Optional[int] = None,
 ) -> DampingFit:
     """Fit the sampled ``laws`` to the campaign; MAP and BIC for every known law.
 
@@ -474,6 +475,8 @@ def fit_damping(
     max_seconds : float, optional
         Cap on each chain's wall time [s].
     progress : bool
+    n_walkers : int, optional
+        Walkers per chain (default max(32, 4 D)).
 
     Returns
     -------
@@ -482,7 +485,9 @@ def fit_damping(
     """
     sweeps = sweep_estimates(log)
     fits = {
-        name: fit_law(log, name, seed=seed, max_steps=max_steps, max_seconds=max_seconds, progress=progress, sweeps=sweeps)
+        name: fit_law(
+            log, name, seed, n_walkers, max_steps, max_seconds, progress=progress, sweeps=sweeps
+        )
         for name in laws
     }
     criteria = {}
