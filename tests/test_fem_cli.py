@@ -1,0 +1,46 @@
+"""``tactile evaluate --model fem``: JSON contract and refusal of bad geometry."""
+
+import json
+
+import pytest
+
+from workflow.cli import main
+
+
+def run_cli(capsys, *argv):
+    try:
+        status = main(list(argv))
+    except SystemExit as exit_:
+        status = exit_.code
+    out, err = capsys.readouterr()
+    return status, out, err
+
+
+def test_fem_evaluate_json_lists_the_modes(capsys):
+    status, out, _ = run_cli(capsys, "evaluate", "--model", "fem", "--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "1", "--b-mm", "55", "--json")
+    assert status == 0
+    record = json.loads(out.strip().splitlines()[-1])
+    for key in ("lambda_mm", "h_i_mm", "h_p_mm", "b_mm", "q", "voltage_v", "w_dyn_um", "f_r_khz", "modes"):
+        assert key in record
+    assert len(record["modes"]) == 6
+    best = max(record["modes"], key=lambda mode: mode["w_um"])
+    assert best["f_khz"] == pytest.approx(record["f_r_khz"]) and best["w_um"] == pytest.approx(record["w_dyn_um"])
+    assert 29.0 < record["f_r_khz"] < 33.0
+    assert 0 <= best["transverse"] < 0.1
+
+
+@pytest.mark.parametrize(
+    "flags, message",
+    [
+        (["--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "0.7"], "commercial"),
+        (["--lambda-mm", "50", "--hi-mm", "2", "--hp-mm", "1"], "wavelength"),
+        (["--lambda-mm", "24", "--hi-mm", "5", "--hp-mm", "1"], "resonator thickness"),
+        (["--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "1", "--b-mm", "10"], "width"),
+        (["--lambda-mm", "-24", "--hi-mm", "2", "--hp-mm", "1"], "positive"),
+    ],
+)
+def test_fem_evaluate_refuses_bad_geometry_in_one_line(capsys, flags, message):
+    status, out, err = run_cli(capsys, "evaluate", "--model", "fem", *flags, "--json")
+    assert status == 2
+    assert out == ""
+    assert len(err.strip().splitlines()) == 1 and message in err and "Traceback" not in err
