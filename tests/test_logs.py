@@ -5,7 +5,7 @@ import os
 import numpy as np
 import pytest
 
-from workflow.damping.logs import read_log, read_logs
+from workflow.damping.logs import drop_short_sweeps, read_log, read_logs
 from workflow.damping.synthetic import campaign_csv, simulate_campaign
 from workflow.errors import InputFileError
 
@@ -96,3 +96,12 @@ def test_reading_never_modifies_the_file(tmp_path):
     before = (path.read_bytes(), os.stat(path).st_mtime_ns)
     read_log(path)
     assert (path.read_bytes(), os.stat(path).st_mtime_ns) == before
+
+
+def test_short_sweeps_are_dropped_with_a_warning(tmp_path):
+    rows = "".join(f"{31000 + 10 * i},5,0.1\n" for i in range(6)) + "31000,10,0.2\n31010,10,0.2\n"
+    log = drop_short_sweeps(read_log(write(tmp_path, HEADER + rows)))
+    assert log.n_sweeps == 1 and len(log.velocity) == 6
+    assert "ignored 1 sweep(s)" in log.warnings[-1]
+    with pytest.raises(InputFileError, match="no sweep has 5"):
+        drop_short_sweeps(read_log(write(tmp_path, HEADER + "31000,5,0.1\n", "short.csv")))

@@ -15,7 +15,7 @@ from ..analytical import resonance_frequency
 from ..damping.design import damped_deflection, damped_model, fem_damped_deflection, fem_required_voltage, required_voltage
 from ..damping.fit import fit_damping, fit_summary
 from ..damping.laws import LAWS, law_parameters
-from ..damping.logs import read_logs
+from ..damping.logs import drop_short_sweeps, read_logs
 from ..damping.posterior import POSTERIOR_FILE, load_posterior, save_posterior
 from ..errors import InputFileError
 from ..materials import TARGET_DEFLECTION
@@ -63,7 +63,7 @@ def _positive_int(text: str) -> int:
 
 
 def run(args) -> dict:
-    log = read_logs(args.logs)
+    log = drop_short_sweeps(read_logs(args.logs))
     for warning in log.warnings:
         print(f"tactile fit-damping: warning: {warning}", file=sys.stderr)
     out = _output_folder(args.out)

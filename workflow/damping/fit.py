@@ -24,7 +24,7 @@ from scipy import optimize
 
 from .laws import LAWS
 from .likelihood import FitData, fit_data, log_probability, pointwise_log_likelihood
-from .logs import CampaignLog
+from .logs import CampaignLog, drop_short_sweeps
 from .posterior import DampingPosterior
 
 DEFAULT_LAWS = ("quadratic", "linear")
@@ -466,7 +466,8 @@ def fit_damping(
     Parameters
     ----------
     log : CampaignLog
-        From :func:`~workflow.damping.logs.read_logs`.
+        From :func:`~workflow.damping.logs.read_logs`; sweeps too short to locate their
+        resonance are dropped (:func:`~workflow.damping.logs.drop_short_sweeps`).
     laws : sequence of str
         Laws to sample (keys of :data:`~workflow.damping.laws.LAWS`).
     seed : int
@@ -483,6 +484,7 @@ def fit_damping(
     DampingFit
         ``preferred`` is the sampled law with the lowest WAIC.
     """
+    log = drop_short_sweeps(log)
     sweeps = sweep_estimates(log)
     fits = {
         name: fit_law(

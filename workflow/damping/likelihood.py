@@ -134,7 +134,7 @@ def fit_data(log: CampaignLog, law_name: str) -> FitData:
         bounds["alpha"] = (0.0, 1.0 / MIN_Q_AT_MAX_VELOCITY / v_max ** exponent[law_name])
     for k in range(log.n_sweeps):
         f = log.frequency[log.sweep == k]
-        span = f.max() - f.min()
+        span = max(f.max() - f.min(), 0.01 * f.mean())
         bounds[f"f_r_{k}"] = (max(f.min() - span, 0.5 * f.min()), f.max() + span)
     lower = np.array([bounds[name][0] for name in layout.names], dtype=float)
     upper = np.array([bounds[name][1] for name in layout.names], dtype=float)

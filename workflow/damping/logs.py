@@ -66,6 +66,38 @@ class CampaignLog:
         return np.array([np.median(self.drive_voltage[self.sweep == k]) for k in range(self.n_sweeps)])
 
 
+MIN_POINTS_PER_SWEEP = 5
+"""Fewer rows than this cannot locate a sweep's resonance; such sweeps are dropped."""
+
+
+def drop_short_sweeps(log: CampaignLog, min_points: int = MIN_POINTS_PER_SWEEP) -> CampaignLog:
+    """The log without sweeps of fewer than ``min_points`` rows (e.g. the partial sweep of an
+    interrupted campaign), renumbered, with one warning naming what was dropped.
+
+    Raises
+    ------
+    InputFileError
+        If no sweep is long enough.
+    """
+    counts = np.bincount(log.sweep, minlength=log.n_sweeps)
+    short = np.nonzero(counts < min_points)[0]
+    if short.size == 0:
+        return log
+    if short.size == log.n_sweeps:
+        raise InputFileError(
+            f"{', '.join(log.sources)}: no sweep has {min_points} or more rows; cannot locate a resonance"
+        )
+    keep = counts[log.sweep] >= min_points
+    renumbered = np.cumsum(counts >= min_points)[log.sweep[keep]] - 1
+    warning = (
+        f"{', '.join(log.sources)}: ignored {short.size} sweep(s) with fewer than {min_points} rows "
+        f"({int(counts[short].sum())} rows)"
+    )
+    return CampaignLog(
+        log.frequency[keep], log.drive_voltage[keep], log.velocity[keep], renumbered, log.sources, log.warnings + (warning,)
+    )
+
+
 def read_logs(paths: Sequence) -> CampaignLog:
     """Read and concatenate several logs; sweeps are renumbered so they never collide.
 
