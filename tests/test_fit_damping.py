@@ -164,3 +164,35 @@ def test_coverage_of_the_90_percent_interval_over_seeds():
             hits.append(low <= truth <= high)
     # 16 Bernoulli(0.9) trials: fewer than 11 hits has probability < 2 %.
     assert sum(hits) >= 11, hits
+
+
+def _write_posterior(path, law):
+    from workflow.damping.posterior import DampingPosterior, save_posterior
+
+    rng = np.random.default_rng(0)
+    parameters = {"q0": law.q0 * (1 + 0.01 * rng.standard_normal(50)), "alpha": law.alpha * (1 + 0.01 * rng.standard_normal(50))}
+    parameters["q0"][0], parameters["alpha"][0] = law.q0, law.alpha
+    posterior = DampingPosterior("quadratic", parameters)
+    return save_posterior(posterior, path, np.zeros((50, 1)), ["unused"])
+
+
+def test_damping_option_on_evaluate_and_optimize(tmp_path, capsys):
+    from workflow import analytical
+    from workflow.damping.laws import quadratic_law_through
+    from workflow.plate import ORIGINAL_PLATE
+
+    w_54 = float(analytical.dynamic_deflection(ORIGINAL_PLATE, 15.0, 54.0))
+    v_work = 2 * np.pi * float(analytical.resonance_frequency(ORIGINAL_PLATE)) * w_54
+    path = _write_posterior(tmp_path / "posterior.npz", quadratic_law_through(150.0, 54.0, v_work))
+    status, out, err = run_cli(capsys, "evaluate", "--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "1", "--damping", path, "--json")
+    assert status == 0, err
+    record = json.loads(out.strip().splitlines()[-1])
+    assert record["w_dyn_um"] == pytest.approx(w_54 / 1e-6, rel=2e-3)  # the original plate keeps its deflection
+    assert record["q"] == pytest.approx(54.0, rel=2e-3)
+    assert record["required_voltage_v"]["p05"] <= record["required_voltage_v"]["p50"] <= record["required_voltage_v"]["p95"]
+    status, out, err = run_cli(capsys, "optimize", "--hp-mm", "1", "--damping", tmp_path, "--json")
+    assert status == 0, err
+    record = json.loads(out.strip().splitlines()[-1])
+    assert record["f_r_khz"] >= 25.0 * (1 - 1e-6) and record["damping"]["law"] == "quadratic"
+    status, _, err = run_cli(capsys, "optimize", "--hp-mm", "1", "--damping", tmp_path / "missing.npz")
+    assert status != 0 and len(err.strip().splitlines()) == 1 and "Traceback" not in err

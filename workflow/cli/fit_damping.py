@@ -168,24 +168,20 @@ def damping_record(posterior, plate, voltage: float, draws: int = 200) -> dict:
     the Q it settles at, 90 % intervals over posterior draws and the voltage for the target."""
     law, drawn = posterior.median_law(), posterior.draws(draws)
     deflection = float(damped_deflection(plate, voltage, law))
-    frequency = float(resonance_frequency(plate))
     w05, w95 = np.quantile(damped_deflection(plate, voltage, drawn), [0.05, 0.95])
     return {
-        "w_dyn_um": deflection / UM,
         "w_dyn_um_p05": w05 / UM,
         "w_dyn_um_p95": w95 / UM,
-        "q": float(law.quality_factor(2 * np.pi * frequency * deflection)),
-        **_damping_keys(posterior, plate, draws),
+        **_damping_keys(posterior, deflection, float(resonance_frequency(plate)), required_voltage(plate, drawn)),
     }
 
 
-def _damping_keys(posterior, plate, draws: int) -> dict:
-    """The voltage for the target deflection at ``plate`` (median and 90 % over draws) and the law used."""
-    v05, v50, v95 = np.quantile(required_voltage(plate, posterior.draws(draws)), [0.05, 0.5, 0.95])
-    return {
-        "required_voltage_v": {"target_um": TARGET_DEFLECTION / UM, "p05": v05, "p50": v50, "p95": v95},
-        "damping": {"law": posterior.law_name, "median": law_parameters(posterior.median_law()), "posterior": posterior.source},
-    }
+def fem_damping_record(posterior, result, draws: int = 200) -> dict:
+    """JSON keys for a FEM evaluation with Q(v): the best mode's self-consistent deflection with
+    the posterior-median law, the Q it settles at, and the voltage for the target deflection."""
+    deflection = float(fem_damped_deflection(result, posterior.median_law()))
+    voltages = fem_required_voltage(result, posterior.draws(draws))
+    return _damping_keys(posterior, deflection, result.frequency, voltages)
 
 
 def damped_optimum(posterior, problem, draws: int = 200):
@@ -193,18 +189,20 @@ def damped_optimum(posterior, problem, draws: int = 200):
     the voltage for the target deflection there (median law and 90 % interval over draws)."""
     law = posterior.median_law()
     optimum = maximise_deflection(damped_model(law, problem.voltage), problem)
-    return optimum, _damping_keys(posterior, optimum.plate, draws)
+    voltages = required_voltage(optimum.plate, posterior.draws(draws))
+    keys = _damping_keys(posterior, optimum.deflection, optimum.frequency, voltages)
+    del keys["w_dyn_um"]
+    return optimum, keys
 
 
-def fem_damping_record(posterior, result) -> dict:
-    """JSON keys for a FEM evaluation with Q(v): the best mode's self-consistent deflection with
-    the posterior-median law, the Q it settles at, and the voltage for the target deflection."""
+def _damping_keys(posterior, deflection: float, frequency: float, required_voltages) -> dict:
+    """Deflection [um] and the Q it settles at, the voltage for the target deflection (median
+    and 90 % over posterior draws) and the law used."""
     law = posterior.median_law()
-    deflection = float(fem_damped_deflection(result, law))
-    v05, v50, v95 = np.quantile(fem_required_voltage(result, posterior.draws(200)), [0.05, 0.5, 0.95])
+    v05, v50, v95 = np.quantile(required_voltages, [0.05, 0.5, 0.95])
     return {
         "w_dyn_um": deflection / UM,
-        "q": float(law.quality_factor(2 * np.pi * result.frequency * deflection)),
+        "q": float(law.quality_factor(2 * np.pi * frequency * deflection)),
         "required_voltage_v": {"target_um": TARGET_DEFLECTION / UM, "p05": v05, "p50": v50, "p95": v95},
         "damping": {"law": posterior.law_name, "median": law_parameters(law), "posterior": posterior.source},
     }
