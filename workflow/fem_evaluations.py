@@ -1,0 +1,103 @@
+"""Many FEM evaluations: cached on disk by content, run in parallel, usable as a plate model.
+
+:class:`FemModel` turns :func:`workflow.fem.evaluate_fem` into a
+:data:`~workflow.optimize.PlateModel` (a batch of plates in, deflection and frequency of
+each plate's best mode out), so the optimiser, space mapping and the maps all drive the
+FEM the same way.  Every geometry is one :class:`FemTask`; tasks run through
+:func:`~workflow.evaluation_cache.cached_map`, whose key holds the model name, the plate's
+fields, Q, the voltage, the FEM settings and a hash of the FEM's source code.
+"""
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import List, Optional, Tuple
+
+import numpy as np
+
+from . import fem, materials
+from .evaluation_cache import EvaluationCache, cached_map, source_version
+from .fem import FemResult, FemSettings, evaluate_fem
+from .plate import Plate
+
+FEM_SOURCE = str(Path(fem.__file__).parent)
+"""Directory whose sources version the cached FEM results."""
+
+
+@dataclass(frozen=True)
+class FemTask:
+    """One FEM evaluation: a scalar plate, Q [-], voltage [V] and the settings."""
+
+    plate: Plate
+    q: float
+    voltage: float
+    settings: FemSettings
+
+
+def run_fem_task(task: FemTask) -> FemResult:
+    """Evaluate one task (module level, so that process pools and Dask can pickle it)."""
+    return evaluate_fem(task.plate, task.q, task.voltage, task.settings)
+
+
+def describe_fem_task(task: FemTask) -> dict:
+    """The cache-key content of a task."""
+    return {
+        "model": "fem",
+        "plate": task.plate,
+        "q": float(task.q),
+        "voltage": float(task.voltage),
+        "settings": task.settings.as_dict(),
+        "code": source_version(FEM_SOURCE),
+    }
+
+
+def scalar_plates(plate: Plate) -> List[Plate]:
+    """The plates of a batch (array fields broadcast together), flattened in C order."""
+    names = ("wavelength", "resonator_thickness", "ceramic_thickness", "width")
+    arrays = np.broadcast_arrays(*(np.asarray(getattr(plate, name), dtype=float) for name in names))
+    return [plate.with_(**{name: float(a.flat[i]) for name, a in zip(names, arrays)}) for i in range(arrays[0].size)]
+
+
+@dataclass
+class FemModel:
+    """The FEM as a batched plate model, with a disk cache and parallel evaluation.
+
+    Attributes
+    ----------
+    q : float
+        Plate quality factor [-].
+    voltage : float
+        Drive amplitude [V].
+    settings : FemSettings
+    cache : EvaluationCache or None
+        None recomputes everything.
+    scheduler : None, str or distributed.Client
+        Where batches run (see :func:`~workflow.parallel.map_evaluations`).
+    progress : bool
+        Progress bar for batches.
+    evaluations : int
+        Geometries requested so far (cached or not).
+    """
+
+    q: float = materials.PLATE_Q
+    voltage: float = materials.DESIGN_VOLTAGE
+    settings: FemSettings = field(default_factory=FemSettings)
+    cache: Optional[EvaluationCache] = None
+    scheduler: object = None
+    progress: bool = False
+    evaluations: int = 0
+
+    def results(self, plate: Plate) -> List[FemResult]:
+        """The full FEM result of every plate of the batch."""
+        tasks = [FemTask(p, self.q, self.voltage, self.settings) for p in scalar_plates(plate)]
+        self.evaluations += len(tasks)
+        return cached_map(
+            run_fem_task, tasks, describe_fem_task, self.cache, self.scheduler, self.progress, description="FEM"
+        )
+
+    def __call__(self, plate: Plate) -> Tuple[np.ndarray, np.ndarray]:
+        """Deflection [m] and frequency [Hz] of the best mode of each plate, shaped like the batch."""
+        results = self.results(plate)
+        shape = np.broadcast(plate.wavelength, plate.resonator_thickness, plate.ceramic_thickness, plate.width).shape
+        deflection = np.array([r.deflection for r in results]).reshape(shape)
+        frequency = np.array([r.frequency for r in results]).reshape(shape)
+        return deflection, frequency
