@@ -1,0 +1,62 @@
+"""Benchmark of the FEM cost function; prints one JSON object on the last line.
+
+The fast path (:func:`workflow.fem.evaluate_fem`: exact box integrals scattered in one
+COO assembly, one real factorisation shared by the shift-invert eigen solve and the
+modal harmonic responses) is timed against the plain reference path
+(:func:`workflow.fem.reference.evaluate_fem_reference`: scikit-fem generic assembly with its
+default quadrature, ARPACK's own factorisation, one complex direct solve per mode) on the
+same mesh in the same run, so the ratio is meaningful on a noisy machine.
+
+    python bench/bench_fem.py [--repeat N] [--width-mm B]
+"""
+
+import argparse
+import json
+import time
+
+from workflow.fem import FemSettings, evaluate_fem
+from workflow.fem.reference import evaluate_fem_reference
+from workflow.plate import ORIGINAL_PLATE
+from workflow.units import KHZ, MM, UM
+
+
+def timed(function, repeat):
+    """(shortest wall time of ``repeat`` calls [s], last value)."""
+    best, value = float("inf"), None
+    for _ in range(repeat):
+        start = time.perf_counter()
+        value = function()
+        best = min(best, time.perf_counter() - start)
+    return best, value
+
+
+def main(argv=None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeat", type=int, default=5, help="timed runs of the fast path (best is kept)")
+    parser.add_argument("--width-mm", type=float, default=ORIGINAL_PLATE.width / MM, help="plate width [mm]")
+    args = parser.parse_args(argv)
+    plate = ORIGINAL_PLATE.with_(width=args.width_mm * MM)
+    settings = FemSettings()
+    fast_time, fast = timed(lambda: evaluate_fem(plate, 54.0, 15.0, settings), args.repeat)
+    reference_time, reference = timed(lambda: evaluate_fem_reference(plate, 54.0, 15.0, settings), 1)
+    figures = {
+        "plate": {"lambda_mm": plate.wavelength / MM, "h_i_mm": plate.resonator_thickness / MM,
+                  "h_p_mm": plate.ceramic_thickness / MM, "b_mm": plate.width / MM, "q": 54.0, "voltage_v": 15.0},
+        "settings": settings.as_dict(),
+        "n_dofs": fast.n_dofs,
+        "fast_s": fast_time,
+        "reference_s": reference_time,
+        "speedup": reference_time / fast_time,
+        "fast": {"f_khz": fast.frequency / KHZ, "w_um": fast.deflection / UM},
+        "reference": {"f_khz": reference.frequency / KHZ, "w_um": reference.deflection / UM},
+        "max_mode_frequency_rel_diff": max(
+            abs(a.frequency / b.frequency - 1) for a, b in zip(fast.modes, reference.modes)
+        ),
+        "best_deflection_rel_diff": abs(fast.deflection / reference.deflection - 1),
+    }
+    print(json.dumps(figures))
+    return figures
+
+
+if __name__ == "__main__":
+    main()
