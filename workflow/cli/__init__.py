@@ -11,6 +11,7 @@ import importlib
 import sys
 
 from ..errors import TactileError
+from ..serialise import json_line
 
 COMMANDS = ("evaluate", "optimize", "maps", "fit_damping", "simulate", "measure", "run")
 """Modules of :mod:`workflow.cli`, one per command, in the order ``--help`` lists them."""
@@ -54,8 +55,6 @@ def add_json_flag(parser: argparse.ArgumentParser) -> None:
 
 
 def main(argv=None) -> int:
-    import json
-
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
@@ -67,15 +66,5 @@ def main(argv=None) -> int:
         print(f"tactile {args.command.replace('_', '-')}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
     if getattr(args, "json", False) and result is not None:
-        print(json.dumps(result, allow_nan=False, default=_jsonable))
+        print(json_line(result))
     return 0
-
-
-def _jsonable(value):
-    import numpy as np
-
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    raise TypeError(f"not JSON serialisable: {type(value).__name__}")

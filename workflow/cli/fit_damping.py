@@ -5,7 +5,6 @@ Also the ``--damping POSTERIOR`` option shared by ``evaluate``, ``optimize`` and
 """
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -16,12 +15,12 @@ from ..damping.design import damped_deflection, damped_model, fem_damped_deflect
 from ..damping.fit import fit_damping, fit_summary
 from ..damping.laws import LAWS, law_parameters
 from ..damping.logs import drop_short_sweeps, read_logs
-from ..damping.posterior import POSTERIOR_FILE, load_posterior, save_posterior
-from ..errors import InputFileError
+from ..damping.posterior import load_posterior
+from ..damping_files import output_folder, write_fit
 from ..materials import TARGET_DEFLECTION
 from ..optimize import maximise_deflection
 from ..units import UM
-from . import _jsonable, add_json_flag
+from . import add_json_flag
 
 SAMPLED_LAWS = tuple(name for name in LAWS if name != "constant")
 """Laws ``--law`` accepts; the constant-Q baseline is always in the comparison (BIC at the MAP)."""
@@ -66,7 +65,7 @@ def run(args) -> dict:
     log = drop_short_sweeps(read_logs(args.logs))
     for warning in log.warnings:
         print(f"tactile fit-damping: warning: {warning}", file=sys.stderr)
-    out = _output_folder(args.out)
+    out = output_folder(args.out)
     input_paths = {Path(p).resolve() for p in args.logs}
     laws = SAMPLED_LAWS if args.law == "all" else (args.law,)
     fit = fit_damping(log, laws=laws, seed=args.seed, max_steps=args.max_steps, progress=sys.stderr.isatty())
@@ -74,61 +73,6 @@ def run(args) -> dict:
     if not args.json:
         _print_human(summary)
     return summary
-
-
-def write_fit(fit, out, figures: bool = True, protect=()) -> dict:
-    """Write a fit's posterior files, ``fit.json`` and (optionally) its figures into ``out``.
-
-    Parameters
-    ----------
-    fit : DampingFit
-    out : path-like
-        Folder, created if missing.
-    figures : bool
-    protect : collection of Path
-        Resolved paths that must not be overwritten (the input logs).
-
-    Returns
-    -------
-    dict
-        {"posterior": path of posterior.npz, "figures": [paths]}.
-    """
-    out = _output_folder(out)
-    out.mkdir(parents=True, exist_ok=True)
-    outputs = {POSTERIOR_FILE: fit.best, **{f"posterior_{name}.npz": law_fit for name, law_fit in fit.fits.items()}}
-    for name, law_fit in outputs.items():
-        _refuse_overwriting_input(out / name, protect)
-        save_posterior(law_fit.posterior(), out / name, law_fit.samples, law_fit.data.layout.names)
-    files = {"posterior": str(out / POSTERIOR_FILE), "figures": _write_figures(fit, out, protect) if figures else []}
-    _refuse_overwriting_input(out / "fit.json", protect)
-    (out / "fit.json").write_text(json.dumps(dict(fit_summary(fit), files=files), indent=2, default=_jsonable) + "\n")
-    return files
-
-
-def _output_folder(out) -> Path:
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise InputFileError(f"--out {out}: exists and is not a folder")
-    return out
-
-
-def _write_figures(fit, out: Path, input_paths) -> list:
-    import matplotlib.pyplot as plt
-
-    from ..figures.damping import fit_figures
-
-    written = []
-    for name, figure in fit_figures(fit).items():
-        _refuse_overwriting_input(out / name, input_paths)
-        figure.savefig(out / name, dpi=120)
-        plt.close(figure)
-        written.append(str(out / name))
-    return written
-
-
-def _refuse_overwriting_input(path: Path, input_paths) -> None:
-    if path.resolve() in input_paths:
-        raise InputFileError(f"--out: writing {path} would overwrite an input log; choose another folder")
 
 
 def _print_human(summary: dict) -> None:
