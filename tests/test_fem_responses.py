@@ -42,3 +42,18 @@ def test_frequency_response_peaks_at_the_working_mode(clean_result):
     half = response.deflection >= response.deflection.max() / np.sqrt(2)
     bandwidth = np.ptp(response.frequency[half])
     assert bandwidth == pytest.approx(clean_result.frequency / 54.0, rel=0.15)
+
+
+def test_figures_draw_the_responses(clean_result, tmp_path):
+    from workflow.figures.fem_responses import frequency_response_figure, modes_figure, transient_figure
+
+    figures = [
+        modes_figure(clean_result),
+        frequency_response_figure(frequency_response(clean_result, 54.0)),
+        transient_figure(transient_response(clean_result, 54.0)),
+    ]
+    for index, figure in enumerate(figures):
+        path = tmp_path / f"figure{index}.png"
+        figure.savefig(path)
+        assert path.stat().st_size > 10_000
+        assert len(figure.axes[0].lines) >= 1
