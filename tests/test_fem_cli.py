@@ -3,17 +3,7 @@
 import json
 
 import pytest
-
-from workflow.cli import main
-
-
-def run_cli(capsys, *argv):
-    try:
-        status = main(list(argv))
-    except SystemExit as exit_:
-        status = exit_.code
-    out, err = capsys.readouterr()
-    return status, out, err
+from test_cli import run_cli
 
 
 def test_fem_evaluate_json_lists_the_modes(capsys):

@@ -4,7 +4,11 @@ import numpy as np
 import pytest
 
 from workflow.fem import FemSettings, evaluate_fem
-from workflow.fem.responses import frequency_response, switch_on_response, transient_response
+from workflow.fem.responses import (
+    frequency_response,
+    switch_on_response,
+    transient_response,
+)
 from workflow.plate import ORIGINAL_PLATE
 
 SETTINGS = FemSettings(elements_per_ceramic=4, elements_per_layer=1, elements_across_half_width=4)
@@ -45,7 +49,11 @@ def test_frequency_response_peaks_at_the_working_mode(clean_result):
 
 
 def test_figures_draw_the_responses(clean_result, tmp_path):
-    from workflow.figures.fem_responses import frequency_response_figure, modes_figure, transient_figure
+    from workflow.figures.fem_responses import (
+        frequency_response_figure,
+        modes_figure,
+        transient_figure,
+    )
 
     figures = [
         modes_figure(clean_result),

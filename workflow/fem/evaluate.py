@@ -10,8 +10,13 @@ from .assembly import assemble_system
 from .harmonic import ProbeModalModel, probe_modal_model
 from .mesh import quarter_plate_mesh
 from .modes import nearest_modes
-from .probes import antinode_probe_points, mean_deflection, probe_matrix, transverse_indicator
-from .settings import FemSettings
+from .probes import (
+    antinode_probe_points,
+    mean_deflection,
+    probe_matrix,
+    transverse_indicator,
+)
+from .settings import DEFAULT_SETTINGS, FemSettings
 
 
 @dataclass(frozen=True)
@@ -104,7 +109,7 @@ def mode_results(probe_model: ProbeModalModel, q: float) -> tuple:
     return tuple(ModeResult(float(f), float(w), float(t)) for f, w, t in zip(frequencies, deflections, indicators))
 
 
-def evaluate_fem(plate: Plate, q: float, voltage: float, settings: FemSettings = FemSettings()) -> FemResult:
+def evaluate_fem(plate: Plate, q: float, voltage: float, settings: FemSettings = DEFAULT_SETTINGS) -> FemResult:
     """Evaluate the quarter-plate FEM: modes nearest the beam resonance and their deflections.
 
     Parameters

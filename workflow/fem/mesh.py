@@ -93,7 +93,6 @@ def x_segments(plate: Plate):
     ceramic_index : int array
         For each segment, the index into ``plate.ceramic_centres`` of its ceramic, -1 for a gap or the free end.
     """
-    wavelength, gap = float(plate.wavelength), plate.gap
     centres = np.asarray(plate.ceramic_centres, dtype=float).ravel()
     half_length = float(plate.ceramic_length) / 2
     breakpoints, ceramic_index = [0.0], []

@@ -1,7 +1,7 @@
 """Eigenmodes nearest a target frequency by shift-invert Lanczos on one factorisation."""
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 import scipy.sparse.linalg as sla

@@ -8,7 +8,16 @@ The mesh, materials and load are the same as the fast path's.
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
-from skfem import Basis, BilinearForm, ElementHex2, ElementHexS2, ElementVector, LinearForm, MeshHex, asm
+from skfem import (
+    Basis,
+    BilinearForm,
+    ElementHex2,
+    ElementHexS2,
+    ElementVector,
+    LinearForm,
+    MeshHex,
+    asm,
+)
 from skfem.helpers import dot
 from skfem.models.elasticity import linear_elasticity
 
@@ -19,7 +28,7 @@ from .elements import lame_constants
 from .evaluate import FemResult, ModeResult
 from .mesh import CERAMIC, BrickMesh, quarter_plate_mesh
 from .probes import antinode_probe_points, mean_deflection, transverse_indicator
-from .settings import FemSettings
+from .settings import DEFAULT_SETTINGS, FemSettings
 
 SKFEM_ELEMENTS = {"lagrange27": ElementHex2, "serendipity20": ElementHexS2}
 """scikit-fem's counterpart of each brick type."""
@@ -95,7 +104,7 @@ def reference_system(mesh: BrickMesh, plate: Plate, voltage: float, quadrature_o
 
 
 def evaluate_fem_reference(
-    plate: Plate, q: float, voltage: float, settings: FemSettings = FemSettings(), quadrature_order=None
+    plate: Plate, q: float, voltage: float, settings: FemSettings = DEFAULT_SETTINGS, quadrature_order=None
 ) -> FemResult:
     """Same cost as :func:`evaluate_fem` with scikit-fem assembly and a direct solve per mode.
 

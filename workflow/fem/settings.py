@@ -58,3 +58,7 @@ class FemSettings:
             n_modes=self.n_modes,
             element=self.element,
         )
+
+
+DEFAULT_SETTINGS = FemSettings()
+"""The default mesh (frequency within 0.5 % of the converged value, see docs/fem.md)."""

@@ -8,15 +8,25 @@ import matplotlib
 
 matplotlib.use("Agg")
 
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-from ..fem import FemResult  # noqa: E402
-from ..fem.responses import FrequencyResponse, TransientResponse  # noqa: E402
-from ..units import KHZ, UM  # noqa: E402
+from ..fem import FemResult
+from ..fem.responses import FrequencyResponse, TransientResponse
+from ..units import KHZ, UM
 
 MS = 1e-3
 """One millisecond [s] (axis unit)."""
+
+
+def _finish(figure, ax, xlabel: str, ylabel: str, title: str, legend_location: str = "best"):
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.legend(fontsize=8, loc=legend_location)
+    ax.grid(alpha=0.3)
+    figure.tight_layout()
+    return figure
 
 
 def modes_figure(result: FemResult):
@@ -29,13 +39,7 @@ def modes_figure(result: FemResult):
     points = ax.scatter(frequency, deflection, c=transverse, cmap="coolwarm", vmin=0, vmax=1, zorder=3)
     ax.plot(result.frequency / KHZ, result.deflection / UM, "k*", ms=14, label="best (working) mode")
     figure.colorbar(points, ax=ax, label="transverse indicator (0 = longitudinal)")
-    ax.set_xlabel("eigenfrequency [kHz]")
-    ax.set_ylabel("deflection at resonance [um]")
-    ax.set_title("FEM modes near the beam resonance")
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    figure.tight_layout()
-    return figure
+    return _finish(figure, ax, "eigenfrequency [kHz]", "deflection at resonance [um]", "FEM modes near the beam resonance")
 
 
 def frequency_response_figure(response: FrequencyResponse):
@@ -46,13 +50,9 @@ def frequency_response_figure(response: FrequencyResponse):
     for frequency in response.mode_frequencies[(response.mode_frequencies >= low) & (response.mode_frequencies <= high)]:
         ax.axvline(frequency / KHZ, color="0.6", ls=":", lw=1)
     ax.axvline(response.working_frequency / KHZ, color="k", ls="--", lw=1, label="working mode")
-    ax.set_xlabel("drive frequency [kHz]")
-    ax.set_ylabel("mean |w| over the antinode probes [um]")
-    ax.set_title("frequency response (dotted: other modes)")
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    figure.tight_layout()
-    return figure
+    return _finish(
+        figure, ax, "drive frequency [kHz]", "mean |w| over the antinode probes [um]", "frequency response (dotted: other modes)"
+    )
 
 
 def transient_figure(response: TransientResponse):
@@ -64,10 +64,5 @@ def transient_figure(response: TransientResponse):
     model = response.steady_amplitude * (1 - np.exp(-response.time / response.time_constant))
     ax.plot(time, model / UM, "k--", lw=1, label=f"1 - exp(-t/tau), tau = {response.time_constant / MS:.3f} ms")
     ax.axvline(response.expected_time_constant / MS, color="r", ls=":", label=f"Q/(pi f_r) = {response.expected_time_constant / MS:.3f} ms")
-    ax.set_xlabel("time [ms]")
-    ax.set_ylabel("deflection [um]")
-    ax.set_title(f"switch-on at f_r = {response.frequency / KHZ:.3f} kHz")
-    ax.legend(fontsize=8, loc="lower right")
-    ax.grid(alpha=0.3)
-    figure.tight_layout()
-    return figure
+    title = f"switch-on at f_r = {response.frequency / KHZ:.3f} kHz"
+    return _finish(figure, ax, "time [ms]", "deflection [um]", title, legend_location="lower right")
