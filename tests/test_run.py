@@ -1,5 +1,6 @@
 """``tactile run`` end to end on a tiny configuration; the report's links resolve."""
 
+import json
 import re
 
 
@@ -23,7 +24,7 @@ voltages_v = [5.0, 15.0]
 points_per_sweep = 21
 [damping]
 laws = ["quadratic"]
-walkers = 16
+walkers = 32
 max_steps = 3000
 posterior_draws = 8
 """
@@ -35,12 +36,24 @@ def tiny_run(tmp_path_factory):
     config = folder / "tiny.toml"
     config.write_text(TINY)
     out = folder / "report"
-    status = main(["run", "--config", str(config), "--out", str(out)])
-    return status, out
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("TACTILE_CACHE", str(folder / "cache"))
+        status = main(["run", "--config", str(config), "--out", str(out)])
+    return status, out, config
+
+
+def test_a_rerun_reuses_the_cached_steps(tiny_run, capsys, monkeypatch):
+    _, out, config = tiny_run
+    monkeypatch.setenv("TACTILE_CACHE", str(out.parent / "cache"))
+    capsys.readouterr()
+    assert main(["run", "--config", str(config), "--out", str(out), "--json"]) == 0
+    record = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert "Q(v) fit (emcee)" in record["from_cache"]
+    assert (out / "report.md").is_file()
 
 
 def test_tiny_run_writes_a_report(tiny_run):
-    status, out = tiny_run
+    status, out, _ = tiny_run
     assert status == 0
     text = (out / "report.md").read_text()
     assert "## Analytical optimum with constant Q" in text
@@ -48,7 +61,7 @@ def test_tiny_run_writes_a_report(tiny_run):
 
 
 def test_every_link_of_the_report_resolves(tiny_run):
-    _, out = tiny_run
+    _, out, _ = tiny_run
     text = (out / "report.md").read_text()
     targets = re.findall(r"\]\(([^)]+)\)", text)
     for target in targets:

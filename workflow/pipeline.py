@@ -15,7 +15,7 @@ from typing import Any, Callable, Dict, List, Optional
 from .errors import TactileError
 from .evaluation_cache import EvaluationCache, content_key, source_version
 from .optimize import DesignProblem, optimise_analytical
-from .units import KHZ, MM
+from .units import KHZ, MM, UM
 
 
 class StepError(TactileError):
@@ -113,6 +113,86 @@ def campaign_logs(context: RunContext) -> List[Path]:
     return [path]
 
 
+def damping_fit(context: RunContext):
+    """Q(v) fitted to the logs with emcee (:func:`workflow.damping.fit.fit_damping`)."""
+    from .damping.fit import fit_damping
+    from .damping.logs import drop_short_sweeps, read_logs
+
+    damping = context.config["damping"]
+    log = drop_short_sweeps(read_logs(context.results["logs"]))
+    for warning in log.warnings:
+        print(f"warning: {warning}", file=sys.stderr)
+    return fit_damping(
+        log,
+        laws=tuple(damping["laws"]),
+        seed=damping["seed"],
+        max_steps=damping["max_steps"],
+        n_walkers=damping["walkers"],
+        progress=sys.stderr.isatty(),
+    )
+
+
+def damping_fit_files(context: RunContext, fit) -> None:
+    """The posterior, ``fit.json`` and the fit's figures under ``damping/``."""
+    from .damping_files import write_fit
+
+    protect = {Path(path).resolve() for path in context.results["logs"]}
+    files = write_fit(fit, context.out / "damping", figures=True, protect=protect)
+    for path in files["figures"]:
+        name = Path(path).relative_to(context.out).as_posix()
+        context.figures[name] = name
+
+
+def damped_design(context: RunContext):
+    """Design with Q(v): optimum per h_p with credible intervals, and the Q(v) maps."""
+    from .damping.design import damped_maps, design_with_damping
+
+    damping, design = context.config["damping"], context.config["design"]
+    posterior = context.results["damping_fit"].best.posterior()
+    problems = design_problems(context.config)
+    target = design["target_deflection_um"] * UM
+    result = design_with_damping(
+        posterior,
+        list(problems.values()),
+        draws=damping["posterior_draws"],
+        seed=damping["seed"],
+        target=target,
+        scheduler=context.scheduler,
+        progress=sys.stderr.isatty(),
+    )
+    maps = {
+        hp: damped_maps(
+            posterior,
+            problem,
+            grid=context.config["maps"]["grid"],
+            draws=damping["posterior_draws"],
+            seed=damping["seed"],
+            target=target,
+            optimum=result.optima[hp].damped,
+        )
+        for hp, problem in problems.items()
+    }
+    return result, maps
+
+
+def damped_design_figures(context: RunContext, result) -> None:
+    """Deflection and required-voltage maps with Q(v) for every h_p."""
+    from .figures.damping import design_map_figure
+
+    _, maps = result
+    for hp, hp_maps in maps.items():
+        for quantity in ("deflection", "voltage"):
+            save_figure(design_map_figure(hp_maps, quantity), context.figure_path(f"qv_{quantity}_hp{hp / MM:g}mm.png"))
+
+
+def save_figure(figure, path: Path) -> None:
+    """Write a matplotlib figure as PNG and release it."""
+    import matplotlib.pyplot as plt
+
+    figure.savefig(path, dpi=120, bbox_inches="tight")
+    plt.close(figure)
+
+
 @dataclass(frozen=True)
 class Step:
     """One step of the run.
@@ -142,6 +222,8 @@ class Step:
 STEPS: List[Step] = [
     Step("interferometer logs (simulated campaign unless --logs)", "logs", campaign_logs, cacheable=False),
     Step("analytical optimisation (constant Q)", "analytical_optima", analytical_optima, cacheable=False),
+    Step("Q(v) fit (emcee)", "damping_fit", damping_fit, damping_fit_files),
+    Step("design with Q(v) and posterior propagation", "damped_design", damped_design, damped_design_figures),
 ]
 """The steps in the order they run."""
 

@@ -68,6 +68,121 @@ def _analytical_optima(context: RunContext, optima) -> str:
     )
 
 
+def _logs(context: RunContext, logs) -> str:
+    names = ", ".join(f"[{Path(p).name}]({_relative(context, p)})" for p in logs)
+    origin = "simulated on the bench simulator (original plate)" if not context.logs else "given with --logs"
+    return f"## Interferometer logs\n\nFitted logs ({origin}): {names}."
+
+
+def _relative(context: RunContext, path) -> str:
+    """A link target relative to the report (absolute when outside the output folder)."""
+    path = Path(path).resolve()
+    try:
+        return path.relative_to(context.out.resolve()).as_posix()
+    except ValueError:
+        return path.as_uri()
+
+
+def _damping_fit(context: RunContext, fit) -> str:
+    from .damping.fit import fit_summary
+
+    summary = fit_summary(fit)
+    parameters = [
+        (name, f"{p['median']:.4g}", f"[{p['p05']:.4g}, {p['p95']:.4g}]", p["unit"])
+        for name, p in summary["parameters"].items()
+        if not name.startswith("f_r_")
+    ]
+    d = summary["diagnostics"]
+    laws = summary["comparison"]["laws"]
+    comparison = [
+        (name, f"{c['waic']:.1f}" if "waic" in c else "not sampled", f"{c['bic']:.1f}", c["n_parameters"])
+        for name, c in laws.items()
+    ]
+    figures = [figure(context, name, caption) for name, caption in _DAMPING_FIGURES if name in context.figures]
+    return (
+        "## Damping: Q(v) fitted to the logs\n\n"
+        f"Preferred law: **{summary['law']}** ({summary['comparison']['criterion']}). "
+        f"{summary['n_points']} points in {summary['n_sweeps']} sweeps; the resonance of each sweep, the "
+        "drive-to-deflection gain and the noise are nuisance parameters.\n\n"
+        + table(["parameter", "median", "90 % interval", "unit"], parameters)
+        + "\n\n"
+        + table(["law", "WAIC", "BIC at MAP", "parameters"], comparison)
+        + "\n\n"
+        f"Convergence: {d['n_steps']} steps x {d['n_walkers']} walkers, integrated autocorrelation time "
+        f"tau_max = {d['tau_max']:.1f} ({d['n_steps'] / d['tau_max']:.0f} tau), acceptance {d['acceptance']:.2f}, "
+        f"**{'converged' if d['converged'] else 'NOT converged'}** (rule: {d['rule']}). "
+        "Posterior samples: [damping/posterior.npz](damping/posterior.npz), summary: [damping/fit.json](damping/fit.json).\n\n"
+        + "\n\n".join(figures)
+    )
+
+
+_DAMPING_FIGURES = [
+    ("damping/q_of_v.png", "Q(v) with its 90 % credible band and the per-sweep half-power estimate"),
+    ("damping/resonance_curves.png", "resonance curves: data and posterior prediction"),
+    ("damping/corner_quadratic.png", "posterior of the quadratic law (corner plot)"),
+    ("damping/trace_quadratic.png", "chains of the quadratic law (trace plot)"),
+    ("damping/corner_linear.png", "posterior of the linear law (corner plot)"),
+    ("damping/trace_linear.png", "chains of the linear law (trace plot)"),
+]
+
+
+def _damped_design(context: RunContext, result) -> str:
+    from .damping.design import design_summary
+
+    design, _ = result
+    summary = design_summary(design)
+
+    def spread(interval, digits=3):
+        return f"{interval['p50']:.{digits}f} [{interval['p05']:.{digits}f}, {interval['p95']:.{digits}f}]"
+
+    rows = []
+    for o in summary["optima"]:
+        c, q, i = o["constant_q"], o["q_of_v"], o["q_of_v_intervals"]
+        rows.append(
+            (
+                f"{o['h_p_mm']:g}",
+                f"{c['lambda_mm']:.2f} / {c['h_i_mm']:.3f}",
+                f"{c['w_dyn_um']:.3f}",
+                f"{spread(i['lambda_mm'], 2)} / {spread(i['h_i_mm'])}",
+                spread(i["w_dyn_um"]),
+                f"{q['f_r_khz']:.2f}",
+                spread(i["required_voltage_v"], 2),
+            )
+        )
+    original = summary["original_plate"]
+    maps = [
+        figure(context, name, caption)
+        for hp in design.optima
+        for name, caption in (
+            (f"qv_deflection_hp{hp / MM:g}mm.png", f"deflection with Q(v) at the design voltage, h_p = {hp / MM:g} mm"),
+            (f"qv_voltage_hp{hp / MM:g}mm.png", f"voltage needed for {summary['target_um']:g} um with Q(v), h_p = {hp / MM:g} mm"),
+        )
+        if name in context.figures
+    ]
+    return (
+        "## Design with Q(v)\n\n"
+        f"The constant Q is replaced by the fitted {summary['law']} law and the deflection is solved "
+        f"self-consistently, w = w(Q(2 pi f_r w)). Intervals are 5-95 % over {summary['draws']} posterior draws, "
+        "each optimised again.\n\n"
+        + table(
+            [
+                "h_p [mm]",
+                "constant Q: lambda / h_i [mm]",
+                "constant Q: w [um]",
+                "Q(v): lambda / h_i [mm]",
+                "Q(v): w [um]",
+                "f_r [kHz]",
+                f"V for {summary['target_um']:g} um",
+            ],
+            rows,
+        )
+        + "\n\n"
+        f"Original plate with Q(v) at the design voltage: w = {spread(original['w_dyn_um'])} um; "
+        f"voltage for {summary['target_um']:g} um: {spread(original['required_voltage_v'], 2)} V.\n\n"
+        + "\n\n".join(maps)
+    )
+
+
 def _timings(context: RunContext) -> str:
     rows = [(t.name, f"{t.seconds:.1f}", "yes" if t.cached else "no") for t in context.timings]
     total = sum(t.seconds for t in context.timings)
@@ -81,6 +196,9 @@ def _configuration(context: RunContext) -> str:
 
 
 SECTIONS = [
+    ("logs", _logs),
     ("analytical_optima", _analytical_optima),
+    ("damping_fit", _damping_fit),
+    ("damped_design", _damped_design),
 ]
 """(result key, section writer) in report order."""

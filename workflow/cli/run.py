@@ -46,4 +46,5 @@ def run(args):
         "report": str(report),
         "figures": sorted(context.figures.values()),
         "timings_s": {t.name: round(t.seconds, 3) for t in context.timings},
+        "from_cache": [t.name for t in context.timings if t.cached],
     }
