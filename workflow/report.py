@@ -13,6 +13,7 @@ def write_report(context: RunContext) -> Path:
     for key, writer in SECTIONS:
         if key in context.results:
             sections.append(writer(context, context.results[key]))
+    sections.append(_reproduction(context))
     sections.append(_timings(context))
     sections.append(_configuration(context))
     path = context.out / "report.md"
@@ -180,6 +181,21 @@ def _damped_design(context: RunContext, result) -> str:
         f"Original plate with Q(v) at the design voltage: w = {spread(original['w_dyn_um'])} um; "
         f"voltage for {summary['target_um']:g} um: {spread(original['required_voltage_v'], 2)} V.\n\n"
         + "\n\n".join(maps)
+    )
+
+
+def _reproduction(context: RunContext) -> str:
+    from .reproduction import reproduce
+
+    rows = []
+    for r in reproduce(context.results, context.config["design"]["voltage_v"]):
+        relative = "" if r.relative_difference is None else f" ({100 * r.relative_difference:+.1f} %)"
+        unit = f" {r.paper.unit}" if r.paper.unit else ""
+        rows.append((r.paper.description, f"{r.paper.value:g}{unit}", f"{r.ours:.4g}{unit}", f"{r.difference:+.3g}{relative}", r.how))
+    return (
+        "## Reproduction of the paper\n\n"
+        "Each figure the paper reports (SPEC.md, marked *(paper)*) beside ours; the paper's values are "
+        "validation targets, never inputs.\n\n" + table(["paper figure", "paper", "ours", "difference", "ours from"], rows)
     )
 
 
