@@ -37,8 +37,12 @@ import numpy as np
 from .optimize import DesignProblem, Optimum, PlateModel, maximise_deflection
 from .units import MM
 
-TRUST_FRACTION = 0.2
-"""Largest step per iteration, as a fraction of each variable's range [-]."""
+TRUST_FRACTION = 0.1
+"""Initial (and largest) trust box half-width, as a fraction of each variable's range [-]."""
+PENALTY = 20.0
+"""Weight of the frequency shortfall in the merit that accepts or rejects a step [-]."""
+FREQUENCY_TOLERANCE = 1e-3
+"""Relative distance to f_min within which the frequency constraint counts as active [-]."""
 PROBE_FRACTION = 0.01
 """Length of a probing step, as a fraction of each variable's range [-]."""
 COVERAGE = 0.3
@@ -126,9 +130,14 @@ def _surrogate(coarse: PlateModel, offset: np.ndarray, jacobian: np.ndarray, cen
     return model
 
 
-def _trust_problem(problem: DesignProblem, centre_mm: np.ndarray) -> DesignProblem:
-    """The problem restricted to a box of :data:`TRUST_FRACTION` of the ranges around x [mm]."""
-    radius = TRUST_FRACTION * (problem.upper - problem.lower)
+def _merit(log_response: np.ndarray, problem: DesignProblem) -> float:
+    """ln w minus :data:`PENALTY` times the relative shortfall of f below f_min [-]."""
+    return float(log_response[0] - PENALTY * max(0.0, np.log(problem.min_frequency) - log_response[1]))
+
+
+def _trust_problem(problem: DesignProblem, centre_mm: np.ndarray, fraction: float) -> DesignProblem:
+    """The problem restricted to a box of ``fraction`` of the ranges around x [mm]."""
+    radius = fraction * (problem.upper - problem.lower)
     low = np.maximum(problem.lower, centre_mm * MM - radius)
     high = np.minimum(problem.upper, centre_mm * MM + radius)
     return DesignProblem(
@@ -192,7 +201,8 @@ def space_mapping_optimum(
     coarse: PlateModel,
     problem: DesignProblem,
     tolerance: float = 0.005 * MM,
-    max_fine_evaluations: int = 10,
+    max_fine_evaluations: int = 12,
+    merit_tolerance: float = 1e-4,
 ) -> SpaceMappingResult:
     """Maximise the fine deflection subject to the fine f_r >= f_min by space mapping.
 
@@ -206,6 +216,9 @@ def space_mapping_optimum(
         Stop when the next step is shorter than this in both variables [m].
     max_fine_evaluations : int
         Upper limit on fine evaluations.
+    merit_tolerance : float
+        Stop when the surrogate promises less than this gain of the merit
+        (ln w less the frequency-shortfall penalty) [-], 1e-4 being 0.01 % of deflection.
 
     Returns
     -------
@@ -214,39 +227,40 @@ def space_mapping_optimum(
     fine, coarse = _Counted(fine), _Counted(coarse)
     coarse_optimum = maximise_deflection(coarse, problem)
     x = np.array([coarse_optimum.plate.wavelength, coarse_optimum.plate.resonator_thickness]) / MM
-    jacobian = np.zeros((2, 2))
-    trajectory, previous, converged = [], None, False
-    directions, previous_x = [], None
-    while fine.evaluations < max_fine_evaluations:
-        fine_response, coarse_response = _log_response(fine, problem, x), _log_response(coarse, problem, x)
-        trajectory.append(
-            SpaceMappingStep(x * MM, *np.exp(fine_response), *np.exp(coarse_response))
-        )
-        if previous is not None:
-            step = x - previous[0]
-            change = (fine_response - previous[1]) - (coarse_response - previous[2])
-            jacobian = jacobian + np.outer(change - jacobian @ step, step) / (step @ step)
-        previous = (x, fine_response, coarse_response)
-        directions.append(None if previous_x is None else _unit(x - previous_x, problem))
+    centre = (x, _log_response(fine, problem, x), _log_response(coarse, problem, x))
+    trajectory = [SpaceMappingStep(x * MM, *np.exp(centre[1]), *np.exp(centre[2]))]
+    jacobian, directions, radius, converged = np.zeros((2, 2)), [], TRUST_FRACTION, False
+    while fine.evaluations < max_fine_evaluations and radius * np.min(problem.upper - problem.lower) > tolerance:
+        x, fine_response, coarse_response = centre
         surrogate = _surrogate(coarse, fine_response - coarse_response, jacobian, x)
-        following = maximise_deflection(surrogate, _trust_problem(problem, x), start=x * MM)
+        following = maximise_deflection(surrogate, _trust_problem(problem, x, radius), start=x * MM)
         x_next = np.array([following.plate.wavelength, following.plate.resonator_thickness]) / MM
-        if np.all(np.abs(x_next - x) * MM <= tolerance):
-            free = _free_directions(surrogate, problem, x_next)
-            unexplored = _least_explored(free, [d for d in directions if d is not None])
+        predicted_gain = _merit(_log_response(surrogate, problem, x_next), problem) - _merit(fine_response, problem)
+        if predicted_gain <= merit_tolerance or np.all(np.abs(x_next - x) * MM <= tolerance):
+            unexplored = _least_explored(_free_directions(surrogate, problem, x_next), directions)
             if unexplored is None:
                 converged = True
                 break
             x_next = _probe(surrogate, problem, x, unexplored)
-        previous_x, x = x, x_next
-    last = trajectory[-1]
+        next_fine, next_coarse = _log_response(fine, problem, x_next), _log_response(coarse, problem, x_next)
+        trajectory.append(SpaceMappingStep(x_next * MM, *np.exp(next_fine), *np.exp(next_coarse)))
+        step = x_next - x
+        change = (next_fine - fine_response) - (next_coarse - coarse_response)
+        jacobian = jacobian + np.outer(change - jacobian @ step, step) / (step @ step)
+        directions.append(_unit(step, problem))
+        if _merit(next_fine, problem) > _merit(fine_response, problem):
+            centre = (x_next, next_fine, next_coarse)
+        else:
+            radius /= 2
+    x, fine_response, _ = centre
+    deflection, frequency = np.exp(fine_response)
     optimum = Optimum(
-        plate=problem.plate(float(last.design[0]), float(last.design[1])),
-        deflection=last.deflection,
-        frequency=last.frequency,
+        plate=problem.plate(float(x[0] * MM), float(x[1] * MM)),
+        deflection=float(deflection),
+        frequency=float(frequency),
         evaluations=fine.evaluations,
-        constraint_active=bool(abs(last.frequency / problem.min_frequency - 1) <= 1e-3),
-        status="converged" if converged else "maximum fine evaluations reached",
+        constraint_active=bool(abs(frequency / problem.min_frequency - 1) <= FREQUENCY_TOLERANCE),
+        status="converged" if converged else "stopped: trust region collapsed or maximum fine evaluations",
     )
     return SpaceMappingResult(
         optimum=optimum,
