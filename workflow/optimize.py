@@ -159,6 +159,7 @@ def maximise_deflection(
     relative_step: float = 1e-6,
     difference: str = "central",
     max_evaluations: int = 2000,
+    constraint_tolerance: float = 1e-9,
 ) -> Optimum:
     """Maximise the deflection subject to f_r >= f_min with NLopt's SLSQP.
 
@@ -177,6 +178,9 @@ def maximise_deflection(
         Finite-difference scheme (forward halves the evaluations of an expensive model).
     max_evaluations : int
         Upper limit on optimiser iterations.
+    constraint_tolerance : float
+        Accepted relative violation of f_r >= f_min [-]; a model with finite-difference
+        noise (the FEM) needs ~1e-7 for SLSQP to count its iterates feasible and stop.
 
     Raises
     ------
@@ -224,7 +228,7 @@ def maximise_deflection(
     optimizer.set_lower_bounds(list(problem.lower / scale))
     optimizer.set_upper_bounds(list(problem.upper / scale))
     optimizer.set_max_objective(objective)
-    optimizer.add_inequality_constraint(constraint, 1e-9)
+    optimizer.add_inequality_constraint(constraint, constraint_tolerance)
     optimizer.set_xtol_rel(xtol_rel)
     optimizer.set_maxeval(max_evaluations)
     x_opt = optimizer.optimize(list(np.clip(start / scale, problem.lower / scale, problem.upper / scale)))

@@ -1,0 +1,69 @@
+"""The FEM optimum of SPEC 5: direct NLopt from the beam optimum, or space mapping."""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .optimize import DesignProblem, Optimum, analytical_model, maximise_deflection, optimise_analytical
+from .space_mapping import space_mapping_optimum
+
+METHODS = ("nlopt", "space-mapping")
+"""Ways to reach the FEM optimum."""
+
+DIRECT_RELATIVE_STEP = 1e-4
+"""Forward-difference step of the direct run, relative to each bound's span [-] (2.5 um on lambda)."""
+DIRECT_XTOL = 1e-4
+"""Relative tolerance on (lambda, h_i) of the direct run [-]."""
+DIRECT_CONSTRAINT_TOLERANCE = 1e-6
+"""Accepted relative shortfall of f_r in the direct run [-] (forward differences are noisy)."""
+
+
+@dataclass(frozen=True)
+class FemOptimum:
+    """An FEM optimum and what it cost.
+
+    Attributes
+    ----------
+    optimum : Optimum
+    method : str
+        One of :data:`METHODS`.
+    fine_evaluations, coarse_evaluations : int
+        FEM and beam-model geometries evaluated.
+    """
+
+    optimum: Optimum
+    method: str
+    fine_evaluations: int
+    coarse_evaluations: int
+
+
+def optimise_fem(problem: DesignProblem, fem_model, method: str = "space-mapping", q: float = None) -> FemOptimum:
+    """Maximise the FEM deflection subject to the FEM f_r >= f_min.
+
+    Parameters
+    ----------
+    problem : DesignProblem
+    fem_model : PlateModel
+        Usually a :class:`~workflow.fem_evaluations.FemModel` (its ``q`` is used when ``q`` is None).
+    method : {"nlopt", "space-mapping"}
+    q : float, optional
+        Quality factor of the coarse (beam) model [-].
+    """
+    q = fem_model.q if q is None else q
+    if method == "space-mapping":
+        result = space_mapping_optimum(fem_model, analytical_model(q, problem.voltage), problem)
+        return FemOptimum(result.optimum, method, result.fine_evaluations, result.coarse_evaluations)
+    if method == "nlopt":
+        coarse = optimise_analytical(problem, q)
+        start = np.array([coarse.plate.wavelength, coarse.plate.resonator_thickness])
+        direct = maximise_deflection(
+            fem_model,
+            problem,
+            start=start,
+            xtol_rel=DIRECT_XTOL,
+            relative_step=DIRECT_RELATIVE_STEP,
+            difference="forward",
+            constraint_tolerance=DIRECT_CONSTRAINT_TOLERANCE,
+        )
+        return FemOptimum(direct, method, direct.evaluations, coarse.evaluations)
+    raise ValueError(f"method must be one of {METHODS}, got {method!r}")
