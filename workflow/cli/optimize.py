@@ -1,5 +1,7 @@
 """``tactile optimize``: the geometry of maximum deflection with f_r >= 25 kHz."""
 
+from ..errors import TactileError
+from ..fem_optimum import optimise_fem
 from ..optimize import Optimum, optimise_analytical
 from ..units import KHZ, MM, UM
 from . import add_json_flag
@@ -57,6 +59,14 @@ def optimum_record(optimum: Optimum, **counts) -> dict:
     }
 
 
+def _fem_model(args):
+    """The cached, parallel FEM at --q and --voltage (default mesh)."""
+    from ..evaluation_cache import EvaluationCache
+    from ..fem_evaluations import FemModel
+
+    return FemModel(q=args.q, voltage=args.voltage, cache=EvaluationCache(), progress=not args.json)
+
+
 def run(args) -> dict:
     records = []
     posterior = load_damping(args)
@@ -68,6 +78,18 @@ def run(args) -> dict:
         elif args.model == "analytical":
             optimum = optimise_analytical(problem, q=args.q)
             records.append(optimum_record(optimum, coarse_evaluations=optimum.evaluations))
+        elif posterior is None:
+            found = optimise_fem(problem, _fem_model(args), args.method)
+            records.append(
+                optimum_record(
+                    found.optimum,
+                    method=found.method,
+                    fine_evaluations=found.fine_evaluations,
+                    coarse_evaluations=found.coarse_evaluations,
+                )
+            )
+        else:
+            raise TactileError("optimize: --damping is supported with --model analytical only")
     if not args.json:
         for r in records:
             counts = ", ".join(f"{k.replace('_', ' ')} {r[k]}" for k in ("fine_evaluations", "coarse_evaluations") if k in r)
