@@ -17,7 +17,9 @@ grid = 9
 fem_grid = 2
 fem_ceramic_thicknesses_mm = [1.0]
 [fem]
-mesh = "coarse"
+elements_per_ceramic = 2
+elements_per_layer = 1
+elements_across_half_width = 3
 width_points = 3
 [campaign]
 voltages_v = [5.0, 15.0]

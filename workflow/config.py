@@ -24,7 +24,15 @@ else:  # pragma: no cover
 def default_config() -> dict:
     """The embedded defaults, as nested dicts: Table 1 for [design], ``defaults.toml`` for the rest."""
     embedded = tomllib.loads(resources.files(__package__).joinpath("defaults.toml").read_text(encoding="utf-8"))
+    embedded["fem"] = {**fem_defaults(), **embedded["fem"]}
     return {"design": design_defaults(), **embedded, "campaign": campaign_defaults(), "simulator": simulator_defaults()}
+
+
+def fem_defaults() -> dict:
+    """The mesh keys of [fem] from :class:`workflow.fem.FemSettings`."""
+    from .fem import FemSettings
+
+    return FemSettings().as_dict()
 
 
 def campaign_defaults() -> dict:

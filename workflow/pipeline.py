@@ -193,6 +193,58 @@ def save_figure(figure, path: Path) -> None:
     plt.close(figure)
 
 
+def fem_settings(config: dict):
+    """The FEM mesh of the [fem] section."""
+    from .fem import FemSettings
+
+    names = FemSettings().as_dict()
+    return FemSettings(**{name: config["fem"][name] for name in names})
+
+
+def fem_model(context: RunContext, q: Optional[float] = None):
+    """The cached, parallel FEM plate model of the run."""
+    from .fem_evaluations import FemModel
+
+    design = context.config["design"]
+    return FemModel(
+        q=design["q"] if q is None else q,
+        voltage=design["voltage_v"],
+        settings=fem_settings(context.config),
+        cache=context.cache,
+        scheduler=context.scheduler,
+        progress=sys.stderr.isatty(),
+    )
+
+
+def fem_original(context: RunContext):
+    """The FEM of the original plate (all evaluated modes)."""
+    from .plate import ORIGINAL_PLATE
+
+    return fem_model(context).results(ORIGINAL_PLATE)[0]
+
+
+def fem_original_figures(context: RunContext, result) -> None:
+    from .figures.fem_responses import modes_figure
+
+    save_figure(modes_figure(result), context.figure_path("fem_modes_original.png"))
+
+
+def fem_responses(context: RunContext):
+    """Frequency response around the working mode and the switch-on transient of the original plate."""
+    from .fem.responses import frequency_response, transient_response
+
+    result, q = context.results["fem_original"], context.config["design"]["q"]
+    return frequency_response(result, q), transient_response(result, q)
+
+
+def fem_responses_figures(context: RunContext, responses) -> None:
+    from .figures.fem_responses import frequency_response_figure, transient_figure
+
+    frequency, transient = responses
+    save_figure(frequency_response_figure(frequency), context.figure_path("fem_frequency_response.png"))
+    save_figure(transient_figure(transient), context.figure_path("fem_transient.png"))
+
+
 @dataclass(frozen=True)
 class Step:
     """One step of the run.
@@ -224,6 +276,8 @@ STEPS: List[Step] = [
     Step("analytical optimisation (constant Q)", "analytical_optima", analytical_optima, cacheable=False),
     Step("Q(v) fit (emcee)", "damping_fit", damping_fit, damping_fit_files),
     Step("design with Q(v) and posterior propagation", "damped_design", damped_design, damped_design_figures),
+    Step("FEM of the original plate", "fem_original", fem_original, fem_original_figures, cacheable=False),
+    Step("FEM responses of the original plate", "fem_responses", fem_responses, fem_responses_figures),
 ]
 """The steps in the order they run."""
 

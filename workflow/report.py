@@ -184,6 +184,45 @@ def _damped_design(context: RunContext, result) -> str:
     )
 
 
+def _fem_original(context: RunContext, result) -> str:
+    from .plate import ORIGINAL_PLATE
+
+    rows = [
+        (
+            i + 1,
+            f"{mode.frequency / KHZ:.3f}",
+            f"{mode.deflection / UM:.4f}",
+            f"{mode.transverse_indicator:.2f}",
+            "working mode" if mode is result.best else "",
+        )
+        for i, mode in enumerate(result.modes)
+    ]
+    plate = ORIGINAL_PLATE
+    return (
+        "## FEM of the original plate\n\n"
+        f"Quarter plate, 27-node bricks, {result.n_dofs} degrees of freedom; lambda {plate.wavelength / MM:g} mm, "
+        f"h_i {plate.resonator_thickness / MM:g} mm, h_p {plate.ceramic_thickness / MM:g} mm, b {plate.width / MM:g} mm, "
+        f"Q = {context.config['design']['q']:g}, {context.config['design']['voltage_v']:g} V. The six modes nearest the "
+        "beam resonance; the transverse indicator is the share of the deflection's variance across the width "
+        "(0: a clean longitudinal mode).\n\n"
+        + table(["mode", "f [kHz]", "mean deflection [um]", "transverse indicator", ""], rows)
+        + "\n\n"
+        + figure(context, "fem_modes_original.png", "deflection and transverse indicator of the evaluated modes")
+    )
+
+
+def _fem_responses(context: RunContext, responses) -> str:
+    frequency, transient = responses
+    return (
+        "## Responses of the original plate\n\n"
+        f"Switched on at resonance ({transient.frequency / KHZ:.3f} kHz), the envelope rises with the time constant "
+        f"{transient.time_constant * 1e3:.3f} ms; Q/(pi f_r) = {transient.expected_time_constant * 1e3:.3f} ms.\n\n"
+        + figure(context, "fem_frequency_response.png", "frequency response |w|(f) around the working mode")
+        + "\n\n"
+        + figure(context, "fem_transient.png", "deflection after a sine at resonance is switched on")
+    )
+
+
 def _reproduction(context: RunContext) -> str:
     from .reproduction import reproduce
 
@@ -216,5 +255,7 @@ SECTIONS = [
     ("analytical_optima", _analytical_optima),
     ("damping_fit", _damping_fit),
     ("damped_design", _damped_design),
+    ("fem_original", _fem_original),
+    ("fem_responses", _fem_responses),
 ]
 """(result key, section writer) in report order."""
