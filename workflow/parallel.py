@@ -20,7 +20,7 @@ import multiprocessing
 import os
 import sys
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from typing import Callable, Iterable, List, Optional, Union
+from typing import Callable, Iterable, List, Optional
 
 from tqdm import tqdm
 
@@ -48,7 +48,7 @@ def local_workers() -> int:
 def map_evaluations(
     function: Callable,
     items: Iterable,
-    scheduler: Union[None, str, "distributed.Client"] = None,  # noqa: F821
+    scheduler=None,
     progress: bool = True,
     workers: Optional[int] = None,
     description: str = "evaluations",
@@ -117,10 +117,9 @@ def _process_pool(function, items, workers, bar):
 
 def _dask(function, items, scheduler, bar):
     from distributed import Client
-    from distributed import as_completed as dask_as_completed
 
     if isinstance(scheduler, Client):
-        return _gather(scheduler, function, items, bar, dask_as_completed)
+        return _gather(scheduler, function, items, bar)
     if not isinstance(scheduler, str) or "://" not in scheduler:
         raise SchedulerError(
             f"--scheduler {scheduler!r} is not a Dask scheduler address; expected e.g. tcp://host:8786"
@@ -130,11 +129,14 @@ def _dask(function, items, scheduler, bar):
     except (OSError, TimeoutError, ValueError) as error:
         raise SchedulerError(f"cannot reach the Dask scheduler at {scheduler}: {error}") from None
     with client:
-        return _gather(client, function, items, bar, dask_as_completed)
+        return _gather(client, function, items, bar)
 
 
-def _gather(client, function, items, bar, dask_as_completed):
+def _gather(client, function, items, bar):
+    """Submit every item, collect in order (the bar advances as the leading results arrive)."""
     futures = client.map(function, items, pure=False)
-    for _ in dask_as_completed(futures):
+    results = []
+    for future in futures:
+        results.append(future.result())
         bar.update()
-    return client.gather(futures)
+    return results
