@@ -1,0 +1,43 @@
+"""FEM optimum by direct NLopt vs space mapping: fine evaluations, distance, time (JSON on stdout).
+
+Usage: python bench/bench_space_mapping.py [h_p_mm ...]   (default 1).  Uncached, in-process FEM.
+"""
+
+import json
+import sys
+import time
+
+import numpy as np
+
+from workflow.fem_evaluations import FemModel
+from workflow.fem_optimum import optimise_fem
+from workflow.optimize import DesignProblem
+from workflow.units import MM, UM
+
+
+def compare(ceramic_thickness_mm: float) -> dict:
+    problem = DesignProblem(ceramic_thickness_mm * MM)
+    record = {"h_p_mm": ceramic_thickness_mm}
+    designs = {}
+    for method in ("nlopt", "space-mapping"):
+        start = time.perf_counter()
+        found = optimise_fem(problem, FemModel(scheduler="synchronous"), method)
+        plate = found.optimum.plate
+        designs[method] = np.array([plate.wavelength, plate.resonator_thickness]) / MM
+        record[method] = {
+            "seconds": round(time.perf_counter() - start, 2),
+            "fine_evaluations": found.fine_evaluations,
+            "coarse_evaluations": found.coarse_evaluations,
+            "lambda_mm": float(designs[method][0]),
+            "h_i_mm": float(designs[method][1]),
+            "w_dyn_um": found.optimum.deflection / UM,
+            "f_r_khz": found.optimum.frequency / 1e3,
+        }
+    record["distance_mm"] = float(np.max(np.abs(designs["nlopt"] - designs["space-mapping"])))
+    record["fine_evaluation_ratio"] = record["nlopt"]["fine_evaluations"] / record["space-mapping"]["fine_evaluations"]
+    return record
+
+
+if __name__ == "__main__":
+    sizes = [float(a) for a in sys.argv[1:]] or [1.0]
+    print(json.dumps([compare(size) for size in sizes]))
