@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional
 
+import numpy as np
+
 from .errors import TactileError
 from .evaluation_cache import EvaluationCache, content_key, source_version
 from .optimize import DesignProblem, optimise_analytical
@@ -50,9 +52,10 @@ class RunContext:
         return self.out / name
 
 
-def design_problems(config: dict) -> Dict[float, DesignProblem]:
-    """One :class:`DesignProblem` per h_p of the [design] section, keyed by h_p [m]."""
+def design_problems(config: dict, thicknesses_mm=None) -> Dict[float, DesignProblem]:
+    """One :class:`DesignProblem` per h_p (default: those of the [design] section), keyed by h_p [m]."""
     design = config["design"]
+    thicknesses_mm = design["ceramic_thicknesses_mm"] if thicknesses_mm is None else thicknesses_mm
     return {
         thickness * MM: DesignProblem(
             ceramic_thickness=thickness * MM,
@@ -63,7 +66,7 @@ def design_problems(config: dict) -> Dict[float, DesignProblem]:
             max_resonator_thickness=design["hi_max_mm"] * MM,
             wavelength_range=(design["wavelength_min_mm"] * MM, design["wavelength_max_mm"] * MM),
         )
-        for thickness in design["ceramic_thicknesses_mm"]
+        for thickness in thicknesses_mm
     }
 
 
@@ -246,6 +249,85 @@ def fem_responses_figures(context: RunContext, responses) -> None:
 
 
 @dataclass(frozen=True)
+class FemOptima:
+    """The FEM optimum of one h_p by space mapping, and by direct NLopt when asked."""
+
+    space_mapping: Any
+    direct: Optional[Any] = None
+
+
+def fem_optima(context: RunContext) -> Dict[float, FemOptima]:
+    """FEM optimum per h_p by aggressive space mapping (and the direct NLopt run if configured)."""
+    from .fem_optimum import optimise_fem
+
+    model = fem_model(context)
+    direct = context.config["fem"]["direct_nlopt"]
+    return {
+        hp: FemOptima(
+            space_mapping=optimise_fem(problem, model, "space-mapping"),
+            direct=optimise_fem(problem, model, "nlopt") if direct else None,
+        )
+        for hp, problem in design_problems(context.config).items()
+    }
+
+
+def analytical_maps(context: RunContext):
+    """Beam-model maps of w_dyn and f_r over (lambda, h_i) for every h_p, with the optimum."""
+    from .maps import design_map
+    from .optimize import analytical_model
+
+    design = context.config["design"]
+    model = analytical_model(design["q"], design["voltage_v"])
+    optima = context.results["analytical_optima"]
+    return {
+        hp: design_map(model, problem, context.config["maps"]["grid"], "analytical", optima[hp])
+        for hp, problem in design_problems(context.config).items()
+    }
+
+
+def fem_maps(context: RunContext):
+    """FEM maps over a (coarse by default) (lambda, h_i) grid for the configured h_p values."""
+    from .maps import design_map
+
+    problems = design_problems(context.config, context.config["maps"]["fem_ceramic_thicknesses_mm"])
+    optima = context.results.get("fem_optima", {})
+    return {
+        hp: design_map(
+            fem_model(context),
+            problem,
+            context.config["maps"]["fem_grid"],
+            "fem",
+            optima[hp].space_mapping.optimum if hp in optima else None,
+        )
+        for hp, problem in problems.items()
+    }
+
+
+def maps_figures(context: RunContext, maps) -> None:
+    """One two-panel contour figure per map."""
+    from .figures.maps import map_figure
+
+    for hp, design_map in maps.items():
+        save_figure(map_figure(design_map), context.figure_path(f"map_{design_map.model}_hp{hp / MM:g}mm.png"))
+
+
+def fem_width_sweep(context: RunContext):
+    """w(b) and f(b) of the original plate with the FEM."""
+    from .maps import width_sweep
+    from .plate import ORIGINAL_PLATE
+
+    fem = context.config["fem"]
+    widths = np.linspace(fem["width_min_mm"], fem["width_max_mm"], fem["width_points"]) * MM
+    return width_sweep(fem_model(context), ORIGINAL_PLATE, widths)
+
+
+def width_sweep_figures(context: RunContext, sweep) -> None:
+    from .figures.maps import width_sweep_figure
+
+    save_figure(width_sweep_figure(sweep), context.figure_path("width_sweep_fem.png"))
+
+
+@dataclass(frozen=True)
 class Step:
     """One step of the run.
 
@@ -278,6 +360,10 @@ STEPS: List[Step] = [
     Step("design with Q(v) and posterior propagation", "damped_design", damped_design, damped_design_figures),
     Step("FEM of the original plate", "fem_original", fem_original, fem_original_figures, cacheable=False),
     Step("FEM responses of the original plate", "fem_responses", fem_responses, fem_responses_figures),
+    Step("FEM optimum per h_p (space mapping)", "fem_optima", fem_optima),
+    Step("analytical maps", "analytical_maps", analytical_maps, maps_figures, cacheable=False),
+    Step("FEM maps", "fem_maps", fem_maps, maps_figures),
+    Step("FEM width sweep of the original plate", "width_sweep", fem_width_sweep, width_sweep_figures),
 ]
 """The steps in the order they run."""
 

@@ -223,6 +223,82 @@ def _fem_responses(context: RunContext, responses) -> str:
     )
 
 
+def _fem_optima(context: RunContext, optima) -> str:
+    rows = []
+    for hp, record in optima.items():
+        for name, result in (("space mapping", record.space_mapping), ("direct NLopt", record.direct)):
+            if result is None:
+                continue
+            o = result.optimum
+            beam = context.results["analytical_optima"][hp]
+            rows.append(
+                (
+                    f"{hp / MM:g}",
+                    name,
+                    f"{o.plate.wavelength / MM:.3f}",
+                    f"{o.plate.resonator_thickness / MM:.3f}",
+                    f"{o.deflection / UM:.3f}",
+                    f"{o.frequency / KHZ:.3f}",
+                    result.fine_evaluations,
+                    result.coarse_evaluations,
+                    f"{beam.plate.wavelength / MM:.3f} / {beam.plate.resonator_thickness / MM:.3f}",
+                )
+            )
+    return (
+        "## FEM optimum\n\n"
+        "Aggressive space mapping with the beam model as the coarse model: parameter extraction and a Broyden "
+        "update of the mapping, so that only a few FEM evaluations are needed. Width "
+        f"{context.config['design']['width_mm']:g} mm.\n\n"
+        + table(
+            [
+                "h_p [mm]",
+                "method",
+                "lambda [mm]",
+                "h_i [mm]",
+                "w_dyn [um]",
+                "f_r [kHz]",
+                "FEM evaluations",
+                "beam evaluations",
+                "beam optimum lambda / h_i [mm]",
+            ],
+            rows,
+        )
+    )
+
+
+def _maps(context: RunContext, maps) -> str:
+    model = next(iter(maps.values())).model if maps else ""
+    title = {"analytical": "Analytical maps", "fem": "FEM maps"}.get(model, "Maps")
+    grid = context.config["maps"]["grid" if model == "analytical" else "fem_grid"]
+    figures = [
+        figure(context, f"map_{m.model}_hp{hp / MM:g}mm.png", f"{m.model} model, h_p = {hp / MM:g} mm: w_dyn and f_r")
+        for hp, m in maps.items()
+    ]
+    return (
+        f"## {title}\n\n"
+        f"Deflection at the design voltage and resonance over a {grid} x {grid} (lambda, h_i) grid; the white line is "
+        f"f_r = {context.config['design']['min_frequency_khz']:g} kHz, the dashed line h_i = "
+        f"{context.config['design']['hi_min_mm']:g} mm, the star the constrained optimum.\n\n" + "\n\n".join(figures)
+    )
+
+
+def _width_sweep(context: RunContext, sweep) -> str:
+    from .maps import TRANSVERSE_THRESHOLD
+
+    rows = [
+        (f"{b / MM:g}", f"{w / UM:.3f}", f"{f / KHZ:.3f}", f"{t:.2f}", "transverse mixed" if mixed else "")
+        for b, w, f, t, mixed in zip(sweep.width, sweep.deflection, sweep.frequency, sweep.transverse_indicator, sweep.transverse)
+    ]
+    return (
+        "## Width sweep of the original plate (FEM)\n\n"
+        f"Working mode against the width b; widths whose working mode has a transverse indicator above "
+        f"{TRANSVERSE_THRESHOLD:g} are marked.\n\n"
+        + table(["b [mm]", "w_dyn [um]", "f_r [kHz]", "transverse indicator", ""], rows)
+        + "\n\n"
+        + figure(context, "width_sweep_fem.png", "w(b) and f(b); transverse-mixed widths marked")
+    )
+
+
 def _reproduction(context: RunContext) -> str:
     from .reproduction import reproduce
 
@@ -257,5 +333,9 @@ SECTIONS = [
     ("damped_design", _damped_design),
     ("fem_original", _fem_original),
     ("fem_responses", _fem_responses),
+    ("fem_optima", _fem_optima),
+    ("analytical_maps", _maps),
+    ("fem_maps", _maps),
+    ("width_sweep", _width_sweep),
 ]
 """(result key, section writer) in report order."""
