@@ -4,7 +4,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .optimize import DesignProblem, Optimum, analytical_model, maximise_deflection, optimise_analytical
+from .optimize import DesignProblem, Optimum, PlateModel, analytical_model, maximise_deflection
 from .space_mapping import space_mapping_optimum
 
 METHODS = ("nlopt", "space-mapping")
@@ -37,7 +37,9 @@ class FemOptimum:
     coarse_evaluations: int
 
 
-def optimise_fem(problem: DesignProblem, fem_model, method: str = "space-mapping", q: float = None) -> FemOptimum:
+def optimise_fem(
+    problem: DesignProblem, fem_model, method: str = "space-mapping", q: float = None, coarse_model: PlateModel = None
+) -> FemOptimum:
     """Maximise the FEM deflection subject to the FEM f_r >= f_min.
 
     Parameters
@@ -47,14 +49,18 @@ def optimise_fem(problem: DesignProblem, fem_model, method: str = "space-mapping
         Usually a :class:`~workflow.fem_evaluations.FemModel` (its ``q`` is used when ``q`` is None).
     method : {"nlopt", "space-mapping"}
     q : float, optional
-        Quality factor of the coarse (beam) model [-].
+        Quality factor of the coarse (beam) model [-]; ignored when ``coarse_model`` is given.
+    coarse_model : PlateModel, optional
+        The cheap model (space mapping's coarse model, the direct run's start); default the
+        beam model at ``q`` (e.g. give the beam model with Q(v) for a FEM with Q(v)).
     """
-    q = fem_model.q if q is None else q
+    if coarse_model is None:
+        coarse_model = analytical_model(fem_model.q if q is None else q, problem.voltage)
     if method == "space-mapping":
-        result = space_mapping_optimum(fem_model, analytical_model(q, problem.voltage), problem)
+        result = space_mapping_optimum(fem_model, coarse_model, problem)
         return FemOptimum(result.optimum, method, result.fine_evaluations, result.coarse_evaluations)
     if method == "nlopt":
-        coarse = optimise_analytical(problem, q)
+        coarse = maximise_deflection(coarse_model, problem)
         start = np.array([coarse.plate.wavelength, coarse.plate.resonator_thickness])
         direct = maximise_deflection(
             fem_model,
