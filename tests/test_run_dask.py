@@ -1,0 +1,58 @@
+"""``tactile run`` gives the same numbers locally and on a Dask cluster (issue 6)."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from workflow.config import load_config
+from workflow.pipeline import STEPS, RunContext, run_steps
+
+TINY = """
+[design]
+ceramic_thicknesses_mm = [1.0]
+[maps]
+grid = 5
+fem_grid = 2
+[fem]
+elements_per_ceramic = 2
+elements_per_layer = 1
+elements_across_half_width = 3
+width_points = 3
+[campaign]
+voltages_v = [5.0, 15.0]
+points_per_sweep = 21
+[damping]
+laws = ["quadratic"]
+max_steps = 2000
+posterior_draws = 4
+[run]
+cache = false
+"""
+
+DISTRIBUTED_STEPS = ("damped_design", "fem_optima", "fem_maps", "width_sweep")
+
+
+def _run(config, out: Path, scheduler):
+    steps = [step for step in STEPS if step.key in ("logs", "analytical_optima", "damping_fit") + DISTRIBUTED_STEPS]
+    context = RunContext(config=config, out=out, scheduler=scheduler)
+    return run_steps(context, steps).results
+
+
+def test_local_and_dask_runs_give_identical_numbers(tmp_path):
+    distributed = pytest.importorskip("distributed")
+    path = tmp_path / "tiny.toml"
+    path.write_text(TINY)
+    config = load_config(path)
+    local = _run(config, tmp_path / "local", None)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        remote = _run(config, tmp_path / "dask", cluster.scheduler_address)
+    hp = 1e-3
+    design_local, design_remote = local["damped_design"][0].optima[hp], remote["damped_design"][0].optima[hp]
+    for name in design_local.draws:
+        np.testing.assert_array_equal(design_local.draws[name], design_remote.draws[name])
+    optimum_local, optimum_remote = local["fem_optima"][hp].space_mapping, remote["fem_optima"][hp].space_mapping
+    assert optimum_local.optimum.deflection == optimum_remote.optimum.deflection
+    assert optimum_local.fine_evaluations == optimum_remote.fine_evaluations
+    np.testing.assert_array_equal(local["fem_maps"][hp].deflection, remote["fem_maps"][hp].deflection)
+    np.testing.assert_array_equal(local["width_sweep"].frequency, remote["width_sweep"].frequency)
