@@ -7,23 +7,13 @@ loop over the same model (the reference), so the ratio is meaningful on a noisy 
 """
 
 import json
-import time
 
 import numpy as np
+from timing import best_time
 
 from workflow import analytical, materials
 from workflow.optimize import DesignProblem, optimise_analytical
 from workflow.plate import Plate
-
-
-def best_time(function, repeat):
-    """Shortest wall time of ``repeat`` calls [s]."""
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        function()
-        times.append(time.perf_counter() - start)
-    return min(times)
 
 
 def evaluate(plates):

@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from timing import best_time
 
 from workflow.damping.fit import fit_law
 from workflow.damping.harmonic import self_consistent_amplitude, self_consistent_amplitude_newton
@@ -21,16 +22,6 @@ from workflow.damping.likelihood import fit_data, log_probability, log_probabili
 from workflow.damping.logs import read_logs
 
 SHIPPED = Path(__file__).resolve().parent.parent / "data" / "sample_campaign.csv"
-
-
-def best_time(function, repeat):
-    """Shortest wall time of ``repeat`` calls [s]."""
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        function()
-        times.append(time.perf_counter() - start)
-    return min(times)
 
 
 def main():

@@ -8,27 +8,9 @@ import pytest
 from workflow.config import load_config
 from workflow.pipeline import STEPS, RunContext, run_steps
 
-TINY = """
-[design]
-ceramic_thicknesses_mm = [1.0]
-[maps]
-grid = 5
-fem_grid = 2
-[fem]
-elements_per_ceramic = 2
-elements_per_layer = 1
-elements_across_half_width = 3
-width_points = 3
-[campaign]
-voltages_v = [5.0, 15.0]
-points_per_sweep = 21
-[damping]
-laws = ["quadratic"]
-max_steps = 2000
-posterior_draws = 4
-[run]
-cache = false
-"""
+from test_run import TINY as SMALL
+
+TINY = SMALL + "[run]\ncache = false\n"
 
 DISTRIBUTED_STEPS = ("damped_design", "fem_optima", "fem_maps", "width_sweep")
 
