@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from workflow.config import load_config
-from workflow.pipeline import STEPS, RunContext, run_steps
+from workflow.pipeline import RunContext, run_steps
+from workflow.steps import STEPS
 
 from test_run import TINY as SMALL
 

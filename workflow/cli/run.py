@@ -6,6 +6,7 @@ from pathlib import Path
 from ..config import load_config, to_toml
 from ..evaluation_cache import EvaluationCache
 from ..pipeline import RunContext, run_steps
+from ..steps import STEPS
 from ..report import write_report
 from . import add_json_flag
 
@@ -39,7 +40,7 @@ def run(args):
         logs=list(args.logs or config["campaign"]["logs"]),
         cache=EvaluationCache() if config["run"]["cache"] else None,
     )
-    run_steps(context)
+    run_steps(context, STEPS)
     report = write_report(context)
     print(f"report: {report}", file=sys.stderr if args.json else sys.stdout)
     return {
