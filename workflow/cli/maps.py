@@ -1,14 +1,25 @@
-"""``tactile maps``: w_dyn and f_r over (lambda, h_i) for one h_p, and the FEM width sweep."""
+"""``tactile maps``: w_dyn and f_r over (lambda, h_i) for one h_p, and the FEM width sweep.
+
+With ``--damping POSTERIOR`` the deflection uses the posterior-median Q(v), solved
+self-consistently at every grid point, and a map of the voltage for the target deflection
+(median law, and p05/p95 over posterior draws) is added.
+"""
 
 from pathlib import Path
 
+import numpy as np
+
+from ..damping.design import QUANTILES, DampedMaps, damped_maps, fem_damped_deflection, fem_required_voltage
+from ..damping.laws import law_parameters
 from ..errors import TactileError
 from ..evaluation_cache import EvaluationCache
 from ..fem_optimum import optimise_fem
-from ..maps import design_map, width_sweep
+from ..maps import design_map, grid_axes, width_sweep
 from ..optimize import analytical_model, optimise_analytical
 from ..units import KHZ, MM, UM
 from . import add_json_flag
+from .fit_damping import add_damping_option, damped_optimum, load_damping
+from .optimize import damped_fem_optimum
 from .options import (
     add_ceramic_option,
     add_hi_min_option,
@@ -22,6 +33,10 @@ DEFAULT_GRID = {"analytical": 81, "fem": 12}
 """Grid points per axis when --grid is not given."""
 MAX_GRID = 400
 """Largest accepted --grid."""
+DAMPING_DRAW_BUDGET = 2_000_000
+"""With --damping: grid points x posterior draws for the required-voltage interval (memory)."""
+MAX_DAMPING_DRAWS = 100
+"""With --damping: most posterior draws for the required-voltage interval."""
 
 
 def register(subparsers) -> None:
@@ -39,6 +54,7 @@ def register(subparsers) -> None:
     add_hi_min_option(parser)
     add_width_option(parser)
     add_drive_options(parser)
+    add_damping_option(parser)
     parser.add_argument(
         "--grid",
         type=int,
@@ -58,37 +74,24 @@ def run(args) -> dict:
     if args.width_sweep and args.model != "fem":
         raise TactileError("maps: --width-sweep needs --model fem (the beam model does not depend on b)")
     problem = design_problem(args, args.hp_mm * MM)
+    posterior = load_damping(args)
     if args.model == "analytical":
-        model, optimum = analytical_model(args.q, args.voltage), optimise_analytical(problem, args.q)
+        model = analytical_model(args.q, args.voltage)
     else:
         from ..fem_evaluations import FemModel
 
         model = FemModel(
             q=args.q, voltage=args.voltage, cache=EvaluationCache(), scheduler=args.scheduler, progress=not args.json
         )
-        optimum = optimise_fem(problem, model, "space-mapping").optimum
-    result = design_map(model, problem, points, args.model, optimum)
-    from ..figures.maps import map_figure, width_sweep_figure
-
     args.out.mkdir(parents=True, exist_ok=True)
-    figures = [_save(map_figure(result), args.out / f"map_{args.model}_hp{args.hp_mm:g}mm.png")]
-    record = {
-        "model": args.model,
-        "h_p_mm": args.hp_mm,
-        "b_mm": args.b_mm,
-        "lambda_mm": (result.wavelength / MM).tolist(),
-        "h_i_mm": (result.resonator_thickness / MM).tolist(),
-        "w_dyn_um": (result.deflection / UM).tolist(),
-        "f_r_khz": (result.frequency / KHZ).tolist(),
-        "optimum": {
-            "lambda_mm": optimum.plate.wavelength / MM,
-            "h_i_mm": optimum.plate.resonator_thickness / MM,
-            "w_dyn_um": optimum.deflection / UM,
-            "f_r_khz": optimum.frequency / KHZ,
-        },
-        "figures": figures,
-    }
+    if posterior is None:
+        record = _constant_q_record(args, problem, model, points)
+    else:
+        record = _damped_record(args, problem, model, points, posterior)
+    figures = record["figures"]
     if args.width_sweep:
+        from ..figures.maps import width_sweep_figure
+
         sweep = width_sweep(model)
         figures.append(_save(width_sweep_figure(sweep), args.out / "width_sweep_fem.png"))
         record["width_sweep"] = {
@@ -99,12 +102,117 @@ def run(args) -> dict:
         }
     if not args.json:
         o = record["optimum"]
+        damping = "" if posterior is None else f" with {posterior.law_name} Q(v)"
+        voltage = "" if posterior is None else f", {o['required_voltage_v']['p50']:.3g} V for the target"
         print(
-            f"{args.model} map {points}x{points}, h_p {args.hp_mm:g} mm: optimum lambda {o['lambda_mm']:.3f} mm, "
-            f"h_i {o['h_i_mm']:.3f} mm, w_dyn {o['w_dyn_um']:.3f} um at {o['f_r_khz']:.2f} kHz; figures: "
+            f"{args.model} map {points}x{points}{damping}, h_p {args.hp_mm:g} mm: optimum lambda {o['lambda_mm']:.3f} mm, "
+            f"h_i {o['h_i_mm']:.3f} mm, w_dyn {o['w_dyn_um']:.3f} um at {o['f_r_khz']:.2f} kHz{voltage}; figures: "
             + ", ".join(figures)
         )
     return record
+
+
+def _map_keys(args, wavelength, resonator_thickness, deflection, frequency) -> dict:
+    """The SPEC section 8 keys of a map (grids indexed [lambda, h_i])."""
+    return {
+        "model": args.model,
+        "h_p_mm": args.hp_mm,
+        "b_mm": args.b_mm,
+        "lambda_mm": (wavelength / MM).tolist(),
+        "h_i_mm": (resonator_thickness / MM).tolist(),
+        "w_dyn_um": (deflection / UM).tolist(),
+        "f_r_khz": (frequency / KHZ).tolist(),
+    }
+
+
+def _optimum_keys(optimum) -> dict:
+    return {
+        "lambda_mm": float(optimum.plate.wavelength) / MM,
+        "h_i_mm": float(optimum.plate.resonator_thickness) / MM,
+        "w_dyn_um": optimum.deflection / UM,
+        "f_r_khz": optimum.frequency / KHZ,
+    }
+
+
+def _constant_q_record(args, problem, model, points: int) -> dict:
+    """Map and optimum with the constant --q."""
+    from ..figures.maps import map_figure
+
+    if args.model == "analytical":
+        optimum = optimise_analytical(problem, args.q)
+    else:
+        optimum = optimise_fem(problem, model, "space-mapping").optimum
+    result = design_map(model, problem, points, args.model, optimum)
+    figure = _save(map_figure(result), args.out / f"map_{args.model}_hp{args.hp_mm:g}mm.png")
+    return {
+        **_map_keys(args, result.wavelength, result.resonator_thickness, result.deflection, result.frequency),
+        "optimum": _optimum_keys(optimum),
+        "figures": [figure],
+    }
+
+
+def _damped_record(args, problem, model, points: int, posterior) -> dict:
+    """Maps and optimum with the posterior-median Q(v), and the required-voltage map."""
+    from ..figures.damping import design_map_figure
+
+    draws = int(np.clip(DAMPING_DRAW_BUDGET // points**2, 1, MAX_DAMPING_DRAWS))
+    if args.model == "analytical":
+        optimum, keys = damped_optimum(posterior, problem)
+        maps = damped_maps(posterior, problem, points, draws=draws, optimum=optimum)
+    else:
+        found, keys = damped_fem_optimum(posterior, problem, model, "space-mapping")
+        optimum = found.optimum
+        maps = fem_damped_maps(posterior, problem, model, points, draws, optimum)
+    stem = f"map_{args.model}_qv_hp{args.hp_mm:g}mm"
+    figures = [
+        _save(design_map_figure(maps, quantity), args.out / f"{stem}_{quantity}.png") for quantity in ("deflection", "voltage")
+    ]
+    p05, _, p95 = maps.required_voltage_interval
+    return {
+        **_map_keys(args, maps.wavelength, maps.resonator_thickness, maps.deflection, maps.frequency),
+        "required_voltage_v": maps.required_voltage.tolist(),
+        "required_voltage_v_p05": p05.tolist(),
+        "required_voltage_v_p95": p95.tolist(),
+        "target_um": keys["required_voltage_v"]["target_um"],
+        "draws": draws,
+        "damping": keys["damping"],
+        "optimum": {**_optimum_keys(optimum), "q": keys["q"], "required_voltage_v": keys["required_voltage_v"]},
+        "figures": figures,
+    }
+
+
+def fem_damped_maps(posterior, problem, fem_model, points: int, draws: int = 100, optimum=None) -> DampedMaps:
+    """FEM maps with Q(v) over the Table 1 (lambda, h_i) box, like :func:`~workflow.damping.design.damped_maps`.
+
+    Each grid point's best mode (picked at ``fem_model.q``) gets its deflection at
+    ``fem_model.voltage`` solved self-consistently with the posterior-median Q(v), and the
+    voltage for the target deflection (median law, and p05/p50/p95 over ``draws`` posterior
+    draws), from the cached FEM results without new solves.
+    """
+    wavelength, thickness = grid_axes(points)
+    results = fem_model.results(problem.plate(*np.meshgrid(wavelength, thickness, indexing="ij")))
+    law, drawn = posterior.median_law(), posterior.draws(draws)
+    shape = (points, points)
+
+    def grid(values):
+        return np.reshape(np.array(values, dtype=float), shape + np.shape(values)[1:])
+
+    parameters = ", ".join(f"{k} = {v:.4g}" for k, v in law_parameters(law).items())
+    return DampedMaps(
+        wavelength=wavelength,
+        resonator_thickness=thickness,
+        deflection=grid([fem_damped_deflection(r, law) for r in results]),
+        frequency=grid([r.frequency for r in results]),
+        required_voltage=grid([fem_required_voltage(r, law) for r in results]),
+        required_voltage_interval=np.moveaxis(
+            grid([np.quantile(fem_required_voltage(r, drawn), QUANTILES) for r in results]), -1, 0
+        ),
+        ceramic_thickness=problem.ceramic_thickness,
+        min_frequency=problem.min_frequency,
+        min_resonator_thickness=problem.min_resonator_thickness,
+        optimum=optimum,
+        law_label=f"FEM, {posterior.law_name} Q(v), median: {parameters}",
+    )
 
 
 def _save(figure, path: Path) -> str:

@@ -1,11 +1,10 @@
 """``tactile optimize``: the geometry of maximum deflection with f_r >= 25 kHz."""
 
-from ..errors import TactileError
 from ..fem_optimum import optimise_fem
 from ..optimize import Optimum, optimise_analytical
 from ..units import KHZ, MM, UM
 from . import add_json_flag
-from .fit_damping import add_damping_option, damped_optimum, load_damping
+from .fit_damping import add_damping_option, damped_optimum, fem_damping_record, load_damping
 from .options import (
     add_ceramic_option,
     add_hi_min_option,
@@ -67,6 +66,22 @@ def _fem_model(args):
     return FemModel(q=args.q, voltage=args.voltage, cache=EvaluationCache(), progress=not args.json)
 
 
+def damped_fem_optimum(posterior, problem, fem_model, method: str):
+    """The FEM optimum with the posterior-median Q(v), and the damping keys of its best mode.
+
+    The fine model is the FEM with Q(v) solved self-consistently on each geometry's best
+    mode; the coarse model (space mapping, and the direct run's start) is the beam model
+    with the same law.  ``fem_model`` evaluates at ``problem.voltage``.
+    """
+    from ..damping.design import damped_model
+
+    law = posterior.median_law()
+    fine = damped_model(law, problem.voltage, model="fem", fem_model=fem_model)
+    found = optimise_fem(problem, fine, method, coarse_model=damped_model(law, problem.voltage))
+    (result,) = fem_model.results(found.optimum.plate)
+    return found, fem_damping_record(posterior, result)
+
+
 def run(args) -> dict:
     records = []
     posterior = load_damping(args)
@@ -78,18 +93,16 @@ def run(args) -> dict:
         elif args.model == "analytical":
             optimum = optimise_analytical(problem, q=args.q)
             records.append(optimum_record(optimum, coarse_evaluations=optimum.evaluations))
-        elif posterior is None:
-            found = optimise_fem(problem, _fem_model(args), args.method)
-            records.append(
-                optimum_record(
-                    found.optimum,
-                    method=found.method,
-                    fine_evaluations=found.fine_evaluations,
-                    coarse_evaluations=found.coarse_evaluations,
-                )
-            )
         else:
-            raise TactileError("optimize: --damping is supported with --model analytical only")
+            extra = {}
+            if posterior is None:
+                found = optimise_fem(problem, _fem_model(args), args.method)
+            else:
+                found, extra = damped_fem_optimum(posterior, problem, _fem_model(args), args.method)
+            counts = dict(
+                method=found.method, fine_evaluations=found.fine_evaluations, coarse_evaluations=found.coarse_evaluations
+            )
+            records.append({**optimum_record(found.optimum, **counts), **extra})
     if not args.json:
         for r in records:
             counts = ", ".join(f"{k.replace('_', ' ')} {r[k]}" for k in ("fine_evaluations", "coarse_evaluations") if k in r)
