@@ -94,7 +94,7 @@ class Optimum:
     evaluations : int
         Geometries the model evaluated (every finite-difference point counts).
     constraint_active : bool
-        Whether f_r sits on its lower limit (within 1e-6 relative).
+        Whether f_r sits on its lower limit (within 1e-6 relative, or the constraint tolerance).
     status : str
         NLopt's stopping reason.
     """
@@ -234,7 +234,8 @@ def maximise_deflection(
     x_opt = optimizer.optimize(list(np.clip(start / scale, problem.lower / scale, problem.upper / scale)))
     status = _STATUS.get(optimizer.last_optimize_result(), str(optimizer.last_optimize_result()))
     deflection, frequency = (float(v[0]) for v in evaluate(np.asarray(x_opt)))
-    if frequency < problem.min_frequency * (1 - 1e-6):
+    slack = max(1e-6, constraint_tolerance)
+    if frequency < problem.min_frequency * (1 - slack):
         raise InfeasibleError(
             f"the optimiser ended on an infeasible point (f_r = {frequency / 1e3:.3f} kHz < "
             f"{problem.min_frequency / 1e3:g} kHz, {status}); try another start"
@@ -245,7 +246,7 @@ def maximise_deflection(
         deflection=deflection,
         frequency=frequency,
         evaluations=counting.evaluations,
-        constraint_active=bool(frequency <= problem.min_frequency * (1 + 1e-6)),
+        constraint_active=bool(frequency <= problem.min_frequency * (1 + slack)),
         status=status,
     )
 
