@@ -1,0 +1,5 @@
+"""Shared pytest configuration: figures render off-screen."""
+
+import matplotlib
+
+matplotlib.use("Agg")
