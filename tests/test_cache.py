@@ -1,10 +1,8 @@
 """Content-addressed disk cache: hits on rerun, reuse on refined grids, keys that follow the inputs."""
 
-import os
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from workflow.evaluation_cache import CACHE_VARIABLE, EvaluationCache, cached_map, content_key, default_directory
 from workflow.fem import FemSettings

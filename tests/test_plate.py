@@ -5,7 +5,7 @@ import pytest
 
 from workflow import materials
 from workflow.errors import GeometryError
-from workflow.plate import ORIGINAL_PLATE, Plate, check_design_space
+from workflow.plate import ORIGINAL_PLATE, check_design_space
 
 
 def test_derived_geometry_of_the_original_plate():

@@ -1,7 +1,7 @@
 """``tactile evaluate``: deflection and resonance of one geometry."""
 
 from .. import analytical
-from ..units import KHZ, MM, UM
+from ..units import KHZ, UM
 from . import add_json_flag
 from .fit_damping import add_damping_option, damping_record, fem_damping_record, load_damping
 from .options import (
@@ -9,6 +9,7 @@ from .options import (
     add_model_option,
     add_drive_options,
     add_width_option,
+    geometry_record,
     plate_from_args,
     positive_float,
 )
@@ -36,10 +37,7 @@ def run(args) -> dict:
     plate = plate_from_args(args)
     result = {
         "model": args.model,
-        "lambda_mm": plate.wavelength / MM,
-        "h_i_mm": plate.resonator_thickness / MM,
-        "h_p_mm": plate.ceramic_thickness / MM,
-        "b_mm": plate.width / MM,
+        **geometry_record(plate),
         "q": args.q,
         "voltage_v": args.voltage,
     }

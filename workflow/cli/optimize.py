@@ -2,7 +2,7 @@
 
 from ..fem_optimum import optimise_fem
 from ..optimize import Optimum, optimise_analytical
-from ..units import KHZ, MM, UM
+from ..units import KHZ, UM
 from . import add_json_flag
 from .fit_damping import add_damping_option, damped_optimum, fem_damping_record, load_damping
 from .options import (
@@ -13,6 +13,7 @@ from .options import (
     add_width_option,
     ceramic_thicknesses,
     design_problem,
+    geometry_record,
 )
 
 METHODS = ("nlopt", "space-mapping")
@@ -46,10 +47,7 @@ def optimum_record(optimum: Optimum, **counts) -> dict:
     """The JSON keys of SPEC section 8 for one optimum."""
     plate = optimum.plate
     return {
-        "lambda_mm": plate.wavelength / MM,
-        "h_i_mm": plate.resonator_thickness / MM,
-        "h_p_mm": plate.ceramic_thickness / MM,
-        "b_mm": plate.width / MM,
+        **geometry_record(plate),
         "w_dyn_um": optimum.deflection / UM,
         "f_r_khz": optimum.frequency / KHZ,
         "constraint_active": optimum.constraint_active,

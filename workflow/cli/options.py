@@ -107,3 +107,13 @@ def design_problem(args, ceramic_thickness: float) -> DesignProblem:
         voltage=getattr(args, "voltage", materials.DESIGN_VOLTAGE),
         min_resonator_thickness=hi_min,
     )
+
+
+def geometry_record(plate: Plate) -> dict:
+    """The geometry keys of the JSON contract, in mm."""
+    return {
+        "lambda_mm": float(plate.wavelength) / MM,
+        "h_i_mm": float(plate.resonator_thickness) / MM,
+        "h_p_mm": float(plate.ceramic_thickness) / MM,
+        "b_mm": float(plate.width) / MM,
+    }
