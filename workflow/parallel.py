@@ -120,16 +120,26 @@ def _dask(function, items, scheduler, bar):
 
     if isinstance(scheduler, Client):
         return _gather(scheduler, function, items, bar)
-    if not isinstance(scheduler, str) or "://" not in scheduler:
-        raise SchedulerError(
-            f"--scheduler {scheduler!r} is not a Dask scheduler address; expected e.g. tcp://host:8786"
-        )
-    try:
-        client = Client(scheduler, timeout=CONNECT_TIMEOUT, set_as_default=False)
-    except (OSError, TimeoutError, ValueError) as error:
-        raise SchedulerError(f"cannot reach the Dask scheduler at {scheduler}: {error}") from None
-    with client:
+    with connect(scheduler) as client:
         return _gather(client, function, items, bar)
+
+
+def connect(address: str):
+    """A ``distributed.Client`` on the scheduler at ``address`` (close it after use).
+
+    Raises
+    ------
+    SchedulerError
+        When ``address`` is not a scheduler address or cannot be reached.
+    """
+    from distributed import Client
+
+    if not isinstance(address, str) or "://" not in address:
+        raise SchedulerError(f"--scheduler {address!r} is not a Dask scheduler address; expected e.g. tcp://host:8786")
+    try:
+        return Client(address, timeout=CONNECT_TIMEOUT, set_as_default=False)
+    except (OSError, TimeoutError, ValueError) as error:
+        raise SchedulerError(f"cannot reach the Dask scheduler at {address}: {error}") from None
 
 
 def _gather(client, function, items, bar):

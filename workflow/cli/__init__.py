@@ -18,6 +18,7 @@ COMMANDS = ("evaluate", "optimize", "maps", "fit_damping", "simulate", "measure"
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
+EXIT_BROKEN_PIPE = 141
 
 
 class _Parser(argparse.ArgumentParser):
@@ -65,6 +66,20 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print(f"tactile {args.command.replace('_', '-')}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
-    if getattr(args, "json", False) and result is not None:
-        print(json_line(result))
+    except BrokenPipeError:
+        return _closed_stdout()
+    try:
+        if getattr(args, "json", False) and result is not None:
+            print(json_line(result))
+        sys.stdout.flush()
+    except BrokenPipeError:
+        return _closed_stdout()
     return 0
+
+
+def _closed_stdout() -> int:
+    """The reader of stdout went away (e.g. ``| head``): stop quietly, as command-line tools do."""
+    import os
+
+    os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    return EXIT_BROKEN_PIPE

@@ -40,6 +40,10 @@ def run(args):
         logs=list(args.logs or config["campaign"]["logs"]),
         cache=EvaluationCache() if config["run"]["cache"] else None,
     )
+    if context.scheduler is not None:
+        from ..parallel import connect
+
+        connect(context.scheduler).close()  # fail before any step, not in the middle of the run
     run_steps(context, STEPS)
     report = write_report(context)
     print(f"report: {report}", file=sys.stderr if args.json else sys.stdout)

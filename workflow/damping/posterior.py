@@ -88,8 +88,10 @@ def load_posterior(path) -> DampingPosterior:
             samples = np.asarray(content["parameter_samples"], dtype=float)
     except FileNotFoundError:
         raise InputFileError(f"{path}: no such posterior file (write one with 'tactile fit-damping ... --out DIR')") from None
-    except (OSError, ValueError, KeyError) as error:
-        raise InputFileError(f"{path}: not a posterior written by 'tactile fit-damping' ({error})") from None
+    except (OSError, ValueError, KeyError):
+        raise InputFileError(
+            f"{path}: not a posterior written by 'tactile fit-damping' (expected its posterior.npz or its --out folder)"
+        ) from None
     if law_name not in LAWS:
         raise InputFileError(f"{path}: unknown Q(v) law {law_name!r}; expected one of {', '.join(LAWS)}")
     expected = list(parameter_names(LAWS[law_name]))
