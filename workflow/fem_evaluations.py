@@ -97,7 +97,7 @@ class FemModel:
     def __call__(self, plate: Plate) -> Tuple[np.ndarray, np.ndarray]:
         """Deflection [m] and frequency [Hz] of the best mode of each plate, shaped like the batch."""
         results = self.results(plate)
-        shape = np.broadcast(plate.wavelength, plate.resonator_thickness, plate.ceramic_thickness, plate.width).shape
+        shape = plate.batch_shape
         deflection = np.array([r.deflection for r in results]).reshape(shape)
         frequency = np.array([r.frequency for r in results]).reshape(shape)
         return deflection, frequency

@@ -63,6 +63,11 @@ class Plate:
         return replace(self, **changes)
 
     @property
+    def batch_shape(self) -> tuple:
+        """Broadcast shape of the geometric fields (``()`` for a single plate)."""
+        return np.broadcast(self.wavelength, self.resonator_thickness, self.ceramic_thickness, self.width).shape
+
+    @property
     def length(self):
         """Resonator length L = (2n+1) lambda / 4 [m]."""
         return (2 * self.n_ceramics + 1) * np.asarray(self.wavelength) / 4

@@ -103,7 +103,7 @@ class DampedFemModel:
 
     def __call__(self, plate: Plate):
         results = self.results(plate)
-        shape = np.broadcast(plate.wavelength, plate.resonator_thickness, plate.ceramic_thickness, plate.width).shape
+        shape = plate.batch_shape
         scale = self.voltage / self.fem_model.voltage
         deflection = np.array([float(fem_damped_deflection(_ScaledResult(r, scale), self.law)) for r in results])
         frequency = np.array([r.frequency for r in results])
