@@ -94,10 +94,15 @@ class FemModel:
             run_fem_task, tasks, describe_fem_task, self.cache, self.scheduler, self.progress, description="FEM"
         )
 
-    def __call__(self, plate: Plate) -> Tuple[np.ndarray, np.ndarray]:
-        """Deflection [m] and frequency [Hz] of the best mode of each plate, shaped like the batch."""
+    def responses(self, plate: Plate) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Deflection [m], frequency [Hz] and transverse indicator [-] of the best mode of each plate."""
         results = self.results(plate)
         shape = plate.batch_shape
-        deflection = np.array([r.deflection for r in results]).reshape(shape)
-        frequency = np.array([r.frequency for r in results]).reshape(shape)
-        return deflection, frequency
+        return tuple(
+            np.array([getattr(r.best, name) for r in results]).reshape(shape)
+            for name in ("deflection", "frequency", "transverse_indicator")
+        )
+
+    def __call__(self, plate: Plate) -> Tuple[np.ndarray, np.ndarray]:
+        """Deflection [m] and frequency [Hz] of the best mode of each plate, shaped like the batch."""
+        return self.responses(plate)[:2]

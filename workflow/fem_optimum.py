@@ -59,7 +59,8 @@ def optimise_fem(
     if coarse_model is None:
         coarse_model = analytical_model(fem_model.q if q is None else q, problem.voltage)
     if method == "space-mapping":
-        result = space_mapping_optimum(fem_model, coarse_model, problem)
+        fine = getattr(fem_model, "responses", fem_model)  # with the transverse indicator when there is one
+        result = space_mapping_optimum(fine, coarse_model, problem)
         return FemOptimum(result.optimum, method, result.fine_evaluations, result.coarse_evaluations)
     if method == "nlopt":
         coarse = maximise_deflection(coarse_model, problem)

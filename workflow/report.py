@@ -247,9 +247,11 @@ def _fem_optima(context: RunContext, optima) -> str:
             )
     return (
         "## FEM optimum\n\n"
-        "Space mapping with the beam model as the coarse model: at each FEM point the beam model is corrected to "
-        "match the FEM there, the correction's Jacobian is updated by Broyden's rule, and the corrected beam model "
-        "is optimised in a trust region, so that few FEM evaluations are needed. Width "
+        "Space mapping with the beam model as the coarse model: the optimum lies on the FEM's 25 kHz curve; at each "
+        "FEM point the beam wavelength with the same frequency is extracted, and the wavelength and deflection "
+        "ratios FEM/beam, fitted along the curve, turn the beam model into a surrogate whose optimum is the next FEM "
+        "point; the search ends when FEM points on both sides confirm the surrogate's optimum. Points whose mode mixes "
+        "with a transverse one do not shape the surrogate. Width "
         f"{context.config['design']['width_mm']:g} mm. The FEM deflections are larger than the calibrated beam "
         "model's: the beam calibration reproduces the paper's analytical figures for the original plate, whose "
         "FEM working mode at 49 mm is mixed with a transverse mode (see the width sweep); on clean longitudinal "

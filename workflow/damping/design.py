@@ -101,13 +101,18 @@ class DampedFemModel:
     def results(self, plate: Plate):
         return self.fem_model.results(plate)
 
-    def __call__(self, plate: Plate):
+    def responses(self, plate: Plate):
+        """Deflection with Q(v) [m], frequency [Hz] and transverse indicator [-] of each plate's best mode."""
         results = self.results(plate)
         shape = plate.batch_shape
         scale = self.voltage / self.fem_model.voltage
         deflection = np.array([float(fem_damped_deflection(_ScaledResult(r, scale), self.law)) for r in results])
         frequency = np.array([r.frequency for r in results])
-        return deflection.reshape(shape), frequency.reshape(shape)
+        indicator = np.array([r.best.transverse_indicator for r in results])
+        return deflection.reshape(shape), frequency.reshape(shape), indicator.reshape(shape)
+
+    def __call__(self, plate: Plate):
+        return self.responses(plate)[:2]
 
 
 @dataclass(frozen=True)
