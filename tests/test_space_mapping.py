@@ -7,7 +7,12 @@ from workflow.fem import FemSettings
 from workflow.fem_evaluations import FemModel
 from workflow.fem_optimum import optimise_fem
 from workflow.optimize import DesignProblem, analytical_model, maximise_deflection
-from workflow.space_mapping import FREQUENCY_TOLERANCE, MIXING_THRESHOLD, coarse_wavelength, space_mapping_optimum
+from workflow.space_mapping import (
+    FREQUENCY_TOLERANCE,
+    MIXING_THRESHOLD,
+    coarse_wavelength,
+    space_mapping_optimum,
+)
 from workflow.units import MM
 
 COARSE = analytical_model()
@@ -105,7 +110,7 @@ def test_space_mapping_steps_past_a_transverse_dip():
     assert not any(s.mixed for s in result.trajectory if s.design[1] == result.optimum.plate.resonator_thickness)
     assert np.max(np.abs(design(result.optimum) - target)) < 0.05 * MM
     assert result.optimum.deflection == pytest.approx(deflection, rel=1e-4)
-    assert result.fine_evaluations <= 10
+    assert result.fine_evaluations <= 12
 
 
 @pytest.mark.slow

@@ -52,18 +52,21 @@ Measured (``python bench/bench_space_mapping.py 0.5 1 2``): 6 to 9 FEM evaluatio
 33 to 54 for the direct run, within 0.05 mm of its optimum.
 """
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable, Optional, Tuple
 
 import numpy as np
 
+from .errors import InfeasibleError
 from .optimize import DesignProblem, Optimum, maximise_deflection
 from .units import MM
 
 SPREAD_FRACTION = 0.16
 """Exploring step in h_i, as a fraction of its range (0.4 mm of 0.5-3 mm) [-]."""
 TRUST_FRACTION = 0.32
-"""Largest move in h_i from the best clean point, as a fraction of its range [-]."""
+"""Largest move in h_i from the best clean point once the mapping's curvature is known, as a
+fraction of its range [-]; halved after each surrogate step that brings no gain (before, the
+reach is :data:`SPREAD_FRACTION`)."""
 NEAR_FRACTION = 0.04
 """Proposals closer than this fraction of the h_i range to an evaluated point add little [-]."""
 LOCAL_FRACTION = 0.024
@@ -201,7 +204,7 @@ class SpaceMappingResult:
 
     optimum: Optimum
     coarse_optimum: Optimum
-    trajectory: Tuple[SpaceMappingStep, ...]
+    trajectory: tuple[SpaceMappingStep, ...]
     fine_evaluations: int
     coarse_evaluations: int
     mapping: CurveMapping
@@ -308,7 +311,7 @@ def _feasible(step: SpaceMappingStep, problem: DesignProblem) -> bool:
     return step.frequency >= problem.min_frequency * (1 - FREQUENCY_TOLERANCE)
 
 
-def _best(steps, problem: DesignProblem) -> Optional[SpaceMappingStep]:
+def _best(steps, problem: DesignProblem) -> SpaceMappingStep | None:
     """The feasible clean step of largest deflection (feasible mixed steps when none is clean)."""
     feasible = [s for s in steps if _feasible(s, problem)]
     pool = [s for s in feasible if not s.mixed] or feasible
@@ -322,40 +325,56 @@ def _anchor(steps, problem: DesignProblem) -> SpaceMappingStep:
     return max(feasible or clean, key=lambda s: s.deflection) if clean else steps[0]
 
 
-def _exploring_thickness(steps, anchor_mm: float, spread_mm: float, near_mm: float, bounds_mm) -> Optional[float]:
+def _exploring_thickness(steps, anchor_mm: float, spread_mm: float, near_mm: float, bounds_mm, feasible) -> float | None:
     """h_i [mm] a spread (else half, a quarter of one) from the anchor, at least ``near_mm`` from every point evaluated.
 
     The side towards mid-range is tried first (the surrogate cannot tell the sides apart yet:
-    the anchor is the coarse optimum, or the mapping has no slope); None when no candidate is clear.
+    the anchor is the coarse optimum, or the mapping has no slope); thicknesses where
+    ``feasible(h_i)`` is False are skipped; None when no candidate is left.
     """
     evaluated = np.array([s.thickness_mm for s in steps])
     sign = 1 if anchor_mm <= np.mean(bounds_mm) else -1
     for fraction in (1, 0.5, 0.25):
         for side in (sign, -sign):
             thickness = anchor_mm + side * fraction * spread_mm
-            if bounds_mm[0] <= thickness <= bounds_mm[1] and np.min(np.abs(evaluated - thickness)) >= 0.999 * near_mm:
+            if (
+                bounds_mm[0] <= thickness <= bounds_mm[1]
+                and np.min(np.abs(evaluated - thickness)) >= 0.999 * near_mm
+                and feasible(thickness)
+            ):
                 return float(thickness)
     return None
 
 
-def _unbracketed_side(steps, problem: DesignProblem, thickness_mm: float, local_mm: float, bounds_mm) -> int:
-    """-1 or +1 for a side of h_i [mm] with no clean point near the curve within ``local_mm``, 0 when both have one.
+def _on_design_curve(step: SpaceMappingStep, problem: DesignProblem) -> bool:
+    """Whether a clean step lies on the fine f_min curve (within :data:`NEAR_CURVE`) or on the lambda upper bound."""
+    on_bound = step.design[0] >= problem.wavelength_range[1] * (1 - 1e-9)
+    return not step.mixed and (on_bound or abs(np.log(step.frequency / problem.min_frequency)) <= NEAR_CURVE)
 
-    A bound counts as a bracket.  The surrogate is only trusted where fine points surround it.
+
+def _unbracketed_side(steps, problem: DesignProblem, thickness_mm: float, local_mm: float, bounds_mm, feasible) -> int:
+    """-1 or +1 for a side of h_i [mm] with no point on the design curve within ``local_mm``, 0 when both have one.
+
+    A bound, or a thickness where ``feasible(h_i)`` is False, counts as a bracket.  The
+    surrogate is only trusted where fine points surround it.
     """
-    near = [
-        s.thickness_mm - thickness_mm
-        for s in steps
-        if not s.mixed and abs(np.log(s.frequency / problem.min_frequency)) <= NEAR_CURVE
-    ]
+    near = [s.thickness_mm - thickness_mm for s in steps if _on_design_curve(s, problem)]
     for side, bound in ((-1, bounds_mm[0]), (1, bounds_mm[1])):
         room = abs(bound - thickness_mm)
-        if room < 1e-9:
+        if room < 1e-9 or not feasible(thickness_mm + side * min(local_mm, room)):
             continue
         closest = min(BRACKET_WINDOW[0] * local_mm, room - 1e-9)  # a point on a nearby bound brackets too
         if not any(closest <= side * d <= BRACKET_WINDOW[1] * local_mm for d in near):
             return side
     return 0
+
+
+def _repeats(design: np.ndarray, steps, tolerance: float) -> bool:
+    """Whether a step sits at ``design`` [m]: h_i within ``tolerance``, frequency within :data:`FREQUENCY_TOLERANCE`."""
+    return any(
+        abs(design[1] - s.design[1]) <= tolerance and abs(design[0] / s.design[0] - 1) <= FREQUENCY_TOLERANCE / 2
+        for s in steps
+    )
 
 
 def space_mapping_optimum(
@@ -377,15 +396,22 @@ def space_mapping_optimum(
         Cheap model of (deflection [m], frequency [Hz]), batched.
     problem : DesignProblem
     tolerance : float
-        Stop when the next step is shorter than this in both variables [m].
+        A proposal within this of an evaluated h_i [m] (and within the frequency tolerance of
+        its wavelength) counts as that point: the search then checks the bracket and stops.
     max_fine_evaluations : int
         Upper limit on fine evaluations.
     gain_tolerance : float
-        Stop when the surrogate promises less than this relative gain of deflection [-].
+        Below this relative gain of deflection promised by the surrogate [-], the search
+        checks the bracket and stops.
 
     Returns
     -------
     SpaceMappingResult
+
+    Raises
+    ------
+    InfeasibleError
+        When no fine point reached f_min.
     """
     fine, coarse = _Counted(fine), _Counted(coarse)
     coarse_optimum = maximise_deflection(coarse, problem)
@@ -395,48 +421,68 @@ def space_mapping_optimum(
     curve = _CoarseCurve(grid_mm, coarse_wavelength(coarse, problem, grid_mm * MM, problem.min_frequency))
     start = np.array([coarse_optimum.plate.wavelength, coarse_optimum.plate.resonator_thickness], float)
     steps = [_evaluate(fine, coarse, problem, start)]
-    converged = False
+    local_mm = max(LOCAL_FRACTION * span_mm, 2 * tolerance / MM)
+    near_mm = NEAR_FRACTION * span_mm
+    converged, shrink = False, 1.0
     while True:
         anchor = _anchor(steps, problem)
         mapping = fit_mapping(steps, problem, anchor, SPREAD_FRACTION * span_mm)
         determined = mapping.determined >= 2
         wavelength, predicted = curve.surrogate(coarse, problem, mapping)
-        reach = (TRUST_FRACTION if determined else SPREAD_FRACTION) * span_mm
-        predicted = np.where(np.abs(grid_mm - anchor.thickness_mm) <= reach + 1e-12, predicted, np.nan)
+
+        def feasible(thickness_mm, predicted=predicted):
+            return bool(np.isfinite(predicted[int(np.argmin(np.abs(grid_mm - thickness_mm)))]))
+
         if np.all(np.isnan(predicted)):
+            status = "stopped: no thickness reaches f_min on the surrogate"
             break
-        index = int(np.nanargmax(predicted))
+        reach = max(shrink * TRUST_FRACTION * span_mm, local_mm) if determined else SPREAD_FRACTION * span_mm
+        within = np.where(np.abs(grid_mm - anchor.thickness_mm) <= reach + 1e-12, predicted, np.nan)
+        index = int(np.nanargmax(within if np.any(np.isfinite(within)) else predicted))
         proposal = np.array([wavelength[index], grid_mm[index] * MM])
         best = _best(steps, problem)
         thickness_mm = None
-        if best is not None and determined:
-            repeated = any(np.all(np.abs(proposal - s.design) <= tolerance) for s in steps)
-            if repeated or np.log(predicted[index] / best.deflection) <= gain_tolerance:
-                side = _unbracketed_side(steps, problem, grid_mm[index], LOCAL_FRACTION * span_mm, bounds_mm)
-                if side == 0:
-                    converged = True
-                    break
-                thickness_mm = float(np.clip(grid_mm[index] + side * LOCAL_FRACTION * span_mm, *bounds_mm))
+        settled = best is not None and determined
+        if settled and (_repeats(proposal, steps, tolerance) or np.log(predicted[index] / best.deflection) <= gain_tolerance):
+            side = _unbracketed_side(steps, problem, best.thickness_mm, local_mm, bounds_mm, feasible)
+            if side == 0:
+                converged, status = True, "converged"
+                break
+            thickness_mm = float(np.clip(best.thickness_mm + side * local_mm, *bounds_mm))
         if fine.evaluations >= max_fine_evaluations:
+            status = f"stopped: {max_fine_evaluations} fine evaluations"
             break
-        near_mm = NEAR_FRACTION * span_mm
         if not determined and min(abs(s.thickness_mm - grid_mm[index]) for s in steps) < near_mm:
-            thickness_mm = _exploring_thickness(steps, anchor.thickness_mm, SPREAD_FRACTION * span_mm, near_mm, bounds_mm)
+            thickness_mm = _exploring_thickness(
+                steps, anchor.thickness_mm, SPREAD_FRACTION * span_mm, near_mm, bounds_mm, feasible
+            )
             if thickness_mm is None:
+                status = "stopped: no unexplored thickness within reach"
                 break
         if thickness_mm is not None:
             proposal = np.array([np.interp(thickness_mm, grid_mm, wavelength), thickness_mm * MM])
-        if any(np.all(np.abs(proposal - s.design) <= tolerance) for s in steps):
-            break  # nothing new to learn there
+        if _repeats(proposal, steps, tolerance):
+            status = "stopped: the next point was evaluated already"
+            break
         steps.append(_evaluate(fine, coarse, problem, proposal))
-    answer = best or max(steps, key=lambda s: s.frequency)
+        if determined and thickness_mm is None and best is not None:  # a surrogate step: did it deliver?
+            improved = _feasible(steps[-1], problem) and steps[-1].deflection > best.deflection
+            shrink = 1.0 if improved else shrink / 2
+    answer = _best(steps, problem)
+    if answer is None:
+        closest = max(steps, key=lambda s: s.frequency)
+        raise InfeasibleError(
+            f"space mapping found no design with f_r >= {problem.min_frequency / 1e3:g} kHz in "
+            f"{fine.evaluations} fine evaluations (highest {closest.frequency / 1e3:.3f} kHz at lambda "
+            f"{closest.design[0] / MM:.3f} mm, h_i {closest.thickness_mm:.3f} mm); widen the bounds or lower f_min"
+        )
     optimum = Optimum(
         plate=problem.plate(float(answer.design[0]), float(answer.design[1])),
         deflection=answer.deflection,
         frequency=answer.frequency,
         evaluations=fine.evaluations,
         constraint_active=bool(abs(answer.frequency / problem.min_frequency - 1) <= FREQUENCY_TOLERANCE),
-        status="converged" if converged else "stopped: maximum fine evaluations or no feasible surrogate point",
+        status=status,
     )
     return SpaceMappingResult(
         optimum=optimum,
