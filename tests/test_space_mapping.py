@@ -6,10 +6,10 @@ import pytest
 from workflow.fem import FemSettings
 from workflow.fem_evaluations import FemModel
 from workflow.fem_optimum import optimise_fem
+from workflow.maps import TRANSVERSE_THRESHOLD
 from workflow.optimize import DesignProblem, analytical_model, maximise_deflection
 from workflow.space_mapping import (
     FREQUENCY_TOLERANCE,
-    MIXING_THRESHOLD,
     coarse_wavelength,
     space_mapping_optimum,
 )
@@ -87,17 +87,12 @@ def mixing_fine(plate):
 
 
 def best_along_the_fine_curve(problem, fine, thickness):
-    """The largest clean fine deflection on f = f_min over a thickness grid, by bisection in lambda."""
-    low, high = np.full(thickness.shape, 10 * MM), np.full(thickness.shape, 60 * MM)
-    for _ in range(50):
-        middle = (low + high) / 2
-        _, frequency, _ = fine(problem.plate(middle, thickness))
-        above = frequency > problem.min_frequency
-        low, high = np.where(above, middle, low), np.where(above, high, middle)
-    deflection, _, mixing = fine(problem.plate(low, thickness))
-    deflection = np.where(mixing > MIXING_THRESHOLD, 0, deflection)
+    """The largest clean fine deflection on f = f_min over a thickness grid."""
+    wavelength = coarse_wavelength(lambda plate: fine(plate)[:2], problem, thickness, problem.min_frequency)
+    deflection, _, mixing = fine(problem.plate(wavelength, thickness))
+    deflection = np.where(mixing > TRANSVERSE_THRESHOLD, 0, deflection)
     best = int(np.argmax(deflection))
-    return np.array([low[best], thickness[best]]), deflection[best]
+    return np.array([wavelength[best], thickness[best]]), deflection[best]
 
 
 def test_space_mapping_steps_past_a_transverse_dip():

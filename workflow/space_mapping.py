@@ -33,7 +33,7 @@ curve; where along it the fine deflection peaks is fine-model information (the d
 ratio above) that P(x) = z* ignores.
 
 Transverse modes.  Where the working mode mixes with a transverse one (indicator above
-:data:`MIXING_THRESHOLD`), the fine deflection dips in a narrow band of h_i that no smooth
+:data:`TRANSVERSE_THRESHOLD`), the fine deflection dips in a narrow band of h_i that no smooth
 correction describes.  Such points still count as evaluations and as candidates, but they
 do not shape the mapping; the search steps past them (for h_p = 2 mm the beam optimum
 lies in such a band and the FEM optimum 0.8 mm beyond it).
@@ -58,6 +58,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import InfeasibleError
+from .maps import TRANSVERSE_THRESHOLD
 from .optimize import DesignProblem, Optimum, maximise_deflection
 from .units import MM
 
@@ -81,8 +82,6 @@ BISECTION_STEPS = 48
 """Bisection steps of the coarse wavelength at a given frequency [-] (1e-12 m)."""
 FREQUENCY_TOLERANCE = 2e-4
 """Relative shortfall of f below f_min accepted at a fine point [-] (5 Hz at 25 kHz)."""
-MIXING_THRESHOLD = 0.15
-"""Transverse indicator above which a fine point is mixed and does not shape the mapping [-]."""
 MAPPING_DEGREE = 2
 """Highest degree of the polynomials ln m(h_i), ln rho(h_i) [-]."""
 MAPPING_NOISE = 1e-4
@@ -145,7 +144,7 @@ class SpaceMappingStep:
 
     @property
     def mixed(self) -> bool:
-        return self.transverse_indicator > MIXING_THRESHOLD
+        return self.transverse_indicator > TRANSVERSE_THRESHOLD
 
 
 @dataclass(frozen=True)
