@@ -157,23 +157,32 @@ class CurveMapping:
         Ascending powers [-].
     centre_mm, scale_mm : float
         Of the polynomial variable [mm].
+    span_mm : tuple of float
+        h_i range of the fitted steps [mm]; beyond it ln m and ln rho continue along their
+        tangent at its edge (a fitted curvature is not extrapolated).
     """
 
     wavelength_coefficients: np.ndarray
     deflection_coefficients: np.ndarray
     centre_mm: float
     scale_mm: float
+    span_mm: tuple = (-np.inf, np.inf)
 
-    def _variable(self, thickness_mm):
-        return (np.asarray(thickness_mm) - self.centre_mm) / self.scale_mm
+    def _logarithm(self, thickness_mm, coefficients) -> np.ndarray:
+        """The polynomial inside the span, its tangent at the nearer edge outside [-]."""
+        thickness_mm = np.asarray(thickness_mm, dtype=float)
+        edge = (np.clip(thickness_mm, *self.span_mm) - self.centre_mm) / self.scale_mm
+        beyond = (thickness_mm - self.centre_mm) / self.scale_mm - edge
+        polynomial = np.polynomial.polynomial
+        return polynomial.polyval(edge, coefficients) + beyond * polynomial.polyval(edge, polynomial.polyder(coefficients))
 
     def wavelength_ratio(self, thickness_mm) -> np.ndarray:
         """m(h_i) [-]."""
-        return np.exp(np.polynomial.polynomial.polyval(self._variable(thickness_mm), self.wavelength_coefficients))
+        return np.exp(self._logarithm(thickness_mm, self.wavelength_coefficients))
 
     def deflection_ratio(self, thickness_mm) -> np.ndarray:
         """rho(h_i) [-]."""
-        return np.exp(np.polynomial.polynomial.polyval(self._variable(thickness_mm), self.deflection_coefficients))
+        return np.exp(self._logarithm(thickness_mm, self.deflection_coefficients))
 
     @property
     def determined(self) -> int:
@@ -248,14 +257,18 @@ def _evaluate(fine, coarse, problem: DesignProblem, design: np.ndarray) -> Space
     return SpaceMappingStep(np.asarray(design, float), deflection, frequency, indicator, extracted, float(np.ravel(coarse_deflection)[0]))
 
 
-def fit_mapping(steps, problem: DesignProblem, anchor: SpaceMappingStep, scale_mm: float) -> CurveMapping:
+def fit_mapping(
+    steps, problem: DesignProblem, anchor: SpaceMappingStep, scale_mm: float, centre_mm: float | None = None
+) -> CurveMapping:
     """ln m and ln rho fitted to the clean steps (all when none is) by weighted least squares around ``anchor``.
 
     The degree is at most the number of distinct h_i less one.  A point counts less the
     more its mode mixes beyond the anchor's (:data:`MIXING_DEPRESSION`), the farther it
-    lies off the f_min curve (:data:`OFF_CURVE_NOISE`) and the farther from the anchor in
-    h_i (:data:`LOCALITY`: a quadratic describes the ratios only locally).
+    lies off the f_min curve (:data:`OFF_CURVE_NOISE`) and the farther from the centre
+    (``centre_mm``, default the anchor's h_i) in h_i (:data:`LOCALITY`: a quadratic
+    describes the ratios only locally).
     """
+    centre_mm = anchor.thickness_mm if centre_mm is None else centre_mm
     steps = [s for s in steps if not s.mixed] or list(steps)
     thickness = np.array([s.thickness_mm for s in steps])
     distinct = len(np.unique(np.round(thickness / scale_mm, 3)))
@@ -266,12 +279,12 @@ def fit_mapping(steps, problem: DesignProblem, anchor: SpaceMappingStep, scale_m
             MAPPING_NOISE
             + MIXING_DEPRESSION * max(0.0, s.transverse_indicator**2 - anchor.transverse_indicator**2)
             + OFF_CURVE_NOISE * abs(v)
-            + LOCALITY * abs(s.thickness_mm - anchor.thickness_mm) ** 3
+            + LOCALITY * abs(s.thickness_mm - centre_mm) ** 3
             for s, v in zip(steps, offset)
         ]
     )
     # columns 1, u, ..., u^degree, then ln(f / f_min); one prior row keeps the off-curve slope near 0
-    basis = np.column_stack([np.vander((thickness - anchor.thickness_mm) / scale_mm, degree + 1, increasing=True), offset])
+    basis = np.column_stack([np.vander((thickness - centre_mm) / scale_mm, degree + 1, increasing=True), offset])
     prior = np.zeros(degree + 2)
     prior[-1] = 1 / OFF_CURVE_SLOPE_PRIOR
 
@@ -283,8 +296,9 @@ def fit_mapping(steps, problem: DesignProblem, anchor: SpaceMappingStep, scale_m
     return CurveMapping(
         fit(np.log([s.wavelength_ratio for s in steps])),
         fit(np.log([s.deflection_ratio for s in steps])),
-        anchor.thickness_mm,
+        centre_mm,
         scale_mm,
+        (float(thickness.min()), float(thickness.max())),
     )
 
 
@@ -318,10 +332,16 @@ def _best(steps, problem: DesignProblem) -> SpaceMappingStep | None:
 
 
 def _anchor(steps, problem: DesignProblem) -> SpaceMappingStep:
-    """Where the mapping is centred: the best feasible clean step, else the best clean one, else the first."""
+    """Where the mapping is centred: the best feasible clean step, else the clean step nearest the f_min curve, else the first.
+
+    Deflections of steps below the curve are not compared: the lower their frequency, the
+    longer and softer the plate and the larger the deflection.
+    """
     clean = [s for s in steps if not s.mixed]
     feasible = [s for s in clean if _feasible(s, problem)]
-    return max(feasible or clean, key=lambda s: s.deflection) if clean else steps[0]
+    if feasible:
+        return max(feasible, key=lambda s: s.deflection)
+    return min(clean, key=lambda s: abs(np.log(s.frequency / problem.min_frequency))) if clean else steps[0]
 
 
 def _exploring_thickness(steps, anchor_mm: float, spread_mm: float, near_mm: float, bounds_mm, feasible) -> float | None:
@@ -436,7 +456,11 @@ def space_mapping_optimum(
             status = "stopped: no thickness reaches f_min on the surrogate"
             break
         reach = max(shrink * TRUST_FRACTION * span_mm, local_mm) if determined else SPREAD_FRACTION * span_mm
-        within = np.where(np.abs(grid_mm - anchor.thickness_mm) <= reach + 1e-12, predicted, np.nan)
+        allowed = np.abs(grid_mm - anchor.thickness_mm) <= reach + 1e-12
+        for step in steps:  # a mixed mode was seen there: the smooth surrogate does not hold
+            if step.mixed and determined:
+                allowed &= np.abs(grid_mm - step.thickness_mm) >= near_mm
+        within = np.where(allowed, predicted, np.nan)
         index = int(np.nanargmax(within if np.any(np.isfinite(within)) else predicted))
         proposal = np.array([wavelength[index], grid_mm[index] * MM])
         best = _best(steps, problem)
@@ -458,13 +482,19 @@ def space_mapping_optimum(
             if thickness_mm is None:
                 status = "stopped: no unexplored thickness within reach"
                 break
-        if thickness_mm is not None:
-            proposal = np.array([np.interp(thickness_mm, grid_mm, wavelength), thickness_mm * MM])
+        surrogate_step = thickness_mm is None
+        if surrogate_step:
+            thickness_mm = float(proposal[1] / MM)
+        # the wavelength from the mapping fitted around the new thickness: steps there (a secant in f) count most
+        local = fit_mapping(steps, problem, anchor, SPREAD_FRACTION * span_mm, thickness_mm)
+        coarse_at = np.interp(thickness_mm, grid_mm, curve.wavelength)
+        placed = float(np.clip(coarse_at / local.wavelength_ratio(thickness_mm), *problem.wavelength_range))
+        proposal = np.array([placed, thickness_mm * MM])
         if _repeats(proposal, steps, tolerance):
             status = "stopped: the next point was evaluated already"
             break
         steps.append(_evaluate(fine, coarse, problem, proposal))
-        if determined and thickness_mm is None and best is not None:  # a surrogate step: did it deliver?
+        if determined and surrogate_step and best is not None:  # a surrogate step: did it deliver?
             improved = _feasible(steps[-1], problem) and steps[-1].deflection > best.deflection
             shrink = 1.0 if improved else shrink / 2
     answer = _best(steps, problem)
