@@ -1,6 +1,7 @@
 """FEM optimum by direct NLopt vs space mapping: fine evaluations, distance, time (JSON on stdout).
 
-Usage: python bench/bench_space_mapping.py [h_p_mm ...]   (default 1).  Uncached, in-process FEM.
+Usage: python bench/bench_space_mapping.py [h_p_mm ...] [--width-mm B]   (default h_p 1 mm, b 49 mm).
+Uncached, in-process FEM.
 """
 
 import json
@@ -15,9 +16,9 @@ from workflow.optimize import DesignProblem
 from workflow.units import MM, UM
 
 
-def compare(ceramic_thickness_mm: float) -> dict:
-    problem = DesignProblem(ceramic_thickness_mm * MM)
-    record = {"h_p_mm": ceramic_thickness_mm}
+def compare(ceramic_thickness_mm: float, width_mm: float | None = None) -> dict:
+    problem = DesignProblem(ceramic_thickness_mm * MM, **({} if width_mm is None else {"width": width_mm * MM}))
+    record = {"h_p_mm": ceramic_thickness_mm, "b_mm": problem.width / MM}
     designs = {}
     for method in ("nlopt", "space-mapping"):
         start = time.perf_counter()
@@ -39,5 +40,11 @@ def compare(ceramic_thickness_mm: float) -> dict:
 
 
 if __name__ == "__main__":
-    sizes = [float(a) for a in sys.argv[1:]] or [1.0]
-    print(json.dumps([compare(size) for size in sizes]))
+    arguments = sys.argv[1:]
+    width = None
+    if "--width-mm" in arguments:
+        at = arguments.index("--width-mm")
+        width = float(arguments[at + 1])
+        del arguments[at : at + 2]
+    sizes = [float(a) for a in arguments] or [1.0]
+    print(json.dumps([compare(size, width) for size in sizes]))

@@ -31,12 +31,15 @@ class FemOptimum:
         One of :data:`METHODS`.
     fine_evaluations, coarse_evaluations : int
         FEM and beam-model geometries evaluated.
+    trajectory : tuple of SpaceMappingStep
+        The FEM points of a space-mapping search in evaluation order (empty for the direct run).
     """
 
     optimum: Optimum
     method: str
     fine_evaluations: int
     coarse_evaluations: int
+    trajectory: tuple = ()
 
 
 def optimise_fem(
@@ -61,7 +64,7 @@ def optimise_fem(
     if method == "space-mapping":
         fine = getattr(fem_model, "responses", fem_model)  # with the transverse indicator when there is one
         result = space_mapping_optimum(fine, coarse_model, problem)
-        return FemOptimum(result.optimum, method, result.fine_evaluations, result.coarse_evaluations)
+        return FemOptimum(result.optimum, method, result.fine_evaluations, result.coarse_evaluations, result.trajectory)
     if method == "nlopt":
         coarse = maximise_deflection(coarse_model, problem)
         start = np.array([coarse.plate.wavelength, coarse.plate.resonator_thickness])

@@ -272,6 +272,8 @@ def _fem_optima(context: RunContext, optima) -> str:
             ],
             rows,
         )
+        + "\n\n"
+        + figure(context, "space_mapping_trajectories.png", "FEM points of each space-mapping search, numbered in order")
     )
 
 

@@ -48,8 +48,8 @@ near the curve bracket the answer within :data:`LOCAL_FRACTION` of the range on 
 (else it evaluates the missing bracket): transverse modes bend the FEM deflection on a
 0.1 mm scale, and only nearby fine points show it.  The answer is always a fine point.
 
-Measured (``python bench/bench_space_mapping.py 0.5 1 2``): 6 to 9 FEM evaluations against
-33 to 54 for the direct run, within 0.05 mm of its optimum.
+Measured (``python bench/bench_space_mapping.py 0.5 1 2 [--width-mm B]``, b = 40, 49, 55, 70 mm):
+6 to 12 FEM evaluations against 12 to 54 for the direct run, within 0.1 mm of its optimum.
 """
 
 from collections.abc import Callable

@@ -236,6 +236,14 @@ def fem_optima(context: RunContext) -> Dict[float, FemOptima]:
     }
 
 
+def fem_optima_figures(context: RunContext, optima) -> None:
+    from .figures.space_mapping import trajectory_figure
+
+    searches = {hp: (record.space_mapping, record.direct) for hp, record in optima.items()}
+    minimum = context.config["design"]["min_frequency_khz"] * KHZ
+    save_figure(trajectory_figure(searches, minimum), context.figure_path("space_mapping_trajectories.png"))
+
+
 def analytical_maps(context: RunContext):
     """Beam-model maps of w_dyn and f_r over (lambda, h_i) for every h_p, with the optimum."""
     from .maps import design_map
@@ -299,7 +307,7 @@ STEPS: List[Step] = [
     Step("design with Q(v) and posterior propagation", "damped_design", damped_design, damped_design_figures),
     Step("FEM of the original plate", "fem_original", fem_original, fem_original_figures, cacheable=False),
     Step("FEM responses of the original plate", "fem_responses", fem_responses, fem_responses_figures),
-    Step("FEM optimum per h_p (space mapping)", "fem_optima", fem_optima),
+    Step("FEM optimum per h_p (space mapping)", "fem_optima", fem_optima, fem_optima_figures),
     Step("analytical maps", "analytical_maps", analytical_maps, maps_figures, cacheable=False),
     Step("FEM maps", "fem_maps", fem_maps, maps_figures),
     Step("FEM width sweep of the original plate", "width_sweep", fem_width_sweep, width_sweep_figures),
