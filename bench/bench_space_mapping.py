@@ -4,9 +4,10 @@ Usage: python bench/bench_space_mapping.py [h_p_mm ...] [--width-mm B]   (defaul
 Uncached, in-process FEM.
 """
 
+import argparse
 import json
-import sys
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -17,7 +18,9 @@ from workflow.units import MM, UM
 
 
 def compare(ceramic_thickness_mm: float, width_mm: float | None = None) -> dict:
-    problem = DesignProblem(ceramic_thickness_mm * MM, **({} if width_mm is None else {"width": width_mm * MM}))
+    problem = DesignProblem(ceramic_thickness_mm * MM)
+    if width_mm is not None:
+        problem = replace(problem, width=width_mm * MM)
     record = {"h_p_mm": ceramic_thickness_mm, "b_mm": problem.width / MM}
     designs = {}
     for method in ("nlopt", "space-mapping"):
@@ -40,11 +43,8 @@ def compare(ceramic_thickness_mm: float, width_mm: float | None = None) -> dict:
 
 
 if __name__ == "__main__":
-    arguments = sys.argv[1:]
-    width = None
-    if "--width-mm" in arguments:
-        at = arguments.index("--width-mm")
-        width = float(arguments[at + 1])
-        del arguments[at : at + 2]
-    sizes = [float(a) for a in arguments] or [1.0]
-    print(json.dumps([compare(size, width) for size in sizes]))
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("hp_mm", type=float, nargs="*", default=[1.0], help="ceramic thicknesses h_p [mm] (default 1)")
+    parser.add_argument("--width-mm", type=float, default=None, help="plate width b [mm] (default 49)")
+    arguments = parser.parse_args()
+    print(json.dumps([compare(size, arguments.width_mm) for size in arguments.hp_mm]))

@@ -19,13 +19,18 @@ that curve rho(h) w_c(lambda_c(h; f_min), h).
 
 How the mapping is updated.  ln m and ln rho are quadratics in h_i (plus a slope in
 ln(f / f_min) for points off the curve, about -0.7 for rho on the FEM) fitted by weighted
-least squares to all fine points, centred on the best one.  With two points this is the
+least squares to all fine points, centred on the anchor: the best feasible clean point, or
+while there is none the clean point nearest the f_min curve (below the curve a point deflects
+more only because its frequency is lower).  With two points this is the
 Broyden (secant) update of the mapping; from three on it is a local quadratic, because
 the deflection ratio bends along the curve as much as the beam's deflection does or more
 (FEM, h_p = 1 mm: d2 ln rho/dh2 = -0.9 /mm2 against -0.3 /mm2 for the beam; near a
 transverse mode far more), so a Broyden-updated linear mapping cannot place the peak.
-Weights fall with the distance from the best point (:data:`LOCALITY`), with the distance
-from the curve and with mode mixing.
+Weights fall with the distance from the centre (:data:`LOCALITY`), with the distance
+from the curve and with mode mixing.  Beyond the thicknesses seen, ln m and ln rho continue
+along their tangent: a fitted curvature is not extrapolated.  The wavelength of each new
+point comes from ln m refitted around its own thickness, so fine points there count most
+(two at the same h_i make a secant in frequency).
 
 Why not the textbook iteration.  Aggressive space mapping solves P(x) = z* for the coarse
 optimum z*.  With the frequency constraint active, P(x) = z* only puts x on the right
@@ -35,11 +40,13 @@ ratio above) that P(x) = z* ignores.
 Transverse modes.  Where the working mode mixes with a transverse one (indicator above
 :data:`TRANSVERSE_THRESHOLD`), the fine deflection dips in a narrow band of h_i that no smooth
 correction describes.  Such points still count as evaluations and as candidates, but they
-do not shape the mapping; the search steps past them (for h_p = 2 mm the beam optimum
-lies in such a band and the FEM optimum 0.8 mm beyond it).
+do not shape the mapping, and once the mapping is determined the surrogate proposes no
+point within :data:`NEAR_FRACTION` of the range of them (unless nothing else is within
+reach); the search steps past them (for h_p = 2 mm the beam optimum lies in such a band
+and the FEM optimum 0.8 mm beyond it).
 
 Steps.  The first fine point is the coarse optimum z*.  Each next point maximises the
-surrogate within a trust interval of h_i around the best clean point; while fewer than
+surrogate within a trust interval of h_i around the anchor; while fewer than
 three thicknesses determine the mapping and that maximiser falls next to a point already
 evaluated, an exploring point :data:`SPREAD_FRACTION` of the h_i range away is taken
 instead.  When the surrogate promises less than ``gain_tolerance`` over the best feasible
@@ -90,7 +97,7 @@ MIXING_DEPRESSION = 10.0
 """ln rho lies about this times t^2 below its trend at a mode of transverse indicator t [-]
 (FEM, h_p = 2 mm: t = 0.047, 0.061, 0.091 -> 0.5 %, 2.2 %, 8 %)."""
 LOCALITY = 10.0
-"""Growth of the quadratic's error with the cube of the distance from the anchor [1/mm^3]: transverse
+"""Growth of the quadratic's error with the cube of the distance from its centre [1/mm^3]: transverse
 modes bend the deflection ratio on a scale of 0.1 mm (FEM, h_p = 0.5 mm: ln rho rises 0.3 % from
 h_i = 0.5 to 0.53 mm and falls 3 % by 0.6 mm)."""
 OFF_CURVE_SLOPE_PRIOR = 1.0
@@ -260,7 +267,7 @@ def _evaluate(fine, coarse, problem: DesignProblem, design: np.ndarray) -> Space
 def fit_mapping(
     steps, problem: DesignProblem, anchor: SpaceMappingStep, scale_mm: float, centre_mm: float | None = None
 ) -> CurveMapping:
-    """ln m and ln rho fitted to the clean steps (all when none is) by weighted least squares around ``anchor``.
+    """ln m and ln rho fitted to the clean steps (all when none is) by weighted least squares around ``centre_mm``.
 
     The degree is at most the number of distinct h_i less one.  A point counts less the
     more its mode mixes beyond the anchor's (:data:`MIXING_DEPRESSION`), the farther it
@@ -318,6 +325,18 @@ class _CoarseCurve:
         deflection, _ = coarse(problem.plate(fine_wavelength * ratio, self.thickness_mm * MM))
         predicted = np.where(feasible, deflection * mapping.deflection_ratio(self.thickness_mm), np.nan)
         return fine_wavelength, predicted
+
+
+def _placed(steps, problem: DesignProblem, anchor, curve: _CoarseCurve, thickness_mm: float, scale_mm: float) -> np.ndarray:
+    """The design (lambda, h_i) [m] on the surrogate's f_min curve at ``thickness_mm``.
+
+    The wavelength ratio is fitted around that thickness, so the fine steps there (a secant
+    in frequency when one sits at the same h_i) count most.
+    """
+    mapping = fit_mapping(steps, problem, anchor, scale_mm, thickness_mm)
+    coarse_at = np.interp(thickness_mm, curve.thickness_mm, curve.wavelength)
+    wavelength = float(np.clip(coarse_at / mapping.wavelength_ratio(thickness_mm), *problem.wavelength_range))
+    return np.array([wavelength, thickness_mm * MM])
 
 
 def _feasible(step: SpaceMappingStep, problem: DesignProblem) -> bool:
@@ -447,7 +466,7 @@ def space_mapping_optimum(
         anchor = _anchor(steps, problem)
         mapping = fit_mapping(steps, problem, anchor, SPREAD_FRACTION * span_mm)
         determined = mapping.determined >= 2
-        wavelength, predicted = curve.surrogate(coarse, problem, mapping)
+        _, predicted = curve.surrogate(coarse, problem, mapping)
 
         def feasible(thickness_mm, predicted=predicted):
             return bool(np.isfinite(predicted[int(np.argmin(np.abs(grid_mm - thickness_mm)))]))
@@ -456,17 +475,22 @@ def space_mapping_optimum(
             status = "stopped: no thickness reaches f_min on the surrogate"
             break
         reach = max(shrink * TRUST_FRACTION * span_mm, local_mm) if determined else SPREAD_FRACTION * span_mm
-        allowed = np.abs(grid_mm - anchor.thickness_mm) <= reach + 1e-12
-        for step in steps:  # a mixed mode was seen there: the smooth surrogate does not hold
-            if step.mixed and determined:
-                allowed &= np.abs(grid_mm - step.thickness_mm) >= near_mm
-        within = np.where(allowed, predicted, np.nan)
-        index = int(np.nanargmax(within if np.any(np.isfinite(within)) else predicted))
-        proposal = np.array([wavelength[index], grid_mm[index] * MM])
+        in_reach = (np.abs(grid_mm - anchor.thickness_mm) <= reach + 1e-12) & np.isfinite(predicted)
+        allowed = in_reach.copy()
+        if determined:  # where a mixed mode was seen, the smooth surrogate does not hold
+            for step in steps:
+                if step.mixed:
+                    allowed &= np.abs(grid_mm - step.thickness_mm) >= near_mm
+        allowed = allowed if np.any(allowed) else in_reach
         best = _best(steps, problem)
         thickness_mm = None
-        settled = best is not None and determined
-        if settled and (_repeats(proposal, steps, tolerance) or np.log(predicted[index] / best.deflection) <= gain_tolerance):
+        if np.any(allowed):
+            index = int(np.nanargmax(np.where(allowed, predicted, np.nan)))
+            proposal = _placed(steps, problem, anchor, curve, grid_mm[index], SPREAD_FRACTION * span_mm)
+            gain = np.log(predicted[index] / best.deflection) if best is not None else np.inf
+        else:  # nothing feasible within reach: nothing to gain there
+            index, proposal, gain = None, None, -np.inf
+        if best is not None and determined and (proposal is None or _repeats(proposal, steps, tolerance) or gain <= gain_tolerance):
             side = _unbracketed_side(steps, problem, best.thickness_mm, local_mm, bounds_mm, feasible)
             if side == 0:
                 converged, status = True, "converged"
@@ -475,7 +499,7 @@ def space_mapping_optimum(
         if fine.evaluations >= max_fine_evaluations:
             status = f"stopped: {max_fine_evaluations} fine evaluations"
             break
-        if not determined and min(abs(s.thickness_mm - grid_mm[index]) for s in steps) < near_mm:
+        if not determined and (index is None or min(abs(s.thickness_mm - grid_mm[index]) for s in steps) < near_mm):
             thickness_mm = _exploring_thickness(
                 steps, anchor.thickness_mm, SPREAD_FRACTION * span_mm, near_mm, bounds_mm, feasible
             )
@@ -483,13 +507,11 @@ def space_mapping_optimum(
                 status = "stopped: no unexplored thickness within reach"
                 break
         surrogate_step = thickness_mm is None
-        if surrogate_step:
-            thickness_mm = float(proposal[1] / MM)
-        # the wavelength from the mapping fitted around the new thickness: steps there (a secant in f) count most
-        local = fit_mapping(steps, problem, anchor, SPREAD_FRACTION * span_mm, thickness_mm)
-        coarse_at = np.interp(thickness_mm, grid_mm, curve.wavelength)
-        placed = float(np.clip(coarse_at / local.wavelength_ratio(thickness_mm), *problem.wavelength_range))
-        proposal = np.array([placed, thickness_mm * MM])
+        if not surrogate_step:
+            proposal = _placed(steps, problem, anchor, curve, thickness_mm, SPREAD_FRACTION * span_mm)
+        if proposal is None:
+            status = "stopped: no thickness within reach reaches f_min on the surrogate"
+            break
         if _repeats(proposal, steps, tolerance):
             status = "stopped: the next point was evaluated already"
             break

@@ -11,10 +11,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from ..space_mapping import FREQUENCY_TOLERANCE, NEAR_CURVE
 from ..units import MM, UM
 
-ON_CURVE = 5e-3
-"""|f / f_min - 1| below which a point is drawn filled (on the frequency limit) [-]."""
+LABEL_OFFSETS = ((4, 4), (4, -10), (-12, 4), (-12, -10))
+"""Offsets of the point numbers [points], cycled so that numbers of nearby points do not stack."""
 
 
 def trajectory_figure(searches: dict, min_frequency: float):
@@ -35,14 +36,11 @@ def trajectory_figure(searches: dict, min_frequency: float):
         deflection = np.array([s.deflection for s in steps]) / UM
         offset = 100 * (np.array([s.frequency for s in steps]) / min_frequency - 1)
         mixed = np.array([s.mixed for s in steps])
-        on_curve = np.abs(offset) <= 100 * ON_CURVE
+        on_curve = (offset >= -100 * FREQUENCY_TOLERANCE) & (offset <= 100 * NEAR_CURVE)  # feasible, near f_min
         for ax, values in ((top, deflection), (bottom, offset)):
             ax.plot(thickness, values, color="0.8", lw=0.8, zorder=1)
-            for selection, colour, label in (
-                (~mixed, "tab:blue", "clean mode"),
-                (mixed, "tab:red", "mixed with a transverse mode"),
-            ):
-                for filled in (True, False):
+            for selection, colour, mode in ((~mixed, "tab:blue", "clean mode"), (mixed, "tab:red", "mixed mode")):
+                for filled, where in ((True, "on the limit"), (False, "off it")):
                     chosen = selection & (on_curve == filled)
                     ax.scatter(
                         thickness[chosen],
@@ -50,10 +48,11 @@ def trajectory_figure(searches: dict, min_frequency: float):
                         facecolors=colour if filled else "none",
                         edgecolors=colour,
                         zorder=3,
-                        label=label if filled else None,
+                        label=f"{mode}, {where}",
                     )
             for number, (x, y) in enumerate(zip(thickness, values), start=1):
-                ax.annotate(str(number), (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7)
+                shift = LABEL_OFFSETS[(number - 1) % len(LABEL_OFFSETS)]
+                ax.annotate(str(number), (x, y), textcoords="offset points", xytext=shift, fontsize=7)
         answer = mapped.optimum
         top.plot(
             answer.plate.resonator_thickness / MM, answer.deflection / UM, "k*", ms=13, label="space-mapping optimum"
@@ -74,6 +73,10 @@ def trajectory_figure(searches: dict, min_frequency: float):
         for ax in (top, bottom):
             ax.grid(alpha=0.3)
     axes[0, 0].legend(fontsize=7, loc="best")
-    figure.suptitle("Space mapping: FEM points in evaluation order (filled: within 0.5 % of f_min)", fontsize=10)
+    figure.suptitle(
+        f"Space mapping: FEM points in evaluation order (on the limit: f_min (1 - {FREQUENCY_TOLERANCE:g}) "
+        f"to f_min (1 + {NEAR_CURVE:g}))",
+        fontsize=10,
+    )
     figure.tight_layout()
     return figure
