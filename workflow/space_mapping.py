@@ -316,15 +316,18 @@ class _CoarseCurve:
     thickness_mm: np.ndarray
     wavelength: np.ndarray
 
-    def surrogate(self, coarse, problem: DesignProblem, mapping: CurveMapping):
-        """(lambda [m], predicted deflection [m]) along the surrogate's design curve; NaN where infeasible."""
+    def fine_wavelength(self, mapping: CurveMapping, thickness_mm) -> np.ndarray:
+        """lambda_c(h_i; f_min) / m(h_i): the surrogate's f_min curve at ``thickness_mm`` [m] (not clipped to the bounds)."""
+        return np.interp(thickness_mm, self.thickness_mm, self.wavelength) / mapping.wavelength_ratio(thickness_mm)
+
+    def predicted_deflection(self, coarse, problem: DesignProblem, mapping: CurveMapping) -> np.ndarray:
+        """The surrogate's deflection [m] along its f_min curve on the grid; NaN where lambda is below its bound."""
         ratio = mapping.wavelength_ratio(self.thickness_mm)
-        fine_wavelength = self.wavelength / ratio
+        fine_wavelength = self.fine_wavelength(mapping, self.thickness_mm)
         feasible = fine_wavelength >= problem.wavelength_range[0]
         fine_wavelength = np.clip(fine_wavelength, *problem.wavelength_range)
         deflection, _ = coarse(problem.plate(fine_wavelength * ratio, self.thickness_mm * MM))
-        predicted = np.where(feasible, deflection * mapping.deflection_ratio(self.thickness_mm), np.nan)
-        return fine_wavelength, predicted
+        return np.where(feasible, deflection * mapping.deflection_ratio(self.thickness_mm), np.nan)
 
 
 def _placed(steps, problem: DesignProblem, anchor, curve: _CoarseCurve, thickness_mm: float, scale_mm: float) -> np.ndarray:
@@ -334,8 +337,7 @@ def _placed(steps, problem: DesignProblem, anchor, curve: _CoarseCurve, thicknes
     in frequency when one sits at the same h_i) count most.
     """
     mapping = fit_mapping(steps, problem, anchor, scale_mm, thickness_mm)
-    coarse_at = np.interp(thickness_mm, curve.thickness_mm, curve.wavelength)
-    wavelength = float(np.clip(coarse_at / mapping.wavelength_ratio(thickness_mm), *problem.wavelength_range))
+    wavelength = float(np.clip(curve.fine_wavelength(mapping, thickness_mm), *problem.wavelength_range))
     return np.array([wavelength, thickness_mm * MM])
 
 
@@ -357,9 +359,9 @@ def _anchor(steps, problem: DesignProblem) -> SpaceMappingStep:
     longer and softer the plate and the larger the deflection.
     """
     clean = [s for s in steps if not s.mixed]
-    feasible = [s for s in clean if _feasible(s, problem)]
-    if feasible:
-        return max(feasible, key=lambda s: s.deflection)
+    best = _best(clean, problem)
+    if best is not None:
+        return best
     return min(clean, key=lambda s: abs(np.log(s.frequency / problem.min_frequency))) if clean else steps[0]
 
 
@@ -466,7 +468,7 @@ def space_mapping_optimum(
         anchor = _anchor(steps, problem)
         mapping = fit_mapping(steps, problem, anchor, SPREAD_FRACTION * span_mm)
         determined = mapping.determined >= 2
-        _, predicted = curve.surrogate(coarse, problem, mapping)
+        predicted = curve.predicted_deflection(coarse, problem, mapping)
 
         def feasible(thickness_mm, predicted=predicted):
             return bool(np.isfinite(predicted[int(np.argmin(np.abs(grid_mm - thickness_mm)))]))
