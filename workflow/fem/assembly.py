@@ -43,8 +43,8 @@ def element_dofs(mesh: BrickMesh) -> np.ndarray:
     return (3 * mesh.connectivity[:, :, None] + np.arange(3)).reshape(len(mesh.cells), -1)
 
 
-def assemble_matrices(mesh: BrickMesh, plate: Plate):
-    """Global stiffness and mass (all dofs), shape (n_dofs, n_dofs) [N/m], [kg]."""
+def element_matrices(mesh: BrickMesh, plate: Plate):
+    """Stiffness and mass of every element, each of shape (n, 3 n_local, 3 n_local) [N/m], [kg]."""
     sizes = mesh.sizes
     keys = np.column_stack([sizes, mesh.material])
     unique_keys, which = np.unique(np.round(keys, 15), axis=0, return_inverse=True)
@@ -56,13 +56,22 @@ def assemble_matrices(mesh: BrickMesh, plate: Plate):
         lam, mu = lame_constants(material.youngs_modulus, material.poisson_ratio)
         stiffness[rows] = mesh.brick.box_stiffness(unique_keys[rows, :3], lam, mu)
         mass[rows] = mesh.brick.box_mass(unique_keys[rows, :3], material.density)
+    return stiffness[which.ravel()], mass[which.ravel()]
+
+
+def scatter_matrices(mesh: BrickMesh, *locals_) -> tuple:
+    """Global matrices (all dofs) summed from element matrices, each of shape (n, 3 n_local, 3 n_local)."""
     dofs = element_dofs(mesh)
+    n_local = dofs.shape[1]
     rows = np.repeat(dofs, n_local, axis=1).ravel()
     cols = np.tile(dofs, (1, n_local)).ravel()
     shape = (mesh.n_dofs, mesh.n_dofs)
-    return tuple(
-        sp.coo_matrix((local[which.ravel()].ravel(), (rows, cols)), shape=shape).tocsc() for local in (stiffness, mass)
-    )
+    return tuple(sp.coo_matrix((local.ravel(), (rows, cols)), shape=shape).tocsc() for local in locals_)
+
+
+def assemble_matrices(mesh: BrickMesh, plate: Plate):
+    """Global stiffness and mass (all dofs), shape (n_dofs, n_dofs) [N/m], [kg]."""
+    return scatter_matrices(mesh, *element_matrices(mesh, plate))
 
 
 def assemble_piezo_load(mesh: BrickMesh, plate: Plate, voltage: float) -> np.ndarray:

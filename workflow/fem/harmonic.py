@@ -59,12 +59,32 @@ class ProbeModalModel:
         coefficients = self.modal_forces / (self.eigenvalues * (1 + 1j * loss) - omega2)
         return coefficients @ self.probe_shapes.T + self.residual
 
+    def moved(self, tangent: "ProbeModalModel", step: float) -> "ProbeModalModel":
+        """The model a step along a tangent: every field x becomes x + step dx.
+
+        Parameters
+        ----------
+        tangent : ProbeModalModel
+            Derivative of each field with respect to a design parameter p (units of the field per
+            unit of p; see :mod:`workflow.fem.sensitivity`).
+        step : float
+            Change of p [unit of p].
+        """
+        fields = self.__dataclass_fields__
+        return type(self)(**{name: getattr(self, name) + step * getattr(tangent, name) for name in fields})
+
     def to_dict(self) -> dict:
         return {name: getattr(self, name).tolist() for name in self.__dataclass_fields__}
 
     @classmethod
     def from_dict(cls, data: dict) -> "ProbeModalModel":
         return cls(**{name: np.asarray(data[name], dtype=float) for name in cls.__dataclass_fields__})
+
+
+def shifted_residual(system: PlateSystem, modes: ShiftedModes) -> np.ndarray:
+    """(K - sigma M)^-1 F without the computed modes' part, on all free dofs [m]."""
+    modal_forces = modes.vectors.T @ system.load
+    return modes.solve_shifted(system.load) - modes.vectors @ (modal_forces / (modes.eigenvalues - modes.shift))
 
 
 def probe_modal_model(system: PlateSystem, modes: ShiftedModes, probes) -> ProbeModalModel:
@@ -76,8 +96,7 @@ def probe_modal_model(system: PlateSystem, modes: ShiftedModes, probes) -> Probe
         Interpolation matrix on the free dofs, shape (n_probes, n_free).
     """
     modal_forces = modes.vectors.T @ system.load
-    static_shifted = modes.solve_shifted(system.load)
-    residual = static_shifted - modes.vectors @ (modal_forces / (modes.eigenvalues - modes.shift))
+    residual = shifted_residual(system, modes)
     return ProbeModalModel(
         eigenvalues=modes.eigenvalues,
         modal_forces=modal_forces,
