@@ -3,8 +3,6 @@
 import numpy as np
 import pytest
 
-from workflow.fem import FemSettings
-from workflow.fem_evaluations import FemModel
 from workflow.fem_optimum import optimise_fem
 from workflow.maps import TRANSVERSE_THRESHOLD
 from workflow.optimize import DesignProblem, analytical_model, maximise_deflection
@@ -143,34 +141,3 @@ def test_trajectory_figure_shows_every_fine_point():
         assert sum(len(c.get_offsets()) for c in ax.collections) == found.fine_evaluations
     mixed = sum(len(c.get_offsets()) for c in top.collections if c.get_edgecolor()[0][0] > 0.5)  # tab:red
     assert mixed == sum(s.mixed for s in found.trajectory) > 0
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("ceramic_thickness", [0.5e-3, 1e-3, 2e-3])
-def test_space_mapping_on_the_fem_matches_the_direct_run(tmp_path, ceramic_thickness):
-    from workflow.evaluation_cache import EvaluationCache
-
-    problem = DesignProblem(ceramic_thickness)
-    model = FemModel(settings=FemSettings(), cache=EvaluationCache(tmp_path), scheduler="synchronous")
-    direct = optimise_fem(problem, model, "nlopt")
-    mapped = optimise_fem(problem, model, "space-mapping")
-    assert mapped.fine_evaluations <= 10
-    assert mapped.fine_evaluations < direct.fine_evaluations / 3
-    assert np.max(np.abs(design(mapped.optimum) - design(direct.optimum))) < 0.1 * MM
-    assert mapped.optimum.deflection == pytest.approx(direct.optimum.deflection, rel=1e-3)
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("width_mm", [40, 55, 70])
-def test_space_mapping_on_the_fem_at_other_widths(tmp_path, width_mm):
-    """h_p = 2 mm, where transverse modes move the most with the width (at 55 mm the search once never reached f_min)."""
-    from workflow.evaluation_cache import EvaluationCache
-
-    problem = DesignProblem(2e-3, width=width_mm * MM)
-    model = FemModel(settings=FemSettings(), cache=EvaluationCache(tmp_path), scheduler="synchronous")
-    direct = optimise_fem(problem, model, "nlopt")
-    mapped = optimise_fem(problem, model, "space-mapping")
-    assert mapped.optimum.status == "converged"
-    assert mapped.fine_evaluations < direct.fine_evaluations
-    assert np.max(np.abs(design(mapped.optimum) - design(direct.optimum))) < 0.1 * MM
-    assert mapped.optimum.deflection == pytest.approx(direct.optimum.deflection, rel=1e-3)

@@ -127,6 +127,26 @@ class FemModel:
         shape = plate.batch_shape + (len(DESIGN_PARAMETERS),)
         return tuple(np.array([pair[k] for pair in pairs]).reshape(shape) for k in (1, 0))
 
+    def responses_with_gradients(self, plate: Plate) -> tuple[np.ndarray, ...]:
+        """:meth:`responses` and :meth:`gradients` of each plate from one evaluation with tangents.
+
+        Returns
+        -------
+        deflection, frequency, indicator : array
+            Batch shape: [m], [Hz], [-].
+        deflection_gradient, frequency_gradient : array
+            Batch shape + (2,), over (lambda, h_i): [m/m], [Hz/m].
+        """
+        results = self.results(plate, with_tangents=True)
+        shape = plate.batch_shape
+        values = tuple(
+            np.array([getattr(r.best, name) for r in results]).reshape(shape)
+            for name in ("deflection", "frequency", "transverse_indicator")
+        )
+        pairs = [best_mode_gradients(result) for result in results]
+        gradient_shape = shape + (len(DESIGN_PARAMETERS),)
+        return values + tuple(np.array([pair[k] for pair in pairs]).reshape(gradient_shape) for k in (1, 0))
+
     def responses(self, plate: Plate) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Deflection [m], frequency [Hz] and transverse indicator [-] of the best mode of each plate."""
         results = self.results(plate)

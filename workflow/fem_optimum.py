@@ -1,9 +1,15 @@
-"""The FEM optimum of SPEC 5: direct NLopt from the beam optimum, or space mapping."""
+"""The FEM optimum of SPEC 5: direct NLopt from the beam optimum, or space mapping.
+
+Space mapping uses the FEM's design sensitivities when the fine model has them
+(:mod:`workflow.gradient_space_mapping`, the plain FEM) and responses only otherwise
+(:mod:`workflow.space_mapping`, e.g. the FEM with Q(v)).
+"""
 
 from dataclasses import dataclass
 
 import numpy as np
 
+from .gradient_space_mapping import gradient_space_mapping_optimum
 from .optimize import DesignProblem, Optimum, PlateModel, analytical_model, maximise_deflection
 from .space_mapping import space_mapping_optimum
 
@@ -31,7 +37,7 @@ class FemOptimum:
         One of :data:`METHODS`.
     fine_evaluations, coarse_evaluations : int
         FEM and beam-model geometries evaluated.
-    trajectory : tuple of SpaceMappingStep
+    trajectory : tuple of SpaceMappingStep or GradientStep
         The FEM points of a space-mapping search in evaluation order (empty for the direct run).
     """
 
@@ -62,8 +68,11 @@ def optimise_fem(
     if coarse_model is None:
         coarse_model = analytical_model(fem_model.q if q is None else q, problem.voltage)
     if method == "space-mapping":
-        fine = getattr(fem_model, "responses", fem_model)  # with the transverse indicator when there is one
-        result = space_mapping_optimum(fine, coarse_model, problem)
+        if hasattr(fem_model, "responses_with_gradients"):  # the FEM: exact design sensitivities
+            result = gradient_space_mapping_optimum(fem_model.responses_with_gradients, coarse_model, problem)
+        else:  # e.g. the FEM with Q(v): responses only
+            fine = getattr(fem_model, "responses", fem_model)  # with the transverse indicator when there is one
+            result = space_mapping_optimum(fine, coarse_model, problem)
         return FemOptimum(result.optimum, method, result.fine_evaluations, result.coarse_evaluations, result.trajectory)
     if method == "nlopt":
         coarse = maximise_deflection(coarse_model, problem)
