@@ -49,7 +49,11 @@ class FemOptimum:
 
 
 def optimise_fem(
-    problem: DesignProblem, fem_model, method: str = "space-mapping", q: float = None, coarse_model: PlateModel = None
+    problem: DesignProblem,
+    fem_model,
+    method: str = "space-mapping",
+    q: float | None = None,
+    coarse_model: PlateModel | None = None,
 ) -> FemOptimum:
     """Maximise the FEM deflection subject to the FEM f_r >= f_min.
 

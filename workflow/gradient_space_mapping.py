@@ -53,7 +53,7 @@ import numpy as np
 
 from .errors import InfeasibleError
 from .optimize import DesignProblem, Optimum, maximise_deflection
-from .space_mapping import FREQUENCY_TOLERANCE, SpaceMappingResult, _Counted, coarse_wavelength
+from .space_mapping import FREQUENCY_TOLERANCE, CountedModel, SpaceMappingResult, coarse_wavelength
 from .units import MM
 
 TRUST_MM = 0.3
@@ -267,7 +267,7 @@ def gradient_space_mapping_optimum(
     InfeasibleError
         When no clean fine point reached f_min.
     """
-    fine, coarse = _Counted(fine), _Counted(coarse)
+    fine, coarse = CountedModel(fine), CountedModel(coarse)
     coarse_optimum = maximise_deflection(coarse, problem)
     log_min_frequency = np.log(problem.min_frequency)
     grid_mm = np.linspace(problem.lower[1] / MM, problem.upper[1] / MM, CURVE_POINTS)

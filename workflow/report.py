@@ -247,11 +247,12 @@ def _fem_optima(context: RunContext, optima) -> str:
             )
     return (
         "## FEM optimum\n\n"
-        "Space mapping with the beam model as the coarse model: the optimum lies on the FEM's 25 kHz curve; at each "
-        "FEM point the beam wavelength with the same frequency is extracted, and the wavelength and deflection "
-        "ratios FEM/beam, fitted along the curve, turn the beam model into a surrogate whose optimum is the next FEM "
-        "point; the search ends when FEM points on both sides confirm the surrogate's optimum. Points whose mode mixes "
-        "with a transverse one do not shape the surrogate. Width "
+        "Space mapping with the beam model as the coarse model: the optimum lies on the FEM's 25 kHz curve; each "
+        "FEM evaluation also gives the design sensitivities (d/d lambda, d/d h_i of frequency and deflection), so "
+        "each FEM point fixes the value and the slope of the wavelength and deflection ratios FEM/beam along the "
+        "curve; fitted there, they turn the beam model into a surrogate whose optimum is the next FEM point, and the "
+        "search ends when that point is the best one already evaluated or promises < 1e-4 more. Points whose mode "
+        "mixes with a transverse one do not shape the surrogate. Width "
         f"{context.config['design']['width_mm']:g} mm. The FEM deflections are larger than the calibrated beam "
         "model's: the beam calibration reproduces the paper's analytical figures for the original plate, whose "
         "FEM working mode at 49 mm is mixed with a transverse mode (see the width sweep); on clean longitudinal "

@@ -1,4 +1,8 @@
-"""Space-mapping optimisation: the FEM optimum from a handful of FEM evaluations (SPEC 5 (b)).
+"""Space-mapping optimisation from the fine responses only: the FEM optimum from a handful of FEM evaluations (SPEC 5 (b)).
+
+With the FEM's design sensitivities, :mod:`workflow.gradient_space_mapping` needs fewer
+(``optimise_fem`` uses it for the plain FEM); this search serves fine models without them
+(the FEM with Q(v)) and holds what both share (parameter extraction, results, counting).
 
 The coarse model (the beam) is cheap, the fine model (the FEM) is not.  Both are plate
 models; the design variables are x = (lambda, h_i).
@@ -208,11 +212,12 @@ class SpaceMappingResult:
     coarse_optimum : Optimum
         The coarse model's optimum z*, the first fine point.
     trajectory : tuple of SpaceMappingStep
-        Every fine evaluation in order.
+        Every fine evaluation in order (:class:`~workflow.gradient_space_mapping.GradientStep`
+        for the search with sensitivities).
     fine_evaluations, coarse_evaluations : int
         Geometries evaluated by each model.
-    mapping : CurveMapping
-        The last fitted mapping.
+    mapping : CurveMapping or None
+        The last fitted mapping (None for the search with sensitivities).
     converged : bool
         Whether the surrogate, fully determined, promised no further gain.
     """
@@ -222,11 +227,11 @@ class SpaceMappingResult:
     trajectory: tuple[SpaceMappingStep, ...]
     fine_evaluations: int
     coarse_evaluations: int
-    mapping: CurveMapping
+    mapping: CurveMapping | None
     converged: bool
 
 
-class _Counted:
+class CountedModel:
     """A plate model that counts the geometries it evaluates."""
 
     def __init__(self, model):
@@ -453,7 +458,7 @@ def space_mapping_optimum(
     InfeasibleError
         When no fine point reached f_min.
     """
-    fine, coarse = _Counted(fine), _Counted(coarse)
+    fine, coarse = CountedModel(fine), CountedModel(coarse)
     coarse_optimum = maximise_deflection(coarse, problem)
     bounds_mm = (problem.lower[1] / MM, problem.upper[1] / MM)
     span_mm = bounds_mm[1] - bounds_mm[0]
