@@ -51,9 +51,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InfeasibleError
-from .optimize import DesignProblem, Optimum, maximise_deflection
-from .space_mapping import FREQUENCY_TOLERANCE, CountedModel, SpaceMappingResult, coarse_wavelength
+from .optimize import DesignProblem, maximise_deflection
+from .space_mapping import (
+    FREQUENCY_TOLERANCE,
+    CountedModel,
+    SpaceMappingResult,
+    coarse_wavelength,
+    search_result,
+)
 from .units import MM
 
 TRUST_MM = 0.3
@@ -193,7 +198,7 @@ def _fit(values, slopes, thickness_mm, scatter_values, scatter_slopes, centre_mm
     return coefficients
 
 
-def _surrogate(clean, anchor: GradientStep, coarse, problem: DesignProblem, grid_mm, coarse_curve):
+def _surrogate(clean, anchor: GradientStep, coarse, problem: DesignProblem, grid_mm, coarse_curve, coarse_slope):
     """The surrogate's f_min curve v_f(u) (placed :data:`FREQUENCY_MARGIN` above f_min) and its ln w there, on the grid.
 
     ln m and ln rho are fitted to the values and slopes of the ``clean`` steps around the
@@ -212,10 +217,8 @@ def _surrogate(clean, anchor: GradientStep, coarse, problem: DesignProblem, grid
         "centre_mm": anchor.thickness_mm,
         "degree": 1 if len(np.unique(np.round(thickness, 4))) == 1 else MAPPING_DEGREE,
     }
-    coarse_slope = np.interp(thickness, grid_mm, np.gradient(coarse_curve, grid_mm))
-    log_ratio = _fit(
-        np.interp(thickness, grid_mm, coarse_curve) - projected[:, 0], coarse_slope - projected[:, 1], **fit
-    )
+    slope = np.interp(thickness, grid_mm, coarse_slope)
+    log_ratio = _fit(np.interp(thickness, grid_mm, coarse_curve) - projected[:, 0], slope - projected[:, 1], **fit)
     log_deflection_ratio = _fit(
         projected[:, 2] - coarse_log, projected[:, 3] - coarse_du - coarse_dv * projected[:, 1], **fit
     )
@@ -223,9 +226,8 @@ def _surrogate(clean, anchor: GradientStep, coarse, problem: DesignProblem, grid
     polynomial = np.polynomial.polynomial
     curve = coarse_curve - polynomial.polyval(offset, log_ratio) - FREQUENCY_MARGIN / 2
     clipped = np.minimum(curve, np.log(problem.wavelength_range[1]))
-    predicted = _coarse_log_deflection(coarse, problem, clipped, grid_mm)[0] + polynomial.polyval(
-        offset, log_deflection_ratio
-    )
+    coarse_deflection, _ = coarse(problem.plate(np.exp(clipped), grid_mm * MM))
+    predicted = np.log(coarse_deflection) + polynomial.polyval(offset, log_deflection_ratio)
     return curve, predicted
 
 
@@ -272,6 +274,7 @@ def gradient_space_mapping_optimum(
     log_min_frequency = np.log(problem.min_frequency)
     grid_mm = np.linspace(problem.lower[1] / MM, problem.upper[1] / MM, CURVE_POINTS)
     coarse_curve = np.log(coarse_wavelength(coarse, problem, grid_mm * MM, problem.min_frequency))
+    coarse_slope = np.gradient(coarse_curve, grid_mm)
     design = np.array([coarse_optimum.plate.wavelength, coarse_optimum.plate.resonator_thickness])
     steps, trust, promised, reference = [], TRUST_MM, None, None
     converged, status = False, f"stopped: {max_fine_evaluations} fine evaluations"
@@ -285,7 +288,7 @@ def gradient_space_mapping_optimum(
         best = _best(steps, problem)
         clean = [s for s in steps if not s.mixed] or steps
         anchor = best or min(clean, key=lambda s: abs(np.log(s.frequency) - log_min_frequency))
-        curve, predicted = _surrogate(clean, anchor, coarse, problem, grid_mm, coarse_curve)
+        curve, predicted = _surrogate(clean, anchor, coarse, problem, grid_mm, coarse_curve, coarse_slope)
         offset = grid_mm - anchor.thickness_mm
         reach = trust if any(not s.mixed for s in steps) else MIXED_TRUST_MM
         allowed = (curve >= np.log(problem.wavelength_range[0])) & (np.abs(offset) <= reach + 1e-12)
@@ -314,21 +317,4 @@ def gradient_space_mapping_optimum(
         reference = np.log(best.deflection) if best is not None else anchor.on_curve(problem.min_frequency)[2]
         promised = predicted[index] - reference
     answer = _best(steps, problem)
-    if answer is None:
-        closest = max(steps, key=lambda s: s.frequency)
-        raise InfeasibleError(
-            f"space mapping found no clean design with f_r >= {problem.min_frequency / 1e3:g} kHz in "
-            f"{fine.evaluations} fine evaluations (highest {closest.frequency / 1e3:.3f} kHz at lambda "
-            f"{closest.design[0] / MM:.3f} mm, h_i {closest.thickness_mm:.3f} mm); widen the bounds or lower f_min"
-        )
-    optimum = Optimum(
-        plate=problem.plate(float(answer.design[0]), float(answer.design[1])),
-        deflection=answer.deflection,
-        frequency=answer.frequency,
-        evaluations=fine.evaluations,
-        constraint_active=bool(abs(answer.frequency / problem.min_frequency - 1) <= FREQUENCY_TOLERANCE),
-        status=status,
-    )
-    return SpaceMappingResult(
-        optimum, coarse_optimum, tuple(steps), fine.evaluations, coarse.evaluations, None, converged
-    )
+    return search_result(steps, answer, problem, fine, coarse, coarse_optimum, status, None, converged, "clean design")

@@ -242,6 +242,39 @@ class CountedModel:
         return self.model(plate)
 
 
+def search_result(
+    steps, answer, problem: DesignProblem, fine, coarse, coarse_optimum, status: str, mapping, converged: bool, what="design"
+) -> SpaceMappingResult:
+    """The :class:`SpaceMappingResult` of a search whose answer is the fine step ``answer``.
+
+    ``fine`` and ``coarse`` are the :class:`CountedModel` wrappers; ``what`` names the kind of
+    design looked for in the error.
+
+    Raises
+    ------
+    InfeasibleError
+        When ``answer`` is None (no fine point reached f_min).
+    """
+    if answer is None:
+        closest = max(steps, key=lambda s: s.frequency)
+        raise InfeasibleError(
+            f"space mapping found no {what} with f_r >= {problem.min_frequency / 1e3:g} kHz in "
+            f"{fine.evaluations} fine evaluations (highest {closest.frequency / 1e3:.3f} kHz at lambda "
+            f"{closest.design[0] / MM:.3f} mm, h_i {closest.thickness_mm:.3f} mm); widen the bounds or lower f_min"
+        )
+    optimum = Optimum(
+        plate=problem.plate(float(answer.design[0]), float(answer.design[1])),
+        deflection=answer.deflection,
+        frequency=answer.frequency,
+        evaluations=fine.evaluations,
+        constraint_active=bool(abs(answer.frequency / problem.min_frequency - 1) <= FREQUENCY_TOLERANCE),
+        status=status,
+    )
+    return SpaceMappingResult(
+        optimum, coarse_optimum, tuple(steps), fine.evaluations, coarse.evaluations, mapping, converged
+    )
+
+
 def coarse_wavelength(coarse, problem: DesignProblem, thickness, frequency) -> np.ndarray:
     """Wavelength [m] at which the coarse f_r equals ``frequency`` [Hz] at each h_i [m].
 
@@ -526,28 +559,6 @@ def space_mapping_optimum(
         if determined and surrogate_step and best is not None:  # a surrogate step: did it deliver?
             improved = _feasible(steps[-1], problem) and steps[-1].deflection > best.deflection
             shrink = 1.0 if improved else shrink / 2
-    answer = _best(steps, problem)
-    if answer is None:
-        closest = max(steps, key=lambda s: s.frequency)
-        raise InfeasibleError(
-            f"space mapping found no design with f_r >= {problem.min_frequency / 1e3:g} kHz in "
-            f"{fine.evaluations} fine evaluations (highest {closest.frequency / 1e3:.3f} kHz at lambda "
-            f"{closest.design[0] / MM:.3f} mm, h_i {closest.thickness_mm:.3f} mm); widen the bounds or lower f_min"
-        )
-    optimum = Optimum(
-        plate=problem.plate(float(answer.design[0]), float(answer.design[1])),
-        deflection=answer.deflection,
-        frequency=answer.frequency,
-        evaluations=fine.evaluations,
-        constraint_active=bool(abs(answer.frequency / problem.min_frequency - 1) <= FREQUENCY_TOLERANCE),
-        status=status,
-    )
-    return SpaceMappingResult(
-        optimum=optimum,
-        coarse_optimum=coarse_optimum,
-        trajectory=tuple(steps),
-        fine_evaluations=fine.evaluations,
-        coarse_evaluations=coarse.evaluations,
-        mapping=mapping,
-        converged=converged,
+    return search_result(
+        steps, _best(steps, problem), problem, fine, coarse, coarse_optimum, status, mapping, converged
     )
