@@ -65,6 +65,14 @@ def scalar_plates(plate: Plate) -> list[Plate]:
     return [plate.with_(**{name: float(a.flat[i]) for name, a in zip(names, arrays)}) for i in range(arrays[0].size)]
 
 
+def best_mode_values(results, shape: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Deflection [m], frequency [Hz] and transverse indicator [-] of each result's best mode, shaped ``shape``."""
+    return tuple(
+        np.array([getattr(r.best, name) for r in results]).reshape(shape)
+        for name in ("deflection", "frequency", "transverse_indicator")
+    )
+
+
 @dataclass
 class FemModel:
     """The FEM as a batched plate model, with a disk cache and parallel evaluation.
@@ -123,9 +131,7 @@ class FemModel:
         frequency_gradient : array
             Batch shape + (2,), d f_r / d (lambda, h_i) [Hz/m].
         """
-        pairs = [best_mode_gradients(result) for result in self.results(plate, with_tangents=True)]
-        shape = plate.batch_shape + (len(DESIGN_PARAMETERS),)
-        return tuple(np.array([pair[k] for pair in pairs]).reshape(shape) for k in (1, 0))
+        return self.responses_with_gradients(plate)[3:]
 
     def responses_with_gradients(self, plate: Plate) -> tuple[np.ndarray, ...]:
         """:meth:`responses` and :meth:`gradients` of each plate from one evaluation with tangents.
@@ -138,23 +144,14 @@ class FemModel:
             Batch shape + (2,), over (lambda, h_i): [m/m], [Hz/m].
         """
         results = self.results(plate, with_tangents=True)
-        shape = plate.batch_shape
-        values = tuple(
-            np.array([getattr(r.best, name) for r in results]).reshape(shape)
-            for name in ("deflection", "frequency", "transverse_indicator")
-        )
         pairs = [best_mode_gradients(result) for result in results]
-        gradient_shape = shape + (len(DESIGN_PARAMETERS),)
-        return values + tuple(np.array([pair[k] for pair in pairs]).reshape(gradient_shape) for k in (1, 0))
+        gradient_shape = plate.batch_shape + (len(DESIGN_PARAMETERS),)
+        gradients = tuple(np.array([pair[k] for pair in pairs]).reshape(gradient_shape) for k in (1, 0))
+        return best_mode_values(results, plate.batch_shape) + gradients
 
     def responses(self, plate: Plate) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Deflection [m], frequency [Hz] and transverse indicator [-] of the best mode of each plate."""
-        results = self.results(plate)
-        shape = plate.batch_shape
-        return tuple(
-            np.array([getattr(r.best, name) for r in results]).reshape(shape)
-            for name in ("deflection", "frequency", "transverse_indicator")
-        )
+        return best_mode_values(self.results(plate), plate.batch_shape)
 
     def __call__(self, plate: Plate) -> tuple[np.ndarray, np.ndarray]:
         """Deflection [m] and frequency [Hz] of the best mode of each plate, shaped like the batch."""
