@@ -25,16 +25,22 @@ nearest the curve): with one point it is the first-order (value and slope) corre
 coarse model, from two on a local quadratic, whose curvature comes from the slopes of
 neighbouring points (a secant on the derivative).  The surrogate deflection along its f_min
 curve is ln w_c(v_f(u), u) + ln rho(u); the next fine point is its maximiser within a trust
-interval of u around the anchor, placed a little (:data:`FREQUENCY_MARGIN`) above f_min.
+interval of u around the anchor.  Its wavelength comes from ln m refitted around its own
+thickness (fine points there count most: repeated points at one h_i converge as a secant in
+frequency), a little (:data:`FREQUENCY_MARGIN`) above f_min.
 
 Trust interval.  :data:`TRUST_MM` to start with, :data:`MIXED_TRUST_MM` while no clean point
 is known (the coarse optimum then sits in a transverse-mode band, and the gradients there
 describe the band, not the plate); halved when a step lands on a mixed mode or delivers less
-than :data:`ACCEPTED_GAIN_RATIO` of the gain the surrogate promised.
+than :data:`ACCEPTED_GAIN_RATIO` of the gain the surrogate promised, doubled (up to
+:data:`TRUST_MM`) when a step to its edge delivers :data:`GROWING_GAIN_RATIO`.  While the clean points
+share one h_i, the mapping is first-order and the step also stops where it would promise more
+than :data:`FIRST_ORDER_GAIN` over the anchor: a slope the beam does not share is only
+extrapolated that far.
 
 Transverse modes.  A point whose working mode has a transverse indicator above
 :data:`MIXING_LIMIT` does not shape the mapping, and the surrogate proposes no point within
-:data:`MIXED_EXCLUSION_MM` of it.
+:data:`MIXED_EXCLUSION_MM` of it, nor beyond halfway to the nearest clean point.
 
 Stop.  When the surrogate's next point is within :data:`STEP_TOLERANCE_MM` in h_i and
 :data:`WAVELENGTH_TOLERANCE` in lambda of the best feasible fine point, or promises less than
@@ -65,13 +71,23 @@ TRUST_MM = 0.3
 """First trust half-width in h_i [mm]."""
 MIXED_TRUST_MM = 0.6
 """Trust half-width in h_i while no clean fine point is known [mm]."""
+FIRST_ORDER_GAIN = 0.03
+"""Largest gain in ln w over the anchor's a first-order mapping may promise [-].
+
+While the clean points share one h_i, ln rho continues along the slope measured there; where
+that slope is not the beam's, the gain it promises grows with the step and is soon
+extrapolation (FEM, b = 49 mm, h_p = 0.5 mm: a slope of 0.76 /mm at h_i = 0.5 mm promises
++22 % at 0.8 mm, where a transverse mode halves the deflection; the curve peaks at 0.515 mm).
+The step then goes only as far as this gain."""
 ACCEPTED_GAIN_RATIO = 0.25
 """A step that delivers less than this fraction of its promised gain halves the trust interval [-]."""
+GROWING_GAIN_RATIO = 0.75
+"""A step to the edge of the trust interval that delivers this fraction of its promise doubles it, up to :data:`TRUST_MM` [-]."""
 MIXING_LIMIT = 0.1
 """Transverse indicator above which a fine point does not shape the mapping [-] (the FEM's
 deflection and its lambda-derivative are disturbed from about 0.1: b = 49 mm, h_p = 2 mm)."""
 MIXED_EXCLUSION_MM = 0.1
-"""No proposal within this of a mixed fine point [mm]."""
+"""No proposal within this of a mixed fine point (nor beyond halfway to the nearest clean one) [mm]."""
 FREQUENCY_MARGIN = 1e-4
 """Relative margin above f_min at which new points are placed [-] (2.5 Hz at 25 kHz)."""
 STEP_TOLERANCE_MM = 0.02
@@ -198,37 +214,95 @@ def _fit(values, slopes, thickness_mm, scatter_values, scatter_slopes, centre_mm
     return coefficients
 
 
-def _surrogate(clean, anchor: GradientStep, coarse, problem: DesignProblem, grid_mm, coarse_curve, coarse_slope):
+@dataclass(frozen=True)
+class _MappingData:
+    """Values and slopes of ln m and ln rho at the clean fine points, to be fitted around any centre.
+
+    Attributes
+    ----------
+    thickness_mm : ndarray
+        h_i of the points [mm].
+    log_ratio, log_ratio_slope : ndarray
+        ln m = v_c - v* [-] and its slope along the curve [1/mm].
+    log_deflection_ratio, log_deflection_ratio_slope : ndarray
+        ln rho = W* - ln w_c [-] and its slope along the curve [1/mm].
+    mixing : ndarray
+        Added scatter of mixed points [-] (:data:`MIXING_SCATTER`).
+    """
+
+    thickness_mm: np.ndarray
+    log_ratio: np.ndarray
+    log_ratio_slope: np.ndarray
+    log_deflection_ratio: np.ndarray
+    log_deflection_ratio_slope: np.ndarray
+    mixing: np.ndarray
+
+    @classmethod
+    def of(cls, clean, anchor: GradientStep, coarse, problem: DesignProblem, grid_mm, coarse_curve, coarse_slope):
+        """From the ``clean`` steps projected onto the fine f_min curve; mixing is counted beyond the anchor's."""
+        projected = np.array([s.on_curve(problem.min_frequency) for s in clean])
+        thickness = np.array([s.thickness_mm for s in clean])
+        coarse_log, coarse_du, coarse_dv = _coarse_log_deflection(coarse, problem, projected[:, 0], thickness)
+        indicator = np.array([s.transverse_indicator for s in clean])
+        return cls(
+            thickness,
+            np.interp(thickness, grid_mm, coarse_curve) - projected[:, 0],
+            np.interp(thickness, grid_mm, coarse_slope) - projected[:, 1],
+            projected[:, 2] - coarse_log,
+            projected[:, 3] - coarse_du - coarse_dv * projected[:, 1],
+            MIXING_SCATTER * np.maximum(0.0, indicator**2 - anchor.transverse_indicator**2),
+        )
+
+    @property
+    def first_order(self) -> bool:
+        """Whether the points share one h_i (the fit is then linear: value and slope) [-]."""
+        return len(np.unique(np.round(self.thickness_mm, 4))) == 1
+
+    def fit(self, centre_mm: float) -> tuple[np.ndarray, np.ndarray]:
+        """ln m and ln rho as polynomials in (u - centre_mm) [ascending powers], points weighted towards the centre."""
+        distance = np.abs(self.thickness_mm - centre_mm)
+        settings = {
+            "thickness_mm": self.thickness_mm,
+            "scatter_values": VALUE_NOISE + LOCALITY * distance**4 + self.mixing,
+            "scatter_slopes": SLOPE_NOISE + 4 * LOCALITY * distance**3 + self.mixing,
+            "centre_mm": centre_mm,
+            "degree": 1 if self.first_order else MAPPING_DEGREE,
+        }
+        return (
+            _fit(self.log_ratio, self.log_ratio_slope, **settings),
+            _fit(self.log_deflection_ratio, self.log_deflection_ratio_slope, **settings),
+        )
+
+
+def _surrogate(mapping: _MappingData, anchor: GradientStep, coarse, problem: DesignProblem, grid_mm, coarse_curve):
     """The surrogate's f_min curve v_f(u) (placed :data:`FREQUENCY_MARGIN` above f_min) and its ln w there, on the grid.
 
-    ln m and ln rho are fitted to the values and slopes of the ``clean`` steps around the
-    anchor; the deflection is the coarse one at (min(v_f, v_max), u) times rho.
+    ln m and ln rho are fitted around the anchor; the deflection is the coarse one at (v_f, u),
+    v_f clipped to the wavelength bounds, times rho.
     """
-    projected = np.array([s.on_curve(problem.min_frequency) for s in clean])
-    thickness = np.array([s.thickness_mm for s in clean])
-    coarse_log, coarse_du, coarse_dv = _coarse_log_deflection(coarse, problem, projected[:, 0], thickness)
-    distance = np.abs(thickness - anchor.thickness_mm)
-    indicator = np.array([s.transverse_indicator for s in clean])
-    mixing = MIXING_SCATTER * np.maximum(0.0, indicator**2 - anchor.transverse_indicator**2)
-    fit = {
-        "thickness_mm": thickness,
-        "scatter_values": VALUE_NOISE + LOCALITY * distance**4 + mixing,
-        "scatter_slopes": SLOPE_NOISE + 4 * LOCALITY * distance**3 + mixing,
-        "centre_mm": anchor.thickness_mm,
-        "degree": 1 if len(np.unique(np.round(thickness, 4))) == 1 else MAPPING_DEGREE,
-    }
-    slope = np.interp(thickness, grid_mm, coarse_slope)
-    log_ratio = _fit(np.interp(thickness, grid_mm, coarse_curve) - projected[:, 0], slope - projected[:, 1], **fit)
-    log_deflection_ratio = _fit(
-        projected[:, 2] - coarse_log, projected[:, 3] - coarse_du - coarse_dv * projected[:, 1], **fit
-    )
+    log_ratio, log_deflection_ratio = mapping.fit(anchor.thickness_mm)
     offset = grid_mm - anchor.thickness_mm
     polynomial = np.polynomial.polynomial
     curve = coarse_curve - polynomial.polyval(offset, log_ratio) - FREQUENCY_MARGIN / 2
-    clipped = np.minimum(curve, np.log(problem.wavelength_range[1]))
+    clipped = np.clip(curve, *np.log(problem.wavelength_range))
     coarse_deflection, _ = coarse(problem.plate(np.exp(clipped), grid_mm * MM))
     predicted = np.log(coarse_deflection) + polynomial.polyval(offset, log_deflection_ratio)
     return curve, predicted
+
+
+def _near_mixed_points(grid_mm, steps) -> np.ndarray:
+    """Where on the grid the surrogate proposes nothing: near mixed steps [bool].
+
+    Within :data:`MIXED_EXCLUSION_MM` of each mixed step, but at most halfway to the nearest
+    clean step: a transverse band can be narrower than that, and the optimum often lies next to it.
+    """
+    clean = np.array([s.thickness_mm for s in steps if not s.mixed])
+    near = np.zeros(np.shape(grid_mm), dtype=bool)
+    for step in steps:
+        if step.mixed:
+            radius = min(MIXED_EXCLUSION_MM, np.min(np.abs(clean - step.thickness_mm), initial=np.inf) / 2)
+            near |= np.abs(grid_mm - step.thickness_mm) < radius
+    return near
 
 
 def _best(steps, problem: DesignProblem) -> GradientStep | None:
@@ -276,7 +350,7 @@ def gradient_space_mapping_optimum(
     coarse_curve = np.log(coarse_wavelength(coarse, problem, grid_mm * MM, problem.min_frequency))
     coarse_slope = np.gradient(coarse_curve, grid_mm)
     design = np.array([coarse_optimum.plate.wavelength, coarse_optimum.plate.resonator_thickness])
-    steps, trust, promised, reference = [], TRUST_MM, None, None
+    steps, trust, promised, reference, at_edge = [], TRUST_MM, None, None, False
     converged, status = False, f"stopped: {max_fine_evaluations} fine evaluations"
     while fine.evaluations < max_fine_evaluations:
         steps.append(_evaluate(fine, design, problem))
@@ -285,21 +359,27 @@ def gradient_space_mapping_optimum(
             delivered = new.on_curve(problem.min_frequency)[2] - reference
             if new.mixed or (promised > 0 and delivered < ACCEPTED_GAIN_RATIO * promised):
                 trust /= 2
+            elif at_edge and delivered >= GROWING_GAIN_RATIO * promised > 0:
+                trust = min(2 * trust, TRUST_MM)
         best = _best(steps, problem)
         clean = [s for s in steps if not s.mixed] or steps
         anchor = best or min(clean, key=lambda s: abs(np.log(s.frequency) - log_min_frequency))
-        curve, predicted = _surrogate(clean, anchor, coarse, problem, grid_mm, coarse_curve, coarse_slope)
+        mapping = _MappingData.of(clean, anchor, coarse, problem, grid_mm, coarse_curve, coarse_slope)
+        curve, predicted = _surrogate(mapping, anchor, coarse, problem, grid_mm, coarse_curve)
         offset = grid_mm - anchor.thickness_mm
         reach = trust if any(not s.mixed for s in steps) else MIXED_TRUST_MM
         allowed = (curve >= np.log(problem.wavelength_range[0])) & (np.abs(offset) <= reach + 1e-12)
-        for step in steps:
-            if step.mixed:
-                allowed &= np.abs(grid_mm - step.thickness_mm) >= MIXED_EXCLUSION_MM
+        allowed &= ~_near_mixed_points(grid_mm, steps)
+        if mapping.first_order and not anchor.mixed:
+            modest = allowed & (predicted - anchor.on_curve(problem.min_frequency)[2] <= FIRST_ORDER_GAIN)
+            allowed = modest if np.any(modest) else allowed
         if not np.any(allowed):
             status = "stopped: no thickness within reach reaches f_min on the surrogate"
             break
         index = int(np.argmax(np.where(allowed, predicted, -np.inf)))
-        design = np.array([min(np.exp(curve[index]), problem.wavelength_range[1]), grid_mm[index] * MM])
+        at_edge = abs(offset[index]) >= reach - (grid_mm[1] - grid_mm[0])
+        placed = coarse_curve[index] - mapping.fit(grid_mm[index])[0][0] - FREQUENCY_MARGIN / 2
+        design = np.array([min(np.exp(placed), problem.wavelength_range[1]), grid_mm[index] * MM])
         if best is not None and (
             predicted[index] - np.log(best.deflection) <= gain_tolerance
             or (
