@@ -60,10 +60,10 @@ import numpy as np
 
 from .optimize import DesignProblem, maximise_deflection
 from .space_mapping import (
-    FREQUENCY_TOLERANCE,
     CountedModel,
     SpaceMappingResult,
     coarse_wavelength,
+    reaches_min_frequency,
     search_result,
 )
 from .units import MM
@@ -308,7 +308,7 @@ def _near_mixed_points(grid_mm, steps) -> np.ndarray:
 
 def _best(steps, problem: DesignProblem) -> GradientStep | None:
     """The feasible clean step of largest deflection."""
-    pool = [s for s in steps if not s.mixed and s.frequency >= problem.min_frequency * (1 - FREQUENCY_TOLERANCE)]
+    pool = [s for s in steps if not s.mixed and reaches_min_frequency(s, problem)]
     return max(pool, key=lambda s: s.deflection) if pool else None
 
 

@@ -379,13 +379,14 @@ def _placed(steps, problem: DesignProblem, anchor, curve: _CoarseCurve, thicknes
     return np.array([wavelength, thickness_mm * MM])
 
 
-def _feasible(step: SpaceMappingStep, problem: DesignProblem) -> bool:
+def reaches_min_frequency(step, problem: DesignProblem) -> bool:
+    """Whether a fine step reached f_min within :data:`FREQUENCY_TOLERANCE` [-]."""
     return step.frequency >= problem.min_frequency * (1 - FREQUENCY_TOLERANCE)
 
 
 def _best(steps, problem: DesignProblem) -> SpaceMappingStep | None:
     """The feasible clean step of largest deflection (feasible mixed steps when none is clean)."""
-    feasible = [s for s in steps if _feasible(s, problem)]
+    feasible = [s for s in steps if reaches_min_frequency(s, problem)]
     pool = [s for s in feasible if not s.mixed] or feasible
     return max(pool, key=lambda s: s.deflection) if pool else None
 
@@ -557,7 +558,7 @@ def space_mapping_optimum(
             break
         steps.append(_evaluate(fine, coarse, problem, proposal))
         if determined and surrogate_step and best is not None:  # a surrogate step: did it deliver?
-            improved = _feasible(steps[-1], problem) and steps[-1].deflection > best.deflection
+            improved = reaches_min_frequency(steps[-1], problem) and steps[-1].deflection > best.deflection
             shrink = 1.0 if improved else shrink / 2
     return search_result(
         steps, _best(steps, problem), problem, fine, coarse, coarse_optimum, status, mapping, converged
