@@ -73,7 +73,7 @@ TRUST_MM = 0.3
 MIXED_TRUST_MM = 0.6
 """Trust half-width in h_i while no clean fine point is known [mm]."""
 FIRST_ORDER_GAIN = 0.03
-"""Largest gain in ln w over the anchor's a first-order mapping may promise [-].
+"""Largest gain in ln w over the anchor that a first-order mapping may promise [-].
 
 While the clean points share one h_i, ln rho continues along the slope measured there; where
 that slope is not the beam's, the gain it promises grows with the step and is soon
@@ -380,7 +380,7 @@ def gradient_space_mapping_optimum(
         index = int(np.argmax(np.where(allowed, predicted, -np.inf)))
         at_edge = abs(offset[index]) >= reach - (grid_mm[1] - grid_mm[0])
         placed = coarse_curve[index] - mapping.fit(grid_mm[index])[0][0] - FREQUENCY_MARGIN / 2
-        design = np.array([min(np.exp(placed), problem.wavelength_range[1]), grid_mm[index] * MM])
+        design = np.array([np.clip(np.exp(placed), *problem.wavelength_range), grid_mm[index] * MM])
         if best is not None and (
             predicted[index] - np.log(best.deflection) <= gain_tolerance
             or (
