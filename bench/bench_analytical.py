@@ -11,9 +11,9 @@ import json
 import numpy as np
 from timing import best_time
 
-from workflow import analytical, materials
-from workflow.optimize import DesignProblem, optimise_analytical
-from workflow.plate import Plate
+from workflow.models import analytical, materials
+from workflow.models.plate import Plate
+from workflow.optimise.problem import DesignProblem, optimise_analytical
 
 
 def evaluate(plates):

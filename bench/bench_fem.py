@@ -14,9 +14,9 @@ import argparse
 import json
 import time
 
-from workflow.fem import FemSettings, evaluate_fem
-from workflow.fem.reference import evaluate_fem_reference
-from workflow.plate import ORIGINAL_PLATE
+from workflow.models.fem import FemSettings, evaluate_fem
+from workflow.models.fem.reference import evaluate_fem_reference
+from workflow.models.plate import ORIGINAL_PLATE
 from workflow.units import KHZ, MM, UM
 
 

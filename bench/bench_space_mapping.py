@@ -15,10 +15,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from workflow.fem_evaluations import FemModel
-from workflow.fem_optimum import optimise_fem
-from workflow.optimize import DesignProblem, analytical_model
-from workflow.space_mapping import space_mapping_optimum
+from workflow.optimise.fem_model import FemModel
+from workflow.optimise.fem_optimum import optimise_fem
+from workflow.optimise.problem import DesignProblem, analytical_model
+from workflow.optimise.space_mapping import space_mapping_optimum
 from workflow.units import MM, UM
 
 

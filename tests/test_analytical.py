@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from workflow import analytical
-from workflow.paper import FIGURES
-from workflow.plate import ORIGINAL_PLATE, Plate
+from workflow.models import analytical
+from workflow.models.plate import ORIGINAL_PLATE, Plate
+from workflow.pipeline.paper import FIGURES
 
 GEOMETRIES = [
     Plate(24e-3, 2.0e-3, 1.0e-3),

@@ -4,10 +4,16 @@ from pathlib import Path
 
 import numpy as np
 
-from workflow.evaluation_cache import CACHE_VARIABLE, EvaluationCache, cached_map, content_key, default_directory
-from workflow.fem import FemSettings
-from workflow.fem_evaluations import FemModel, FemTask, describe_fem_task
-from workflow.plate import ORIGINAL_PLATE
+from workflow.execution.cache import (
+    CACHE_VARIABLE,
+    EvaluationCache,
+    cached_map,
+    content_key,
+    default_directory,
+)
+from workflow.models.fem import FemSettings
+from workflow.models.plate import ORIGINAL_PLATE
+from workflow.optimise.fem_model import FemModel, FemTask, describe_fem_task
 
 CALLS = []
 

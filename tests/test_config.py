@@ -2,9 +2,9 @@
 
 import pytest
 
-from workflow import materials
-from workflow.config import default_config, load_config, to_toml
 from workflow.errors import InputFileError
+from workflow.models import materials
+from workflow.pipeline.config import default_config, load_config, to_toml
 
 
 def test_design_defaults_come_from_table_1():

@@ -7,16 +7,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from workflow import materials
 from workflow.cli import main
-from workflow.damping.design import damped_deflection, fem_damped_deflection
 from workflow.damping.laws import LAWS
 from workflow.damping.posterior import DampingPosterior, save_posterior
-from workflow.space_mapping import FREQUENCY_TOLERANCE
-from workflow.evaluation_cache import EvaluationCache
-from workflow.fem import FemSettings
-from workflow.optimize import analytical_model
-from workflow.plate import Plate
+from workflow.execution.cache import EvaluationCache
+from workflow.models import materials
+from workflow.models.fem import FemSettings
+from workflow.models.plate import Plate
+from workflow.optimise.damped import damped_deflection, fem_damped_deflection
+from workflow.optimise.problem import analytical_model
+from workflow.optimise.space_mapping import FREQUENCY_TOLERANCE
 from workflow.units import KHZ, MM, UM
 
 COARSE = FemSettings(elements_per_ceramic=2, elements_per_layer=1, elements_across_half_width=3)
@@ -34,7 +34,7 @@ def posterior_file(tmp_path):
 @pytest.fixture
 def coarse_fem(monkeypatch, tmp_path):
     """The commands' FEM on a coarse mesh, in process, cached under tmp_path."""
-    import workflow.fem_evaluations as fem_evaluations
+    import workflow.optimise.fem_model as fem_evaluations
 
     monkeypatch.setenv("TACTILE_CACHE", str(tmp_path / "cache"))
     monkeypatch.setattr(

@@ -3,8 +3,11 @@
 import numpy as np
 import pytest
 
-from workflow import analytical, materials
-from workflow.damping.design import (
+from workflow.damping.laws import ConstantQ, QuadraticLoss, quadratic_law_through
+from workflow.damping.posterior import DampingPosterior
+from workflow.models import analytical, materials
+from workflow.models.plate import ORIGINAL_PLATE, Plate
+from workflow.optimise.damped import (
     damped_deflection,
     damped_maps,
     damped_model,
@@ -13,10 +16,7 @@ from workflow.damping.design import (
     fem_required_voltage,
     required_voltage,
 )
-from workflow.damping.laws import ConstantQ, QuadraticLoss, quadratic_law_through
-from workflow.damping.posterior import DampingPosterior
-from workflow.optimize import DesignProblem, maximise_deflection, optimise_analytical
-from workflow.plate import ORIGINAL_PLATE, Plate
+from workflow.optimise.problem import DesignProblem, maximise_deflection, optimise_analytical
 
 LAW = QuadraticLoss(q0=150.0, alpha=0.25)
 GRID = Plate(
@@ -112,8 +112,8 @@ def test_maps_are_consistent_with_the_pointwise_functions():
 
 
 def test_damped_fem_model_with_constant_q_is_the_fem():
-    from workflow.fem import FemSettings
-    from workflow.fem_evaluations import FemModel
+    from workflow.models.fem import FemSettings
+    from workflow.optimise.fem_model import FemModel
 
     settings = FemSettings(elements_per_ceramic=4, elements_across_half_width=3)
     fem = FemModel(q=materials.PLATE_Q, voltage=10.0, settings=settings)
@@ -131,7 +131,7 @@ def test_damped_fem_model_with_constant_q_is_the_fem():
 def test_design_summary_is_json_and_in_display_units():
     import json
 
-    from workflow.damping.design import design_summary
+    from workflow.optimise.damped import design_summary
 
     design = design_with_damping(_posterior(), [DesignProblem(ceramic_thickness=1e-3)], draws=4, scheduler="synchronous")
     summary = json.loads(json.dumps(design_summary(design)))

@@ -5,14 +5,14 @@ import dataclasses
 import numpy as np
 import pytest
 
-from workflow import analytical
-from workflow.fem import FemResult, FemSettings, ModeResult, evaluate_fem
-from workflow.fem.assembly import assemble_matrices, assemble_piezo_load, reduce_system
-from workflow.fem.elements import BRICKS
-from workflow.fem.mesh import CERAMIC, quarter_plate_mesh
-from workflow.fem.modes import nearest_modes
-from workflow.fem.probes import antinode_probe_points, mean_deflection, probe_matrix
-from workflow.plate import ORIGINAL_PLATE
+from workflow.models import analytical
+from workflow.models.fem import FemResult, FemSettings, ModeResult, evaluate_fem
+from workflow.models.fem.assembly import assemble_matrices, assemble_piezo_load, reduce_system
+from workflow.models.fem.elements import BRICKS
+from workflow.models.fem.mesh import CERAMIC, quarter_plate_mesh
+from workflow.models.fem.modes import nearest_modes
+from workflow.models.fem.probes import antinode_probe_points, mean_deflection, probe_matrix
+from workflow.models.plate import ORIGINAL_PLATE
 
 COARSE = FemSettings(elements_per_ceramic=2, elements_per_layer=1, elements_across_half_width=3)
 """A mesh for fast structural tests (not for accuracy)."""
@@ -38,7 +38,7 @@ def test_brick_has_exactly_six_rigid_body_modes_and_partition_of_unity(name):
 
 @pytest.mark.parametrize("element", ["lagrange27", "serendipity20"])
 def test_fast_path_matches_scikit_fem_assembly_and_direct_solves(element):
-    from workflow.fem.reference import evaluate_fem_reference
+    from workflow.models.fem.reference import evaluate_fem_reference
 
     settings = dataclasses.replace(COARSE, element=element)
     fast = evaluate_fem(ORIGINAL_PLATE, 54.0, 15.0, settings)

@@ -2,9 +2,9 @@
 
 import pytest
 
-from workflow.fem import FemSettings, evaluate_fem
-from workflow.fem.convergence import convergence_study, richardson
-from workflow.plate import ORIGINAL_PLATE
+from workflow.models.fem import FemSettings, evaluate_fem
+from workflow.models.fem.convergence import convergence_study, richardson
+from workflow.models.plate import ORIGINAL_PLATE
 
 CLEAN = ORIGINAL_PLATE.with_(width=55e-3)
 """Original plate at a width without transverse interference, so the best mode stays the same mode."""

@@ -3,13 +3,9 @@
 import numpy as np
 import pytest
 
-from workflow.fem import FemSettings, evaluate_fem
-from workflow.fem.responses import (
-    frequency_response,
-    switch_on_response,
-    transient_response,
-)
-from workflow.plate import ORIGINAL_PLATE
+from workflow.models.fem import FemSettings, evaluate_fem
+from workflow.models.fem.responses import frequency_response, switch_on_response, transient_response
+from workflow.models.plate import ORIGINAL_PLATE
 
 SETTINGS = FemSettings(elements_per_ceramic=4, elements_per_layer=1, elements_across_half_width=4)
 
@@ -49,7 +45,7 @@ def test_frequency_response_peaks_at_the_working_mode(clean_result):
 
 
 def test_figures_draw_the_responses(clean_result, tmp_path):
-    from workflow.figures.fem_responses import (
+    from workflow.pipeline.figures.fem_responses import (
         frequency_response_figure,
         modes_figure,
         transient_figure,

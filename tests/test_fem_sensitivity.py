@@ -8,15 +8,14 @@ import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
-from workflow.damping.design import fem_damped_deflection
 from workflow.damping.laws import quadratic_law_through
 from workflow.errors import TactileError
-from workflow.evaluation_cache import EvaluationCache, content_key
-from workflow.fem import FemResult, FemSettings, evaluate_fem
-from workflow.fem.evaluate import discretise, working_modes
-from workflow.fem.mesh import quarter_plate_mesh
-from workflow.fem.probes import mean_deflection
-from workflow.fem.sensitivity import (
+from workflow.execution.cache import EvaluationCache, content_key
+from workflow.models.fem import FemResult, FemSettings, evaluate_fem
+from workflow.models.fem.evaluate import discretise, working_modes
+from workflow.models.fem.mesh import quarter_plate_mesh
+from workflow.models.fem.probes import mean_deflection
+from workflow.models.fem.sensitivity import (
     DESIGN_PARAMETERS,
     TopologyError,
     _mode_tangent,
@@ -28,9 +27,10 @@ from workflow.fem.sensitivity import (
     result_gradient,
     system_tangent,
 )
-from workflow.fem_evaluations import FemModel, FemTask, describe_fem_task
-from workflow.optimize import DesignProblem
-from workflow.plate import ORIGINAL_PLATE
+from workflow.models.plate import ORIGINAL_PLATE
+from workflow.optimise.damped import fem_damped_deflection
+from workflow.optimise.fem_model import FemModel, FemTask, describe_fem_task
+from workflow.optimise.problem import DesignProblem
 from workflow.units import MM
 
 COARSE = FemSettings(elements_per_ceramic=2, elements_per_layer=1, elements_across_half_width=3)

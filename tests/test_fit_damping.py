@@ -177,9 +177,9 @@ def _write_posterior(path, law):
 
 
 def test_damping_option_on_evaluate_and_optimize(tmp_path, capsys):
-    from workflow import analytical
     from workflow.damping.laws import quadratic_law_through
-    from workflow.plate import ORIGINAL_PLATE
+    from workflow.models import analytical
+    from workflow.models.plate import ORIGINAL_PLATE
 
     w_54 = float(analytical.dynamic_deflection(ORIGINAL_PLATE, 15.0, 54.0))
     v_work = 2 * np.pi * float(analytical.resonance_frequency(ORIGINAL_PLATE)) * w_54

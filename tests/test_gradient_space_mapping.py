@@ -12,10 +12,10 @@ from test_space_mapping import (
     synthetic_fine,
 )
 
-from workflow.fem import FemSettings
-from workflow.fem_evaluations import FemModel
-from workflow.fem_optimum import optimise_fem
-from workflow.gradient_space_mapping import (
+from workflow.models.fem import FemSettings
+from workflow.optimise.fem_model import FemModel
+from workflow.optimise.fem_optimum import optimise_fem
+from workflow.optimise.gradient_space_mapping import (
     FIRST_ORDER_GAIN,
     MIXED_EXCLUSION_MM,
     TRUST_MM,
@@ -26,8 +26,8 @@ from workflow.gradient_space_mapping import (
     finite_difference_gradients,
     gradient_space_mapping_optimum,
 )
-from workflow.optimize import DesignProblem, maximise_deflection
-from workflow.space_mapping import FREQUENCY_TOLERANCE, coarse_wavelength
+from workflow.optimise.problem import DesignProblem, maximise_deflection
+from workflow.optimise.space_mapping import FREQUENCY_TOLERANCE, coarse_wavelength
 from workflow.units import MM
 
 
@@ -92,7 +92,7 @@ def test_a_first_order_mapping_is_not_extrapolated_into_a_transverse_mode(monkey
     assert np.max(np.abs(design(result.optimum) - target)) < 0.05 * MM
     assert result.optimum.deflection == pytest.approx(deflection, rel=1e-4)
     # extrapolated over the whole trust interval, the slope leads into the mode and back
-    monkeypatch.setattr("workflow.gradient_space_mapping.FIRST_ORDER_GAIN", np.inf)
+    monkeypatch.setattr("workflow.optimise.gradient_space_mapping.FIRST_ORDER_GAIN", np.inf)
     unbounded = gradient_space_mapping_optimum(fine, COARSE, problem)
     assert unbounded.trajectory[1].thickness_mm - unbounded.trajectory[0].thickness_mm == pytest.approx(TRUST_MM)
     assert unbounded.fine_evaluations > result.fine_evaluations
@@ -190,7 +190,7 @@ def test_space_mapping_on_the_fem_matches_the_direct_run(tmp_path, ceramic_thick
     """SPEC 5 (b): at most 4 FEM evaluations, within 0.1 mm of the direct run, on the original plate
     (b = 49 mm) and at h_p = 2 mm for other widths, where transverse modes move the most with the
     width (at 55 mm the responses-only search once never reached f_min)."""
-    from workflow.evaluation_cache import EvaluationCache
+    from workflow.execution.cache import EvaluationCache
 
     problem = DesignProblem(ceramic_thickness, width=width_mm * MM)
     model = FemModel(settings=FemSettings(), cache=EvaluationCache(tmp_path), scheduler="synchronous")

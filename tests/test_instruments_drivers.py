@@ -2,9 +2,15 @@
 
 import pytest
 
-from instruments.errors import ConnectionLost, GarbledReply, InstrumentError, ReplyTimeout, SafetyLimitError
-from instruments.generator import FunctionGenerator
-from instruments.vibrometer import Vibrometer, VelocityReading, format_range, parse_range
+from instruments.drivers.errors import (
+    ConnectionLost,
+    GarbledReply,
+    InstrumentError,
+    ReplyTimeout,
+    SafetyLimitError,
+)
+from instruments.drivers.generator import FunctionGenerator
+from instruments.drivers.vibrometer import VelocityReading, Vibrometer, format_range, parse_range
 
 
 class ReplayPort:

@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 
 from workflow.cli import main
-from workflow.evaluation_cache import EvaluationCache
-from workflow.fem import FemSettings
-from workflow.fem_evaluations import FemModel
-from workflow.maps import design_map, width_sweep
-from workflow.optimize import DesignProblem, analytical_model, optimise_analytical
-from workflow.plate import ORIGINAL_PLATE
+from workflow.execution.cache import EvaluationCache
+from workflow.models.fem import FemSettings
+from workflow.models.plate import ORIGINAL_PLATE
+from workflow.optimise.fem_model import FemModel
+from workflow.optimise.maps import design_map, width_sweep
+from workflow.optimise.problem import DesignProblem, analytical_model, optimise_analytical
 
 TINY = FemSettings(elements_per_ceramic=2, elements_across_half_width=2, elements_per_layer=1, n_modes=3)
 

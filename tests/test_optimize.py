@@ -4,10 +4,15 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize_scalar
 
-from workflow import analytical, materials
 from workflow.errors import InfeasibleError
-from workflow.optimize import DesignProblem, analytical_model, maximise_deflection, optimise_analytical
-from workflow.plate import Plate
+from workflow.models import analytical, materials
+from workflow.models.plate import Plate
+from workflow.optimise.problem import (
+    DesignProblem,
+    analytical_model,
+    maximise_deflection,
+    optimise_analytical,
+)
 
 
 def _best_on_the_constraint(problem):

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from workflow.parallel import SchedulerError, map_evaluations
+from workflow.execution.parallel import SchedulerError, map_evaluations
 
 
 def spectrum(seed):
@@ -35,6 +35,6 @@ def test_dask_local_cluster_gives_identical_numbers():
 
 @pytest.mark.parametrize("address", ["not-an-address", "tcp://127.0.0.1:9"])
 def test_bad_scheduler_is_a_clear_error(address, monkeypatch):
-    monkeypatch.setattr("workflow.parallel.CONNECT_TIMEOUT", 1.0)
+    monkeypatch.setattr("workflow.execution.parallel.CONNECT_TIMEOUT", 1.0)
     with pytest.raises(SchedulerError, match="Dask scheduler"):
         map_evaluations(spectrum, [1, 2], scheduler=address, progress=False)

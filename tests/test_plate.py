@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from workflow import materials
 from workflow.errors import GeometryError
-from workflow.plate import ORIGINAL_PLATE, check_design_space
+from workflow.models import materials
+from workflow.models.plate import ORIGINAL_PLATE, check_design_space
 
 
 def test_derived_geometry_of_the_original_plate():

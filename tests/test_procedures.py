@@ -9,10 +9,10 @@ from pathlib import Path
 import pytest
 import serial
 
-from instruments.campaign import simulate_campaign, simulated_station
-from instruments.errors import ConnectionLost, InstrumentError, SafetyLimitError
-from instruments.logwriter import LogWriter, read_log
-from instruments.procedures import (
+from instruments.drivers.errors import ConnectionLost, InstrumentError, SafetyLimitError
+from instruments.procedures.logwriter import LogWriter, read_log
+from instruments.procedures.simulated import simulate_campaign, simulated_station
+from instruments.procedures.sweeps import (
     CampaignPlan,
     ResonancePlan,
     VoltageSweepPlan,
@@ -202,7 +202,7 @@ def test_real_generator_identifies():
     """Opt-in (``pytest -m hardware``): a real 33500-series generator on $TACTILE_GENERATOR_PORT."""
     import os
 
-    from instruments.generator import FunctionGenerator
+    from instruments.drivers.generator import FunctionGenerator
 
     port = os.environ.get("TACTILE_GENERATOR_PORT")
     if not port:

@@ -3,11 +3,10 @@
 import json
 import re
 
-
 import pytest
 
 from workflow.cli import main
-from workflow.config import default_config, tomllib
+from workflow.pipeline.config import default_config, tomllib
 
 TINY = """
 [design]

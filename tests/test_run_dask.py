@@ -4,12 +4,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from workflow.config import load_config
-from workflow.pipeline import RunContext, run_steps
-from workflow.steps import STEPS
-
 from test_run import TINY as SMALL
+
+from workflow.pipeline.config import load_config
+from workflow.pipeline.runner import RunContext, run_steps
+from workflow.pipeline.steps import STEPS
 
 TINY = SMALL + "[run]\ncache = false\n"
 

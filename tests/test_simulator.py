@@ -8,12 +8,19 @@ import numpy as np
 import pytest
 import serial
 
-from instruments.simulator import Bench, FaultSettings, bench_url, default_bench_settings, register_bench, register_url_handler
+from instruments.simulator import (
+    Bench,
+    FaultSettings,
+    bench_url,
+    default_bench_settings,
+    register_bench,
+    register_url_handler,
+)
 from instruments.simulator.generator import GeneratorDevice
 from instruments.simulator.physics import DEFAULT_LOW_VELOCITY_Q, plate_response, working_point_velocity
-from workflow import analytical
-from workflow.materials import DESIGN_VOLTAGE, PLATE_Q
-from workflow.plate import ORIGINAL_PLATE
+from workflow.models import analytical
+from workflow.models.materials import DESIGN_VOLTAGE, PLATE_Q
+from workflow.models.plate import ORIGINAL_PLATE
 
 
 def open_bench(**changes):

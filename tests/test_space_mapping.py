@@ -3,14 +3,10 @@
 import numpy as np
 import pytest
 
-from workflow.fem_optimum import optimise_fem
-from workflow.maps import TRANSVERSE_THRESHOLD
-from workflow.optimize import DesignProblem, analytical_model, maximise_deflection
-from workflow.space_mapping import (
-    FREQUENCY_TOLERANCE,
-    coarse_wavelength,
-    space_mapping_optimum,
-)
+from workflow.optimise.fem_optimum import optimise_fem
+from workflow.optimise.maps import TRANSVERSE_THRESHOLD
+from workflow.optimise.problem import DesignProblem, analytical_model, maximise_deflection
+from workflow.optimise.space_mapping import FREQUENCY_TOLERANCE, coarse_wavelength, space_mapping_optimum
 from workflow.units import MM
 
 COARSE = analytical_model()
@@ -130,7 +126,7 @@ def test_no_stop_at_a_point_the_search_would_not_evaluate():
 
 
 def test_trajectory_figure_shows_every_fine_point():
-    from workflow.figures.space_mapping import trajectory_figure
+    from workflow.pipeline.figures.space_mapping import trajectory_figure
 
     problem = DesignProblem(2e-3)
     found = optimise_fem(problem, mixing_fine, "space-mapping", coarse_model=COARSE)

@@ -5,9 +5,15 @@ after importing :mod:`instruments.simulator.urlhandler` or calling :func:`regist
 or as pseudo-terminals (:mod:`.ptyserver`, ``tactile simulate --pty``).
 """
 
-from .bench import Bench, BenchSettings, default_bench_settings, get_bench, register_bench
-from .faults import FaultSettings
-from .urlhandler import URL_SCHEME, bench_url, register_url_handler
+from instruments.simulator.bench import (
+    Bench,
+    BenchSettings,
+    default_bench_settings,
+    get_bench,
+    register_bench,
+)
+from instruments.simulator.faults import FaultSettings
+from instruments.simulator.urlhandler import URL_SCHEME, bench_url, register_url_handler
 
 __all__ = [
     "Bench",

@@ -10,14 +10,13 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from instruments.drivers.amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT, DEFAULT_GAIN, PowerAmplifier
+from instruments.simulator.faults import Fault, FaultInjector, FaultSettings
+from instruments.simulator.generator import GeneratorDevice
+from instruments.simulator.physics import PlateResponse, plate_response
+from instruments.simulator.vibrometer import VibrometerDevice
 from workflow.damping.laws import law_parameters
-from workflow.plate import ORIGINAL_PLATE, Plate
-
-from ..amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT, DEFAULT_GAIN, PowerAmplifier
-from .faults import Fault, FaultInjector, FaultSettings
-from .generator import GeneratorDevice
-from .physics import PlateResponse, plate_response
-from .vibrometer import VibrometerDevice
+from workflow.models.plate import ORIGINAL_PLATE, Plate
 
 INSTRUMENTS = ("generator", "vibrometer")
 DEFAULT_DRIFT_RATE = -0.02

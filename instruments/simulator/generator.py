@@ -9,7 +9,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .scpi import header_regex, split_program
+from instruments.simulator.scpi import header_regex, split_program
 
 IDENTITY = "Agilent Technologies,33521A,TACTILE-SIM,1.0-sim"
 """``*IDN?`` reply (manufacturer, model, serial, firmware), as the 33500 series formats it."""

@@ -14,11 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from workflow import analytical
 from workflow.damping.harmonic import self_consistent_amplitude
 from workflow.damping.laws import QuadraticLoss, quadratic_law_through
-from workflow.materials import DESIGN_VOLTAGE, PLATE_Q
-from workflow.plate import ORIGINAL_PLATE, Plate
+from workflow.models import analytical
+from workflow.models.materials import DESIGN_VOLTAGE, PLATE_Q
+from workflow.models.plate import ORIGINAL_PLATE, Plate
 
 DEFAULT_LOW_VELOCITY_Q = 150.0
 """Q(v -> 0) of the default simulated plate [-]: glued plates damp well below the ceramic's Q."""

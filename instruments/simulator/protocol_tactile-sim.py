@@ -1,3 +1,3 @@
 """pyserial looks up the ``tactile-sim://`` scheme under this module name (see :mod:`.urlhandler`)."""
 
-from .urlhandler import SimulatedSerial as Serial  # noqa: F401
+from instruments.simulator.urlhandler import SimulatedSerial as Serial  # noqa: F401

@@ -9,7 +9,7 @@ import os
 import select
 import tty
 
-from .bench import INSTRUMENTS, Bench, SimulatedDisconnect
+from instruments.simulator.bench import INSTRUMENTS, Bench, SimulatedDisconnect
 
 
 class PtyPair:

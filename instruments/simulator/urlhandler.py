@@ -12,7 +12,7 @@ from urllib.parse import urlsplit
 import serial
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException
 
-from .bench import INSTRUMENTS, SimulatedDisconnect, get_bench
+from instruments.simulator.bench import INSTRUMENTS, SimulatedDisconnect, get_bench
 
 URL_SCHEME = "tactile-sim"
 _PACKAGE = __name__.rsplit(".", 1)[0]

@@ -10,7 +10,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..vibrometer import format_range, full_scale
+from instruments.drivers.vibrometer import format_range, full_scale
 
 CONTROLLER_NAME = "OFV-5000 tactile-sim"
 CONTROLLER_VERSION = "1.0-sim"

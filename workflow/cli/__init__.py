@@ -10,8 +10,8 @@ import argparse
 import importlib
 import sys
 
-from ..errors import TactileError
-from ..serialise import json_line
+from workflow.errors import TactileError
+from workflow.serialise import json_line
 
 COMMANDS = ("evaluate", "optimize", "maps", "fit_damping", "simulate", "measure", "run")
 """Modules of :mod:`workflow.cli`, one per command, in the order ``--help`` lists them."""
@@ -34,7 +34,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Design ultrasonic tactile plates: beam and FEM models, NLopt optimisation, "
         "bench instruments and a Bayesian fit of the damping Q(v).",
     )
-    from .. import __version__
+    from workflow import __version__
 
     parser.add_argument("--version", action="version", version=f"tactile {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
@@ -48,11 +48,6 @@ def build_parser() -> argparse.ArgumentParser:
             raise
         module.register(subparsers)
     return parser
-
-
-def add_json_flag(parser: argparse.ArgumentParser) -> None:
-    """The common ``--json`` flag."""
-    parser.add_argument("--json", action="store_true", help="print one JSON object on the last line of stdout")
 
 
 def main(argv=None) -> int:

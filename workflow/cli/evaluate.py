@@ -1,18 +1,19 @@
 """``tactile evaluate``: deflection and resonance of one geometry."""
 
-from .. import analytical
-from ..units import KHZ, UM
-from . import add_json_flag
-from .fit_damping import add_damping_option, damping_record, fem_damping_record, load_damping
-from .options import (
+from workflow.cli.options import (
     add_ceramic_option,
-    add_model_option,
+    add_damping_option,
     add_drive_options,
+    add_json_flag,
+    add_model_option,
     add_width_option,
-    geometry_record,
+    load_damping,
     plate_from_args,
     positive_float,
 )
+from workflow.models import analytical
+from workflow.pipeline.records import damping_record, fem_damping_record, geometry_record
+from workflow.units import KHZ, UM
 
 
 def register(subparsers) -> None:
@@ -48,7 +49,7 @@ def run(args) -> dict:
         if posterior is not None:
             result.update(damping_record(posterior, plate, args.voltage))
     else:
-        from ..fem import evaluate_fem
+        from workflow.models.fem import evaluate_fem
 
         fem = evaluate_fem(plate, q=args.q, voltage=args.voltage)
         result["w_dyn_um"] = fem.deflection / UM

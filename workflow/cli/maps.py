@@ -9,25 +9,25 @@ from pathlib import Path
 
 import numpy as np
 
-from ..damping.design import QUANTILES, DampedMaps, damped_maps, fem_damped_deflection, fem_required_voltage
-from ..damping.laws import law_parameters
-from ..errors import TactileError
-from ..evaluation_cache import EvaluationCache
-from ..fem_optimum import optimise_fem
-from ..maps import design_map, grid_axes, width_sweep
-from ..optimize import analytical_model, optimise_analytical
-from ..units import KHZ, MM, UM
-from . import add_json_flag
-from .fit_damping import add_damping_option, damped_optimum, load_damping
-from .optimize import damped_fem_optimum
-from .options import (
+from workflow.cli.options import (
     add_ceramic_option,
-    add_hi_min_option,
+    add_damping_option,
     add_drive_options,
+    add_hi_min_option,
+    add_json_flag,
     add_model_option,
     add_width_option,
     design_problem,
+    load_damping,
 )
+from workflow.errors import TactileError
+from workflow.execution.cache import EvaluationCache
+from workflow.optimise.damped import damped_fem_optimum, damped_maps, damped_optimum, fem_damped_maps
+from workflow.optimise.fem_optimum import optimise_fem
+from workflow.optimise.maps import design_map, width_sweep
+from workflow.optimise.problem import analytical_model, optimise_analytical
+from workflow.pipeline.records import damped_optimum_record, fem_damping_record
+from workflow.units import KHZ, MM, UM
 
 DEFAULT_GRID = {"analytical": 81, "fem": 12}
 """Grid points per axis when --grid is not given."""
@@ -78,7 +78,7 @@ def run(args) -> dict:
     if args.model == "analytical":
         model = analytical_model(args.q, args.voltage)
     else:
-        from ..fem_evaluations import FemModel
+        from workflow.optimise.fem_model import FemModel
 
         model = FemModel(
             q=args.q, voltage=args.voltage, cache=EvaluationCache(), scheduler=args.scheduler, progress=not args.json
@@ -90,7 +90,7 @@ def run(args) -> dict:
         record = _damped_record(args, problem, model, points, posterior)
     figures = record["figures"]
     if args.width_sweep:
-        from ..figures.maps import width_sweep_figure
+        from workflow.pipeline.figures.maps import width_sweep_figure
 
         sweep = width_sweep(model)
         figures.append(_save(width_sweep_figure(sweep), args.out / "width_sweep_fem.png"))
@@ -136,7 +136,7 @@ def _optimum_keys(optimum) -> dict:
 
 def _constant_q_record(args, problem, model, points: int) -> dict:
     """Map and optimum with the constant --q."""
-    from ..figures.maps import map_figure
+    from workflow.pipeline.figures.maps import map_figure
 
     if args.model == "analytical":
         optimum = optimise_analytical(problem, args.q)
@@ -153,15 +153,16 @@ def _constant_q_record(args, problem, model, points: int) -> dict:
 
 def _damped_record(args, problem, model, points: int, posterior) -> dict:
     """Maps and optimum with the posterior-median Q(v), and the required-voltage map."""
-    from ..figures.damping import design_map_figure
+    from workflow.pipeline.figures.damping import design_map_figure
 
     draws = int(np.clip(DAMPING_DRAW_BUDGET // points**2, 1, MAX_DAMPING_DRAWS))
     if args.model == "analytical":
-        optimum, keys = damped_optimum(posterior, problem)
+        optimum = damped_optimum(posterior.median_law(), problem)
+        keys = damped_optimum_record(posterior, optimum)
         maps = damped_maps(posterior, problem, points, draws=draws, optimum=optimum)
     else:
-        found, keys = damped_fem_optimum(posterior, problem, model, "space-mapping")
-        optimum = found.optimum
+        found, result = damped_fem_optimum(posterior.median_law(), problem, model, "space-mapping")
+        optimum, keys = found.optimum, fem_damping_record(posterior, result)
         maps = fem_damped_maps(posterior, problem, model, points, draws, optimum)
     stem = f"map_{args.model}_qv_hp{args.hp_mm:g}mm"
     figures = [
@@ -179,40 +180,6 @@ def _damped_record(args, problem, model, points: int, posterior) -> dict:
         "optimum": {**_optimum_keys(optimum), "q": keys["q"], "required_voltage_v": keys["required_voltage_v"]},
         "figures": figures,
     }
-
-
-def fem_damped_maps(posterior, problem, fem_model, points: int, draws: int = 100, optimum=None) -> DampedMaps:
-    """FEM maps with Q(v) over the Table 1 (lambda, h_i) box, like :func:`~workflow.damping.design.damped_maps`.
-
-    Each grid point's best mode (picked at ``fem_model.q``) gets its deflection at
-    ``fem_model.voltage`` solved self-consistently with the posterior-median Q(v), and the
-    voltage for the target deflection (median law, and p05/p50/p95 over ``draws`` posterior
-    draws), from the cached FEM results without new solves.
-    """
-    wavelength, thickness = grid_axes(points)
-    results = fem_model.results(problem.plate(*np.meshgrid(wavelength, thickness, indexing="ij")))
-    law, drawn = posterior.median_law(), posterior.draws(draws)
-    shape = (points, points)
-
-    def grid(values):
-        return np.reshape(np.array(values, dtype=float), shape + np.shape(values)[1:])
-
-    parameters = ", ".join(f"{k} = {v:.4g}" for k, v in law_parameters(law).items())
-    return DampedMaps(
-        wavelength=wavelength,
-        resonator_thickness=thickness,
-        deflection=grid([fem_damped_deflection(r, law) for r in results]),
-        frequency=grid([r.frequency for r in results]),
-        required_voltage=grid([fem_required_voltage(r, law) for r in results]),
-        required_voltage_interval=np.moveaxis(
-            grid([np.quantile(fem_required_voltage(r, drawn), QUANTILES) for r in results]), -1, 0
-        ),
-        ceramic_thickness=problem.ceramic_thickness,
-        min_frequency=problem.min_frequency,
-        min_resonator_thickness=problem.min_resonator_thickness,
-        optimum=optimum,
-        law_label=f"FEM, {posterior.law_name} Q(v), median: {parameters}",
-    )
 
 
 def _save(figure, path: Path) -> str:

@@ -6,9 +6,8 @@ Logs go under ``data/`` by default; running the same command again resumes its l
 import argparse
 from pathlib import Path
 
-from ..errors import TactileError
-from . import add_json_flag
-from .simulate import add_bench_arguments, bench_settings
+from workflow.cli.options import add_bench_arguments, add_json_flag, bench_settings
+from workflow.errors import TactileError
 
 DEFAULT_DATA_DIR = Path("data")
 PROCEDURES = ("resonance", "campaign", "voltage-sweep")
@@ -83,9 +82,9 @@ def _open_station(args):
     """(station, extra log metadata) for real ports or the simulator."""
     import serial
 
-    from instruments.amplifier import PowerAmplifier
-    from instruments.campaign import simulated_station, simulation_metadata
-    from instruments.procedures import open_station
+    from instruments.drivers.amplifier import PowerAmplifier
+    from instruments.procedures.simulated import simulated_station, simulation_metadata
+    from instruments.procedures.sweeps import open_station
     from instruments.simulator import register_url_handler
 
     if not args.max_voltage > 0:
@@ -115,7 +114,7 @@ def _open_station(args):
 
 def _planned(path: Path, key: str):
     """A ``plan_*`` value from an existing log, or None."""
-    from instruments.logwriter import read_log
+    from instruments.procedures.logwriter import read_log
 
     if not path.exists():
         return None
@@ -125,7 +124,7 @@ def _planned(path: Path, key: str):
 
 
 def _resonance_of(args, station, metadata, out: Path) -> float:
-    from instruments.procedures import ResonancePlan, resonance_search
+    from instruments.procedures.sweeps import ResonancePlan, resonance_search
 
     path = out.with_name(f"{out.stem}-resonance{out.suffix}")
     result = resonance_search(station, path, ResonancePlan(), metadata=metadata, restart=args.restart)
@@ -147,7 +146,7 @@ def _check_plan_flags(args) -> None:
 
 
 def run(args):
-    from instruments import procedures
+    from instruments.procedures import sweeps as procedures
 
     _check_plan_flags(args)
     out = args.out or DEFAULT_DATA_DIR / f"{args.procedure}.csv"

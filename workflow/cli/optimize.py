@@ -1,20 +1,21 @@
 """``tactile optimize``: the geometry of maximum deflection with f_r >= 25 kHz."""
 
-from ..fem_optimum import optimise_fem
-from ..optimize import Optimum, optimise_analytical
-from ..units import KHZ, UM
-from . import add_json_flag
-from .fit_damping import add_damping_option, damped_optimum, fem_damping_record, load_damping
-from .options import (
+from workflow.cli.options import (
     add_ceramic_option,
-    add_hi_min_option,
-    add_model_option,
+    add_damping_option,
     add_drive_options,
+    add_hi_min_option,
+    add_json_flag,
+    add_model_option,
     add_width_option,
     ceramic_thicknesses,
     design_problem,
-    geometry_record,
+    load_damping,
 )
+from workflow.optimise.damped import damped_fem_optimum, damped_optimum
+from workflow.optimise.fem_optimum import optimise_fem
+from workflow.optimise.problem import optimise_analytical
+from workflow.pipeline.records import damped_optimum_record, fem_damping_record, optimum_record
 
 METHODS = ("nlopt", "space-mapping")
 
@@ -43,41 +44,12 @@ def register(subparsers) -> None:
     parser.set_defaults(handler=run)
 
 
-def optimum_record(optimum: Optimum, **counts) -> dict:
-    """The JSON keys of SPEC section 8 for one optimum."""
-    plate = optimum.plate
-    return {
-        **geometry_record(plate),
-        "w_dyn_um": optimum.deflection / UM,
-        "f_r_khz": optimum.frequency / KHZ,
-        "constraint_active": optimum.constraint_active,
-        "status": optimum.status,
-        **counts,
-    }
-
-
 def _fem_model(args):
     """The cached, parallel FEM at --q and --voltage (default mesh)."""
-    from ..evaluation_cache import EvaluationCache
-    from ..fem_evaluations import FemModel
+    from workflow.execution.cache import EvaluationCache
+    from workflow.optimise.fem_model import FemModel
 
     return FemModel(q=args.q, voltage=args.voltage, cache=EvaluationCache(), progress=not args.json)
-
-
-def damped_fem_optimum(posterior, problem, fem_model, method: str):
-    """The FEM optimum with the posterior-median Q(v), and the damping keys of its best mode.
-
-    The fine model is the FEM with Q(v) solved self-consistently on each geometry's best
-    mode; the coarse model (space mapping, and the direct run's start) is the beam model
-    with the same law.  ``fem_model`` evaluates at ``problem.voltage``.
-    """
-    from ..damping.design import damped_model
-
-    law = posterior.median_law()
-    fine = damped_model(law, problem.voltage, model="fem", fem_model=fem_model)
-    found = optimise_fem(problem, fine, method, coarse_model=damped_model(law, problem.voltage))
-    (result,) = fem_model.results(found.optimum.plate)
-    return found, fem_damping_record(posterior, result)
 
 
 def run(args) -> dict:
@@ -86,7 +58,8 @@ def run(args) -> dict:
     for ceramic_thickness in ceramic_thicknesses(args):
         problem = design_problem(args, ceramic_thickness)
         if args.model == "analytical" and posterior is not None:
-            optimum, extra = damped_optimum(posterior, problem)
+            optimum = damped_optimum(posterior.median_law(), problem)
+            extra = damped_optimum_record(posterior, optimum)
             records.append(optimum_record(optimum, coarse_evaluations=optimum.evaluations, **extra))
         elif args.model == "analytical":
             optimum = optimise_analytical(problem, q=args.q)
@@ -96,7 +69,8 @@ def run(args) -> dict:
             if posterior is None:
                 found = optimise_fem(problem, _fem_model(args), args.method)
             else:
-                found, extra = damped_fem_optimum(posterior, problem, _fem_model(args), args.method)
+                found, result = damped_fem_optimum(posterior.median_law(), problem, _fem_model(args), args.method)
+                extra = fem_damping_record(posterior, result)
             counts = dict(
                 method=found.method, fine_evaluations=found.fine_evaluations, coarse_evaluations=found.coarse_evaluations
             )

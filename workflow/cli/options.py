@@ -1,13 +1,17 @@
-"""Command-line options shared by several commands, and their conversion to SI."""
+"""Command-line options shared by several commands, and their conversion to SI.
+
+The one module that command modules share: no command module imports another.
+"""
 
 import argparse
 import math
 
-from .. import materials
-from ..errors import GeometryError
-from ..optimize import DesignProblem
-from ..plate import ORIGINAL_PLATE, Plate, check_design_space
-from ..units import MM
+from workflow.damping.posterior import load_posterior
+from workflow.errors import GeometryError, TactileError
+from workflow.models import materials
+from workflow.models.plate import ORIGINAL_PLATE, Plate, check_design_space
+from workflow.optimise.problem import DesignProblem
+from workflow.units import MM
 
 MODELS = ("analytical", "fem")
 
@@ -109,11 +113,50 @@ def design_problem(args, ceramic_thickness: float) -> DesignProblem:
     )
 
 
-def geometry_record(plate: Plate) -> dict:
-    """The geometry keys of the JSON contract, in mm."""
-    return {
-        "lambda_mm": float(plate.wavelength) / MM,
-        "h_i_mm": float(plate.resonator_thickness) / MM,
-        "h_p_mm": float(plate.ceramic_thickness) / MM,
-        "b_mm": float(plate.width) / MM,
-    }
+def add_json_flag(parser: argparse.ArgumentParser) -> None:
+    """The common ``--json`` flag."""
+    parser.add_argument("--json", action="store_true", help="print one JSON object on the last line of stdout")
+
+
+def add_damping_option(parser: argparse.ArgumentParser) -> None:
+    """The ``--damping POSTERIOR`` option: design with the fitted Q(v) instead of a constant Q."""
+    parser.add_argument(
+        "--damping",
+        metavar="POSTERIOR",
+        help="posterior.npz (or its folder) from 'tactile fit-damping': use the posterior-median Q(v) law, "
+        "solved self-consistently, instead of a constant Q",
+    )
+
+
+def load_damping(args):
+    """The :class:`~workflow.damping.posterior.DampingPosterior` named by ``--damping``, or None."""
+    path = getattr(args, "damping", None)
+    return None if path is None else load_posterior(path)
+
+
+def add_bench_arguments(parser) -> None:
+    """Flags that configure a simulated bench (shared with ``tactile measure --simulate``)."""
+    group = parser.add_argument_group("simulated bench")
+    group.add_argument("--seed", type=int, default=0, help="seed of the measurement noise (default 0)")
+    group.add_argument("--drop-rate", type=float, default=0.0, help="probability of a dropped reply (default 0)")
+    group.add_argument("--garble-rate", type=float, default=0.0, help="probability of a garbled reply (default 0)")
+    group.add_argument("--disconnect-at", type=int, default=None, metavar="N",
+                       help="cut the line at the N-th command (once; default never)")
+    group.add_argument("--bench-limit", type=float, default=None, metavar="VOLTS",
+                       help="the simulated generator's own limit, peak volts across the ceramics (default 30)")
+
+
+def bench_settings(args):
+    """BenchSettings from the flags of :func:`add_bench_arguments` (and ``--amplifier-gain`` if present)."""
+    from instruments.drivers.amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT, DEFAULT_GAIN
+    from instruments.simulator import FaultSettings, default_bench_settings
+
+    try:
+        faults = FaultSettings(args.drop_rate, args.garble_rate, args.disconnect_at, seed=args.seed)
+    except ValueError as error:
+        raise TactileError(f"bad fault flag: {error}") from None
+    limit = DEFAULT_CERAMIC_VOLTAGE_LIMIT if args.bench_limit is None else args.bench_limit
+    if not limit > 0:
+        raise TactileError(f"--bench-limit must be positive, got {limit:g}")
+    gain = getattr(args, "amplifier_gain", DEFAULT_GAIN)
+    return default_bench_settings(seed=args.seed, faults=faults, ceramic_voltage_limit=limit, amplifier_gain=gain)

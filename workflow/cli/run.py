@@ -3,12 +3,12 @@
 import sys
 from pathlib import Path
 
-from ..config import load_config, to_toml
-from ..evaluation_cache import EvaluationCache
-from ..pipeline import RunContext, run_steps
-from ..steps import STEPS
-from ..report import write_report
-from . import add_json_flag
+from workflow.cli.options import add_json_flag
+from workflow.execution.cache import EvaluationCache
+from workflow.pipeline.config import load_config, to_toml
+from workflow.pipeline.report import write_report
+from workflow.pipeline.runner import RunContext, run_steps
+from workflow.pipeline.steps import STEPS
 
 
 def register(subparsers) -> None:
@@ -41,7 +41,7 @@ def run(args):
         cache=EvaluationCache() if config["run"]["cache"] else None,
     )
     if context.scheduler is not None:
-        from ..parallel import connect
+        from workflow.execution.parallel import connect
 
         connect(context.scheduler).close()  # fail before any step, not in the middle of the run
     run_steps(context, STEPS)

@@ -3,8 +3,7 @@
 import json
 import signal
 
-from ..errors import TactileError
-from . import add_json_flag
+from workflow.cli.options import add_bench_arguments, add_json_flag, bench_settings
 
 
 def register(subparsers) -> None:
@@ -22,39 +21,11 @@ def register(subparsers) -> None:
     parser.set_defaults(handler=run)
 
 
-def add_bench_arguments(parser) -> None:
-    """Flags that configure a simulated bench (shared with ``tactile measure --simulate``)."""
-    group = parser.add_argument_group("simulated bench")
-    group.add_argument("--seed", type=int, default=0, help="seed of the measurement noise (default 0)")
-    group.add_argument("--drop-rate", type=float, default=0.0, help="probability of a dropped reply (default 0)")
-    group.add_argument("--garble-rate", type=float, default=0.0, help="probability of a garbled reply (default 0)")
-    group.add_argument("--disconnect-at", type=int, default=None, metavar="N",
-                       help="cut the line at the N-th command (once; default never)")
-    group.add_argument("--bench-limit", type=float, default=None, metavar="VOLTS",
-                       help="the simulated generator's own limit, peak volts across the ceramics (default 30)")
-
-
-def bench_settings(args):
-    """BenchSettings from the flags of :func:`add_bench_arguments` (and ``--amplifier-gain`` if present)."""
-    from instruments.amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT, DEFAULT_GAIN
-    from instruments.simulator import FaultSettings, default_bench_settings
-
-    try:
-        faults = FaultSettings(args.drop_rate, args.garble_rate, args.disconnect_at, seed=args.seed)
-    except ValueError as error:
-        raise TactileError(f"bad fault flag: {error}") from None
-    limit = DEFAULT_CERAMIC_VOLTAGE_LIMIT if args.bench_limit is None else args.bench_limit
-    if not limit > 0:
-        raise TactileError(f"--bench-limit must be positive, got {limit:g}")
-    gain = getattr(args, "amplifier_gain", DEFAULT_GAIN)
-    return default_bench_settings(seed=args.seed, faults=faults, ceramic_voltage_limit=limit, amplifier_gain=gain)
-
-
 def run(args):
     from instruments.simulator import Bench
     from instruments.simulator.physics import working_point_velocity
     from instruments.simulator.ptyserver import open_ptys, serve
-    from workflow.materials import DESIGN_VOLTAGE, PLATE_Q
+    from workflow.models.materials import DESIGN_VOLTAGE, PLATE_Q
 
     settings = bench_settings(args)
     if args.pty:

@@ -22,10 +22,10 @@ import emcee
 import numpy as np
 from scipy import optimize
 
-from .laws import LAWS
-from .likelihood import FitData, fit_data, log_probability, pointwise_log_likelihood
-from .logs import CampaignLog, drop_short_sweeps
-from .posterior import DampingPosterior
+from workflow.damping.laws import LAWS
+from workflow.damping.likelihood import FitData, fit_data, log_probability, pointwise_log_likelihood
+from workflow.damping.logs import CampaignLog, drop_short_sweeps
+from workflow.damping.posterior import DampingPosterior
 
 DEFAULT_LAWS = ("quadratic", "linear")
 """The laws sampled by default; every law of :data:`~workflow.damping.laws.LAWS` gets a MAP and a BIC."""

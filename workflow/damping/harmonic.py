@@ -16,7 +16,7 @@ safeguarded Newton iteration, several times faster (the fit's inner loop).
 
 import numpy as np
 
-from ..errors import TactileError
+from workflow.errors import TactileError
 
 
 class HarmonicSolveError(TactileError):

@@ -24,9 +24,9 @@ from typing import Tuple
 
 import numpy as np
 
-from .harmonic import self_consistent_amplitude_newton
-from .laws import LAWS, parameter_names
-from .logs import CampaignLog
+from workflow.damping.harmonic import self_consistent_amplitude_newton
+from workflow.damping.laws import LAWS, parameter_names
+from workflow.damping.logs import CampaignLog
 
 SAMPLED_LAW_PARAMETERS = {"q0": "ln_q0", "alpha": "alpha"}
 """Law parameter -> the coordinate it is sampled in (Q0 in log, alpha linear >= 0)."""

@@ -16,8 +16,8 @@ from typing import Sequence, Tuple
 
 import numpy as np
 
-from .. import logformat
-from ..errors import InputFileError
+from workflow import logformat
+from workflow.errors import InputFileError
 
 _QUANTITY_STEMS = {
     logformat.FREQUENCY: ("frequency", "freq"),

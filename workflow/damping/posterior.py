@@ -11,8 +11,8 @@ from typing import Dict
 
 import numpy as np
 
-from ..errors import InputFileError
-from .laws import LAWS, parameter_names
+from workflow.damping.laws import LAWS, parameter_names
+from workflow.errors import InputFileError
 
 POSTERIOR_FILE = "posterior.npz"
 """File name of the posterior in a fit's output folder."""

@@ -10,10 +10,10 @@ from typing import Sequence
 
 import numpy as np
 
-from .. import logformat
-from .harmonic import self_consistent_amplitude_newton
-from .laws import QuadraticLoss
-from .logs import CampaignLog
+from workflow import logformat
+from workflow.damping.harmonic import self_consistent_amplitude_newton
+from workflow.damping.laws import QuadraticLoss
+from workflow.damping.logs import CampaignLog
 
 TRUE_LAW = QuadraticLoss(q0=150.0, alpha=0.234)
 """A glued-plate-like law: Q(0) = 150, Q = 54 near 0.225 m/s."""

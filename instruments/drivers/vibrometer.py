@@ -1,0 +1,101 @@
+"""Driver for the laser vibrometer: Polytec-style ``Get``/``Set`` lines plus the lock-in readout.
+
+Protocol in ``docs/instruments.md``.  Decoder ranges travel as ``<n>mm/s/V``; the driver
+speaks SI (m/s per volt).  An over-range readout is returned flagged, never as a value.
+"""
+
+import re
+from dataclasses import dataclass
+
+from instruments.drivers.base import LineInstrument, control, measurement, parse_with
+from instruments.drivers.errors import GarbledReply, InstrumentError
+
+FULL_SCALE_OUTPUT = 10.0
+"""Decoder analog output at full scale [V]: full-scale velocity = range x 10 V."""
+_RANGE = re.compile(r"(\d+(?:\.\d+)?)mm/s/V", re.IGNORECASE)
+_STATUS = {"OK": False, "OVER": True}
+
+
+def parse_range(text: str) -> float:
+    """``25mm/s/V`` -> 0.025 [m/s/V]."""
+    match = _RANGE.fullmatch(text.strip())
+    if not match:
+        raise ValueError(text)
+    return float(match.group(1)) * 1e-3
+
+
+def format_range(m_s_v: float) -> str:
+    """0.025 [m/s/V] -> ``25mm/s/V``."""
+    return f"{m_s_v * 1e3:g}mm/s/V"
+
+
+def full_scale(decoder_range: float) -> float:
+    """Largest readable velocity amplitude [m/s] on ``decoder_range`` [m/s/V]."""
+    return decoder_range * FULL_SCALE_OUTPUT
+
+
+@dataclass(frozen=True)
+class VelocityReading:
+    """One lock-in readout at the drive frequency.
+
+    Attributes
+    ----------
+    amplitude : float
+        Peak velocity amplitude [m/s] (the full-scale value when ``over_range``).
+    phase_deg : float
+        Phase of the velocity relative to the drive [deg].
+    over_range : bool
+        The velocity exceeded the decoder range: ``amplitude`` is not a measurement.
+    """
+
+    amplitude: float
+    phase_deg: float
+    over_range: bool
+
+
+def _parse_reading(reply: str) -> VelocityReading:
+    amplitude, phase, status = reply.split(",")
+    reading = VelocityReading(float(amplitude), float(phase), _STATUS[status.strip().upper()])
+    if not reading.amplitude >= 0:
+        raise ValueError(reply)
+    return reading
+
+
+class Vibrometer(LineInstrument):
+    """A vibrometer controller with velocity decoder 1 and the lock-in readout, on an open serial port."""
+
+    READOUT = "Get,LockIn,0,Velocity"
+
+    def __init__(self, port):
+        super().__init__(port, "vibrometer")
+
+    controller = measurement("GetDevInfo,Controller,0,Name", "Controller name (str).")
+    version = measurement("GetDevInfo,Controller,0,Version", "Controller firmware (str).")
+    decoder = measurement("GetDevInfo,VeloDec,1,Name", "Velocity decoder name (str).")
+    ranges = measurement(
+        "GetDevInfo,VeloDec,1,Ranges",
+        "Available decoder ranges [m/s/V], ascending (list of float).",
+        parse=lambda reply: sorted(parse_range(item) for item in reply.split(";")),
+    )
+    decoder_range = control(
+        "Get,VeloDec,1,Range", "Set,VeloDec,1,Range,{}", "Velocity decoder range [m/s/V] (float).",
+        parse=parse_range, format=format_range,
+    )
+
+    def query(self, command: str) -> str:
+        """Send ``command``; its reply, or :class:`InstrumentError` for an ``Error,...`` reply."""
+        reply = super().query(command)
+        if reply.startswith("Error,"):
+            raise InstrumentError(f"{self._where()} answered {reply!r} to {command!r}")
+        return reply
+
+    def set(self, command: str) -> None:
+        """Send a ``Set`` line and check that the acknowledged value is the one sent."""
+        sent = command.rsplit(",", 1)[1]
+        reply = self.query(command)
+        if reply.strip().lower() != sent.lower():
+            raise GarbledReply(f"{self._where()}: acknowledged {reply!r} to {command!r}")
+
+    def read_velocity(self) -> VelocityReading:
+        """Velocity amplitude and phase at the drive frequency, flagged when over range."""
+        return parse_with(_parse_reading, self.READOUT, self.query(self.READOUT), self._where())

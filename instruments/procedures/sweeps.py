@@ -1,0 +1,410 @@
+"""Measurement procedures: resonance search, Q(v) campaign, deflection versus voltage.
+
+Each procedure plans its points, skips those already in its log (resume), measures the
+rest one by one, appending and fsync'ing a row per point (:mod:`.logwriter`), and shows
+a tqdm bar on stderr.  A timed-out or garbled exchange is retried a bounded number of
+times; then a clear :class:`InstrumentError` stops the run, with the log intact for a
+resume.  The generator output is switched off at the end, also after an error.
+
+Voltages are peak volts across the ceramics; the station converts them through the
+amplifier gain and refuses anything above its safety limit before sending it.
+"""
+
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from instruments.drivers.amplifier import PowerAmplifier
+from instruments.drivers.errors import CommunicationError, InstrumentError, SafetyLimitError
+from instruments.drivers.generator import FunctionGenerator
+from instruments.drivers.vibrometer import VelocityReading, Vibrometer, full_scale
+from instruments.procedures.logwriter import LogWriter, point_key
+from workflow import logformat
+
+DEFAULT_RETRIES = 3
+"""Retries of one point after a timeout or a garbled reply."""
+DEFAULT_SETTLE_TIME = 0.3
+"""Wait after changing the drive before reading the velocity [s] (Q/(pi f) is ~2 ms; the lock-in needs longer)."""
+RANGE_HEADROOM = 1.25
+"""A decoder range is used only if its full scale exceeds the last reading by this factor [-]."""
+
+
+@dataclass(frozen=True)
+class PlannedPoint:
+    """One measurement: drive at ``frequency`` [Hz] with ``voltage`` [V peak across the ceramics]."""
+
+    sweep: int
+    frequency: float
+    voltage: float
+
+
+class Station:
+    """The generator, amplifier and vibrometer of one bench, with the safety limit.
+
+    Parameters
+    ----------
+    generator : FunctionGenerator
+        Its ``max_peak_voltage`` should be the limit translated through the gain (see
+        :func:`open_station`); the station checks the limit itself as well.
+    vibrometer : Vibrometer
+    amplifier : PowerAmplifier
+    voltage_limit : float
+        Safety limit on the peak voltage across the ceramics [V].
+    retries : int
+        Retries of a point after a timeout or garbled reply.
+    settle_time : float
+        Wait after changing the drive [s].
+    clock, sleep : callable
+        Time source [s] and wait function (a simulated bench passes its own).
+    """
+
+    def __init__(
+        self,
+        generator: FunctionGenerator,
+        vibrometer: Vibrometer,
+        amplifier: PowerAmplifier,
+        voltage_limit: float,
+        retries: int = DEFAULT_RETRIES,
+        settle_time: float = DEFAULT_SETTLE_TIME,
+        clock: Callable[[], float] = time.monotonic,
+        sleep: Callable[[float], None] = time.sleep,
+    ):
+        self.generator = generator
+        self.vibrometer = vibrometer
+        self.amplifier = amplifier
+        self.voltage_limit = voltage_limit
+        self.retries = retries
+        self.settle_time = settle_time
+        self.clock = clock
+        self.sleep = sleep
+        self._voltage = None
+        self._ranges: list[float] = []
+        self._range = None
+
+    def check_voltage(self, voltage: float) -> None:
+        """Raise :class:`SafetyLimitError` if ``voltage`` [V peak across the ceramics] exceeds the limit."""
+        if not 0 <= voltage <= self.voltage_limit:
+            raise SafetyLimitError(
+                f"drive {voltage:g} V peak across the ceramics is outside 0 to the safety limit {self.voltage_limit:g} V"
+            )
+
+    def retry(self, action: Callable, what: str):
+        """``action()``, retried after timeouts and garbled replies; then :class:`InstrumentError`."""
+        for _ in range(self.retries + 1):
+            try:
+                return action()
+            except CommunicationError as error:
+                last = error
+                self.generator.discard_input()
+                self.vibrometer.discard_input()
+        raise InstrumentError(f"{what}: giving up after {self.retries + 1} attempts; last: {last}")
+
+    def identify(self) -> dict:
+        """Instrument ids for the log header."""
+        generator = self.retry(lambda: self.generator.identity, "identifying the generator")
+        vibrometer = self.retry(
+            lambda: f"{self.vibrometer.controller} {self.vibrometer.version}, decoder {self.vibrometer.decoder}",
+            "identifying the vibrometer",
+        )
+        return {"generator": generator, "vibrometer": vibrometer}
+
+    def prepare(self) -> None:
+        """Sine, no offset, output off, no queued errors; decoder on its most sensitive range."""
+
+        def configure():
+            self.generator.output = False
+            self.generator.clear()
+            self.generator.function = "SIN"
+            self.generator.offset = 0.0
+            self.generator.check_errors("configuring the output")
+            self._ranges = self.vibrometer.ranges
+            self._range = self._ranges[0]
+            self.vibrometer.decoder_range = self._range
+
+        self.retry(configure, "preparing the instruments")
+        self._voltage = None
+
+    def drive(self, frequency: float, voltage: float) -> None:
+        """Sine at ``frequency`` [Hz] with ``voltage`` [V peak across the ceramics], output on."""
+        self.check_voltage(voltage)
+        self.generator.frequency = frequency
+        if voltage != self._voltage:
+            self.generator.amplitude_vpp = self.amplifier.generator_vpp(voltage)
+            self.generator.check_errors(f"setting {voltage:g} V across the ceramics")
+            if self._voltage is None:
+                self.generator.output = True
+            self._voltage = voltage
+        self.sleep(self.settle_time)
+
+    def read_velocity(self) -> VelocityReading:
+        """A readout on a decoder range that holds it: over range steps up and measures again."""
+        while True:
+            reading = self.vibrometer.read_velocity()
+            if not reading.over_range:
+                break
+            larger = [r for r in self._ranges if r > self._range]
+            if not larger:
+                raise InstrumentError(f"vibrometer over range on its largest range {self._range * 1e3:g} mm/s/V")
+            self._set_range(larger[0])
+        holding = [r for r in self._ranges if full_scale(r) > RANGE_HEADROOM * reading.amplitude]
+        if holding and holding[0] < self._range:
+            self._set_range(holding[0])
+        return reading
+
+    def _set_range(self, decoder_range: float) -> None:
+        self.vibrometer.decoder_range = decoder_range
+        self._range = decoder_range
+
+    def measure(self, point: PlannedPoint) -> VelocityReading:
+        """Drive and read one point, with retries."""
+
+        def drive_and_read():
+            self.drive(point.frequency, point.voltage)
+            return self.read_velocity()
+
+        return self.retry(drive_and_read, f"measuring at {point.frequency:.3f} Hz, {point.voltage:g} V")
+
+    def shutdown(self) -> None:
+        """Output off (best effort: a lost connection cannot be helped here)."""
+        try:
+            self.retry(lambda: setattr(self.generator, "output", False), "switching the output off")
+        except InstrumentError:
+            pass
+        self._voltage = None
+
+
+@dataclass(frozen=True)
+class ProcedureResult:
+    """What a procedure did.
+
+    Attributes
+    ----------
+    path : Path
+        The log.
+    procedure : str
+    planned, measured, resumed : int
+        Planned points, points measured in this run, points found in the log.
+    truncated_bytes : int
+        Bytes of an unterminated last line removed on resume.
+    summary : dict
+        Procedure-specific results (JSON-able).
+    """
+
+    path: Path
+    procedure: str
+    planned: int
+    measured: int
+    resumed: int
+    truncated_bytes: int
+    summary: dict
+
+
+def _measure_points(station: Station, log: LogWriter, points: list[PlannedPoint], label: str) -> int:
+    """Measure the points not yet in ``log``; returns how many were measured."""
+    todo = [p for p in points if point_key(p.sweep, p.frequency, p.voltage) not in log.keys]
+    stamps = [float(row[logformat.TIMESTAMP]) for row in log.rows if row[logformat.TIMESTAMP]]
+    offset = max(stamps, default=0.0)
+    start = station.clock()
+    with tqdm(total=len(points), initial=len(points) - len(todo), desc=label, unit="pt", file=sys.stderr, disable=None) as bar:
+        for point in todo:
+            reading = station.measure(point)
+            log.append(
+                {
+                    logformat.FREQUENCY: point.frequency,
+                    logformat.DRIVE_VOLTAGE: point.voltage,
+                    logformat.VELOCITY: reading.amplitude,
+                    logformat.SWEEP: point.sweep,
+                    logformat.TIMESTAMP: offset + station.clock() - start,
+                    logformat.PHASE: reading.phase_deg,
+                }
+            )
+            bar.update()
+    return len(todo)
+
+
+def _run(station: Station, path, procedure: str, plan: dict, voltages, stages: Callable, metadata: dict, restart: bool,
+         fsync: bool):
+    """Common frame: safety check of ``voltages``, identify, open/resume the log, measure each stage's points.
+
+    ``stages`` yields lists of points; it may look at the log's rows (adaptive plans).
+    Returns (log rows, counts) for the summary.
+    """
+    for voltage in voltages:
+        station.check_voltage(voltage)
+    ids = station.identify()
+    header = {
+        "procedure": procedure,
+        **ids,
+        "amplifier_gain": station.amplifier.gain,
+        "ceramic_voltage_limit_v": station.voltage_limit,
+        **{f"plan_{key}": value for key, value in plan.items()},
+        **metadata,
+    }
+    with LogWriter(path, header, restart=restart, fsync=fsync) as log:
+        resumed = len(log.rows)
+        planned = measured = 0
+        station.prepare()
+        try:
+            for points in stages(log):
+                planned += len(points)
+                measured += _measure_points(station, log, points, procedure)
+        finally:
+            station.shutdown()
+        return log.rows, dict(path=Path(path), procedure=procedure, planned=planned, measured=measured,
+                              resumed=resumed, truncated_bytes=log.truncated_bytes)
+
+
+def _sweep_rows(rows: list[dict], sweep: int) -> tuple[np.ndarray, np.ndarray]:
+    chosen = [row for row in rows if row[logformat.SWEEP] == str(sweep)]
+    frequency = np.array([float(row[logformat.FREQUENCY]) for row in chosen])
+    velocity = np.array([float(row[logformat.VELOCITY]) for row in chosen])
+    order = np.argsort(frequency)
+    return frequency[order], velocity[order]
+
+
+def peak_of(frequency: np.ndarray, velocity: np.ndarray) -> tuple[float, float]:
+    """Peak of a sampled resonance curve by a parabola through the largest sample and its neighbours.
+
+    Returns (frequency [Hz], velocity [m/s]).
+    """
+    i = int(np.clip(np.argmax(velocity), 1, len(velocity) - 2))
+    f, v = frequency[i - 1 : i + 2], velocity[i - 1 : i + 2]
+    a, b, c = np.polyfit(f - f[1], v, 2)
+    if a >= 0:
+        j = int(np.argmax(velocity))
+        return float(frequency[j]), float(velocity[j])
+    shift = float(np.clip(-b / (2 * a), f[0] - f[1], f[2] - f[1]))
+    return float(f[1] + shift), float(c + b * shift + a * shift**2)
+
+
+def half_power_bandwidth(frequency: np.ndarray, velocity: np.ndarray, peak: float) -> float | None:
+    """Width [Hz] between the interpolated crossings of peak/sqrt(2), or None if the sweep misses one."""
+    level = peak / np.sqrt(2)
+    above = np.nonzero(velocity >= level)[0]
+    if above.size == 0 or above[0] == 0 or above[-1] == len(velocity) - 1:
+        return None
+    lo, hi = above[0], above[-1]
+    f_low = np.interp(level, [velocity[lo - 1], velocity[lo]], [frequency[lo - 1], frequency[lo]])
+    f_high = np.interp(level, [velocity[hi + 1], velocity[hi]], [frequency[hi + 1], frequency[hi]])
+    return float(f_high - f_low)
+
+
+@dataclass(frozen=True)
+class ResonancePlan:
+    """Coarse sweep (sweep 0) over [start, stop], then a fine sweep (sweep 1) of +-2 coarse steps around its peak.
+
+    Attributes
+    ----------
+    start, stop : float
+        Coarse sweep bounds [Hz].
+    coarse_points, fine_points : int
+    voltage : float
+        Drive [V peak across the ceramics]; small, so that Q is near its low-velocity value.
+    """
+
+    start: float = 25e3
+    stop: float = 40e3
+    coarse_points: int = 61
+    fine_points: int = 41
+    voltage: float = 2.0
+
+
+def resonance_search(station: Station, path, plan: ResonancePlan = ResonancePlan(), metadata: dict | None = None,
+                     restart: bool = False, fsync: bool = True) -> ProcedureResult:
+    """Find the resonance; summary keys ``resonance_frequency_hz``, ``peak_velocity_m_s``, ``q_estimate``."""
+    coarse = np.linspace(plan.start, plan.stop, plan.coarse_points)
+    step = coarse[1] - coarse[0]
+
+    def stages(log):
+        yield [PlannedPoint(0, f, plan.voltage) for f in coarse]
+        centre, _ = peak_of(*_sweep_rows(log.rows, 0))
+        yield [PlannedPoint(1, f, plan.voltage) for f in np.linspace(centre - 2 * step, centre + 2 * step, plan.fine_points)]
+
+    rows, counts = _run(station, path, "resonance", vars(plan), [plan.voltage], stages, metadata or {}, restart, fsync)
+    frequency, velocity = _sweep_rows(rows, 1)
+    f_r, v_peak = peak_of(frequency, velocity)
+    bandwidth = half_power_bandwidth(frequency, velocity, v_peak)
+    summary = {
+        "resonance_frequency_hz": f_r,
+        "peak_velocity_m_s": v_peak,
+        "q_estimate": f_r / bandwidth if bandwidth else None,
+    }
+    return ProcedureResult(**counts, summary=summary)
+
+
+@dataclass(frozen=True)
+class CampaignPlan:
+    """Q(v) campaign: one sweep per voltage (sweep id = index) over centre +- span/2.
+
+    Attributes
+    ----------
+    center_frequency : float
+        [Hz], usually from :func:`resonance_search`.
+    span : float
+        [Hz]
+    points_per_sweep : int
+    voltages : tuple of float
+        [V peak across the ceramics]
+    """
+
+    center_frequency: float
+    span: float = 1600.0
+    points_per_sweep: int = 51
+    voltages: tuple = (2.5, 5.0, 7.5, 10.0, 12.5, 15.0)
+
+    def points(self) -> list[PlannedPoint]:
+        half = self.span / 2
+        frequencies = np.linspace(self.center_frequency - half, self.center_frequency + half, self.points_per_sweep)
+        return [PlannedPoint(sweep, f, v) for sweep, v in enumerate(self.voltages) for f in frequencies]
+
+
+def q_campaign(station: Station, path, plan: CampaignPlan, metadata: dict | None = None, restart: bool = False,
+               fsync: bool = True) -> ProcedureResult:
+    """Frequency sweeps at several voltages; summary ``sweeps``: voltage, peak frequency and velocity, Q estimate."""
+    points = plan.points()
+    rows, counts = _run(station, path, "campaign", vars(plan), plan.voltages, lambda log: [points], metadata or {}, restart, fsync)
+    sweeps = []
+    for sweep, voltage in enumerate(plan.voltages):
+        frequency, velocity = _sweep_rows(rows, sweep)
+        f_peak, v_peak = peak_of(frequency, velocity)
+        bandwidth = half_power_bandwidth(frequency, velocity, v_peak)
+        sweeps.append({"sweep": sweep, "voltage_v": voltage, "peak_frequency_hz": f_peak, "peak_velocity_m_s": v_peak,
+                       "q_estimate": f_peak / bandwidth if bandwidth else None})
+    return ProcedureResult(**counts, summary={"sweeps": sweeps})
+
+
+@dataclass(frozen=True)
+class VoltageSweepPlan:
+    """Deflection versus voltage at a fixed frequency (sweep 0).
+
+    Attributes
+    ----------
+    frequency : float
+        [Hz], usually the resonance.
+    voltages : tuple of float
+        [V peak across the ceramics]
+    """
+
+    frequency: float
+    voltages: tuple = tuple(float(v) for v in range(1, 16))
+
+
+def voltage_sweep(station: Station, path, plan: VoltageSweepPlan, metadata: dict | None = None, restart: bool = False,
+                  fsync: bool = True) -> ProcedureResult:
+    """Velocity and deflection w = v / (2 pi f) at each voltage; summary lists ``voltage_v``, ``deflection_um``."""
+    points = [PlannedPoint(0, plan.frequency, v) for v in plan.voltages]
+    rows, counts = _run(station, path, "voltage-sweep", vars(plan), plan.voltages, lambda log: [points], metadata or {}, restart, fsync)
+    voltage = [float(row[logformat.DRIVE_VOLTAGE]) for row in rows]
+    deflection = [float(row[logformat.VELOCITY]) / (2 * np.pi * float(row[logformat.FREQUENCY])) / 1e-6 for row in rows]
+    return ProcedureResult(**counts, summary={"voltage_v": voltage, "deflection_um": deflection})
+
+
+def open_station(generator_port, vibrometer_port, amplifier: PowerAmplifier, voltage_limit: float, **options) -> Station:
+    """A station on two open ports; the generator driver's limit is ``voltage_limit`` through the gain."""
+    generator = FunctionGenerator(generator_port, amplifier.generator_peak_limit(voltage_limit))
+    return Station(generator, Vibrometer(vibrometer_port), amplifier, voltage_limit, **options)

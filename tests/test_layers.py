@@ -1,0 +1,115 @@
+"""The folder tree is the architecture: imports point one way, and this test keeps them so.
+
+workflow: base <- models <- damping <- optimise <- pipeline <- cli, with execution (pool, Dask,
+cache) beside the models and below optimise.  instruments: drivers <- simulator <- procedures
+<- (pipeline, cli).  Command modules import no other command module, only ``cli.options``.
+"""
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+BASE = ("workflow", "workflow.errors", "workflow.units", "workflow.serialise", "workflow.logformat", "instruments")
+LAYER_PREFIXES = {
+    "models": "workflow.models",
+    "execution": "workflow.execution",
+    "damping": "workflow.damping",
+    "optimise": "workflow.optimise",
+    "pipeline": "workflow.pipeline",
+    "cli": "workflow.cli",
+    "drivers": "instruments.drivers",
+    "simulator": "instruments.simulator",
+    "procedures": "instruments.procedures",
+}
+ALLOWED = {
+    "base": {"base"},
+    "models": {"base", "models"},
+    "execution": {"base", "execution"},
+    "damping": {"base", "models", "damping"},
+    "optimise": {"base", "models", "execution", "damping", "optimise"},
+    "drivers": {"base", "drivers"},
+    "simulator": {"base", "models", "damping", "drivers", "simulator"},
+    "procedures": {"base", "drivers", "simulator", "procedures"},
+    "pipeline": set(LAYER_PREFIXES) - {"cli"} | {"base"},
+    "cli": set(LAYER_PREFIXES) | {"base"},
+}
+PURE_LAYERS = ("models", "execution", "damping", "optimise")
+"""Layers that never draw, parse arguments or print figures."""
+FORBIDDEN_IN_PURE = ("matplotlib", "argparse")
+
+
+def layer_of(module: str) -> str | None:
+    if module in BASE:
+        return "base"
+    if module == "workflow.__main__":
+        return "cli"
+    for layer, prefix in LAYER_PREFIXES.items():
+        if module == prefix or module.startswith(prefix + "."):
+            return layer
+    return None
+
+
+def module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def imports(path: Path) -> list[tuple[int, str]]:
+    """(line, absolute module) of every import in a file, relative ones resolved."""
+    name = module_name(path)
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            found += [(node.lineno, alias.name) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                parts = package.split(".")
+                base = ".".join(parts[: len(parts) - node.level + 1] + ([node.module] if node.module else []))
+            else:
+                base = node.module
+            found.append((node.lineno, base))
+            found += [(node.lineno, f"{base}.{alias.name}") for alias in node.names if _is_module(f"{base}.{alias.name}")]
+    return found
+
+
+def _is_module(dotted: str) -> bool:
+    path = ROOT.joinpath(*dotted.split("."))
+    return path.with_suffix(".py").is_file() or (path / "__init__.py").is_file()
+
+
+SOURCES = sorted(p for folder in ("workflow", "instruments") for p in (ROOT / folder).rglob("*.py"))
+
+
+def test_every_module_has_a_layer():
+    assert [module_name(p) for p in SOURCES if layer_of(module_name(p)) is None] == []
+
+
+@pytest.mark.parametrize("path", SOURCES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_imports_point_one_way(path):
+    here = module_name(path)
+    layer = layer_of(here)
+    wrong = []
+    for line, target in imports(path):
+        if target.split(".")[0] not in ("workflow", "instruments"):
+            if layer in PURE_LAYERS and target.split(".")[0] in FORBIDDEN_IN_PURE:
+                wrong.append(f"{path.name}:{line} imports {target} (a {layer} module must stay pure)")
+            continue
+        if target == "workflow" or target == "instruments":
+            continue
+        if layer_of(target) not in ALLOWED[layer]:
+            wrong.append(f"{path.name}:{line}: {layer} module {here} imports {target} ({layer_of(target)})")
+        if layer == "cli" and layer_of(target) == "cli" and target != "workflow.cli.options" and here != "workflow.__main__":
+            wrong.append(f"{path.name}:{line}: command module {here} imports {target}; share code through cli.options")
+    assert wrong == []
+
+
+def test_the_checker_sees_a_violation(tmp_path, monkeypatch):
+    """The rules are not vacuous: a model importing the pipeline is caught."""
+    fake = ROOT / "workflow" / "models" / "_layer_probe.py"
+    monkeypatch.setattr(Path, "read_text", lambda self, encoding=None: "from workflow.pipeline import steps\n")
+    assert imports(fake) == [(1, "workflow.pipeline"), (1, "workflow.pipeline.steps")]
+    assert layer_of("workflow.pipeline.steps") not in ALLOWED[layer_of(module_name(fake))]

@@ -1,0 +1,152 @@
+"""Evaluate one function over many items, locally or on a Dask cluster.
+
+One code path for every expensive batch (FEM grids, width sweeps, posterior propagation):
+
+    results = map_evaluations(function, items, scheduler=None)
+
+- ``scheduler=None``: a process pool over the local cores (fork start method where the
+  platform has it, so workers start in milliseconds);
+- ``scheduler="synchronous"``: in this process, one item after the other (debugging, tests
+  that count calls);
+- ``scheduler="tcp://host:port"`` (or a ``distributed.Client``): the items run on an existing
+  Dask cluster (see ``docs/scaling.md``).
+
+``function`` and the items must be picklable: a module-level function and plain data
+(frozen dataclasses are fine).  Results come back in the order of ``items`` and are the
+same numbers on every path, since the same function runs on the same inputs.
+"""
+
+import multiprocessing
+import os
+import sys
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from typing import Callable, Iterable, List, Optional
+
+from tqdm import tqdm
+
+from workflow.errors import TactileError
+
+SYNCHRONOUS = "synchronous"
+"""The ``scheduler`` value that runs every item in the calling process."""
+
+CONNECT_TIMEOUT = 10.0
+"""Seconds to wait for a Dask scheduler before giving up [s]."""
+
+
+class SchedulerError(TactileError):
+    """The Dask scheduler named by the user cannot be reached or is not an address."""
+
+
+def local_workers() -> int:
+    """Cores this process may run on [-]."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:
+        return os.cpu_count() or 1
+
+
+def map_evaluations(
+    function: Callable,
+    items: Iterable,
+    scheduler=None,
+    progress: bool = True,
+    workers: Optional[int] = None,
+    description: str = "evaluations",
+) -> List:
+    """``[function(item) for item in items]``, in parallel.
+
+    Parameters
+    ----------
+    function : callable
+        A picklable (module-level) function of one item.
+    items : iterable
+        Picklable inputs.
+    scheduler : None, "synchronous", str or distributed.Client
+        None: local process pool; "synchronous": in this process; ``"tcp://host:port"``: the
+        Dask scheduler of an existing cluster; a ``distributed.Client``: that client.
+    progress : bool
+        Show a tqdm bar on stderr (tqdm hides it when stderr is not a terminal).
+    workers : int, optional
+        Local processes (default: the cores available); ignored on a cluster.
+    description : str
+        Label of the progress bar.
+
+    Returns
+    -------
+    list
+        The results in the order of ``items``.
+
+    Raises
+    ------
+    SchedulerError
+        When the scheduler address is malformed or unreachable.
+    """
+    items = list(items)
+    bar = tqdm(total=len(items), desc=description, file=sys.stderr, disable=None if progress else True)
+    try:
+        if scheduler is None:
+            return _process_pool(function, items, workers or local_workers(), bar)
+        if scheduler == SYNCHRONOUS:
+            return _in_process(function, items, bar)
+        return _dask(function, items, scheduler, bar)
+    finally:
+        bar.close()
+
+
+def _in_process(function, items, bar):
+    results = []
+    for item in items:
+        results.append(function(item))
+        bar.update()
+    return results
+
+
+def _process_pool(function, items, workers, bar):
+    if workers <= 1 or len(items) <= 1:
+        return _in_process(function, items, bar)
+    methods = multiprocessing.get_all_start_methods()
+    context = multiprocessing.get_context("fork" if "fork" in methods else None)
+    with ProcessPoolExecutor(max_workers=min(workers, len(items)), mp_context=context) as pool:
+        futures = {pool.submit(function, item): index for index, item in enumerate(items)}
+        results = [None] * len(items)
+        for future in as_completed(futures):
+            results[futures[future]] = future.result()
+            bar.update()
+    return results
+
+
+def _dask(function, items, scheduler, bar):
+    from distributed import Client
+
+    if isinstance(scheduler, Client):
+        return _gather(scheduler, function, items, bar)
+    with connect(scheduler) as client:
+        return _gather(client, function, items, bar)
+
+
+def connect(address: str):
+    """A ``distributed.Client`` on the scheduler at ``address`` (close it after use).
+
+    Raises
+    ------
+    SchedulerError
+        When ``address`` is not a scheduler address or cannot be reached.
+    """
+    from distributed import Client
+
+    if not isinstance(address, str) or "://" not in address:
+        raise SchedulerError(f"--scheduler {address!r} is not a Dask scheduler address; expected e.g. tcp://host:8786")
+    try:
+        return Client(address, timeout=CONNECT_TIMEOUT, set_as_default=False)
+    except (OSError, TimeoutError, ValueError) as error:
+        raise SchedulerError(f"cannot reach the Dask scheduler at {address}: {error}") from None
+
+
+def _gather(client, function, items, bar):
+    """Submit every item, collect in order (the bar advances as the leading results arrive)."""
+    futures = client.map(function, items, pure=False)
+    results = []
+    for future in futures:
+        results.append(future.result())
+        bar.update()
+    return results

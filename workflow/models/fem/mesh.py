@@ -1,0 +1,161 @@
+"""Structured brick mesh of one quarter of the plate (x >= 0, y >= 0).
+
+Element edges follow the ceramic edges, so the ceramic layer is made of whole
+elements and the gaps between ceramics (and the free end of the resonator) are empty.
+z = 0 is the free face of the ceramic layer, z = h_p + h_i the top face of the resonator.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from workflow.models.fem.elements import BRICKS, ReferenceBrick
+from workflow.models.fem.settings import FemSettings
+from workflow.models.plate import Plate
+
+RESONATOR, CERAMIC = 0, 1
+"""Material ids of the elements."""
+
+
+@dataclass(frozen=True, eq=False)
+class BrickMesh:
+    """Quadratic bricks on a tensor-product grid, some grid cells removed.
+
+    Attributes
+    ----------
+    brick : ReferenceBrick
+        The element type.
+    edges : tuple of 3 arrays
+        Element boundaries along x, y, z [m].
+    cells : (n, 3) int array
+        Grid indices (i_x, i_y, i_z) of the kept elements.
+    material : (n,) int array
+        RESONATOR or CERAMIC per element.
+    polarity : (n,) float array
+        +1/-1 poling sign of ceramic elements, 0 for the resonator [-].
+    node_number : 3D int array
+        Node number on the (2 n_x + 1, 2 n_y + 1, 2 n_z + 1) grid of quadratic nodes, -1 if unused.
+    connectivity : (n, n_local) int array
+        Node numbers of each element in the order of ``brick.local_nodes``.
+    """
+
+    brick: ReferenceBrick
+    edges: tuple
+    cells: np.ndarray
+    material: np.ndarray
+    polarity: np.ndarray
+    node_number: np.ndarray
+    connectivity: np.ndarray
+
+    @property
+    def n_nodes(self) -> int:
+        return int(self.node_number.max()) + 1
+
+    @property
+    def n_dofs(self) -> int:
+        return 3 * self.n_nodes
+
+    @property
+    def sizes(self) -> np.ndarray:
+        """Element edge lengths, shape (n, 3) [m]."""
+        return np.stack([np.diff(self.edges[axis])[self.cells[:, axis]] for axis in range(3)], axis=1)
+
+    def node_grid_coordinates(self, axis: int) -> np.ndarray:
+        """Coordinates of the quadratic nodes along one axis (corners and midpoints) [m]."""
+        edges = self.edges[axis]
+        grid = np.empty(2 * len(edges) - 1)
+        grid[0::2] = edges
+        grid[1::2] = (edges[:-1] + edges[1:]) / 2
+        return grid
+
+    @property
+    def coordinates(self) -> np.ndarray:
+        """Node coordinates, shape (n_nodes, 3) [m]."""
+        grids = np.meshgrid(*(self.node_grid_coordinates(axis) for axis in range(3)), indexing="ij")
+        used = self.node_number >= 0
+        coordinates = np.empty((self.n_nodes, 3))
+        coordinates[self.node_number[used]] = np.stack([grid[used] for grid in grids], axis=1)
+        return coordinates
+
+
+def _subdivide(breakpoints, counts) -> np.ndarray:
+    pieces = [np.linspace(a, b, n + 1)[:-1] for a, b, n in zip(breakpoints[:-1], breakpoints[1:], counts)]
+    return np.concatenate(pieces + [breakpoints[-1:]])
+
+
+def x_segments(plate: Plate):
+    """Breakpoints along x of the quarter and which segments carry a ceramic.
+
+    Returns
+    -------
+    breakpoints : array
+        0, ceramic and gap edges, L/2 [m].
+    ceramic_index : int array
+        For each segment, the index into ``plate.ceramic_centres`` of its ceramic, -1 for a gap or the free end.
+    """
+    centres = np.asarray(plate.ceramic_centres, dtype=float).ravel()
+    half_length = float(plate.ceramic_length) / 2
+    breakpoints, ceramic_index = [0.0], []
+    for index in np.flatnonzero(centres >= 0):
+        if centres[index] > 0:
+            breakpoints.append(centres[index] - half_length)
+            ceramic_index.append(-1)
+        breakpoints.append(centres[index] + half_length)
+        ceramic_index.append(index)
+    breakpoints.append(float(plate.length) / 2)
+    ceramic_index.append(-1)
+    return np.array(breakpoints), np.array(ceramic_index)
+
+
+def quarter_plate_mesh(plate: Plate, settings: FemSettings) -> BrickMesh:
+    """The structured mesh of the quarter plate for ``settings``."""
+    breakpoints, ceramic_index = x_segments(plate)
+    lengths = np.diff(breakpoints)
+    element_length = float(plate.ceramic_length) / settings.elements_per_ceramic
+    counts = np.where(
+        ceramic_index >= 0,
+        np.maximum(1, np.round(lengths / element_length)),
+        settings.elements_per_gap,
+    ).astype(int)
+    free_end = len(lengths) - 1
+    counts[free_end] = max(1, int(np.ceil(lengths[free_end] / element_length - 0.25)))
+    x_edges = _subdivide(breakpoints, counts)
+    segment_of_x_cell = np.repeat(np.arange(len(counts)), counts)
+
+    h_p, h_i = float(plate.ceramic_thickness), float(plate.resonator_thickness)
+    n_layer = settings.elements_per_layer
+    z_edges = _subdivide(np.array([0.0, h_p, h_p + h_i]), [n_layer, n_layer])
+    y_edges = np.linspace(0.0, float(plate.width) / 2, settings.elements_across_half_width + 1)
+
+    grid_shape = (len(x_edges) - 1, len(y_edges) - 1, len(z_edges) - 1)
+    cells = np.stack(np.meshgrid(*(np.arange(n) for n in grid_shape), indexing="ij"), axis=-1).reshape(-1, 3)
+    cell_ceramic = ceramic_index[segment_of_x_cell[cells[:, 0]]]
+    in_ceramic_layer = cells[:, 2] < n_layer
+    keep = ~in_ceramic_layer | (cell_ceramic >= 0)
+    cells, cell_ceramic, in_ceramic_layer = cells[keep], cell_ceramic[keep], in_ceramic_layer[keep]
+    material = np.where(in_ceramic_layer, CERAMIC, RESONATOR)
+    polarity = np.where(in_ceramic_layer, np.asarray(plate.polarities)[cell_ceramic], 0).astype(float)
+
+    brick = BRICKS[settings.element]
+    grid_nodes = 2 * cells[:, None, :] + brick.local_nodes[None]  # (n, n_local, 3)
+    node_shape = tuple(2 * n + 1 for n in grid_shape)
+    flat = np.ravel_multi_index(tuple(grid_nodes.reshape(-1, 3).T), node_shape)
+    used, inverse = np.unique(flat, return_inverse=True)
+    node_number = np.full(int(np.prod(node_shape)), -1)
+    node_number[used] = np.arange(len(used))
+    return BrickMesh(
+        brick=brick,
+        edges=(x_edges, y_edges, z_edges),
+        cells=cells,
+        material=material,
+        polarity=polarity,
+        node_number=node_number.reshape(node_shape),
+        connectivity=inverse.reshape(len(cells), brick.n_nodes),
+    )
+
+
+def symmetry_dofs(mesh: BrickMesh) -> np.ndarray:
+    """Constrained dofs of the symmetry planes: u_x on x = 0 and u_y on y = 0."""
+    on_x0 = mesh.node_number[0][mesh.node_number[0] >= 0]
+    on_y0 = mesh.node_number[:, 0][mesh.node_number[:, 0] >= 0]
+    return np.concatenate([3 * on_x0, 3 * on_y0 + 1])

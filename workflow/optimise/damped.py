@@ -1,0 +1,477 @@
+"""Design with the amplitude-dependent quality factor Q(v) (SPEC section 6).
+
+At resonance the antinode deflection is proportional to Q: w = Q k V with k the
+deflection per volt and per unit of Q.  With Q = Q(v) and v = 2 pi f_r w the deflection
+solves w = Q(2 pi f_r w) k V (the iterative harmonic solve, vectorised over geometries
+and posterior draws).
+
+Calibration choice (beam model): the fitted Q(v) is the plate's physical Q, as the FEM
+and the bench use it.  The beam model's calibration :data:`~workflow.analytical.BEAM_CALIBRATION`
+corrects the beam's deflection per unit Q (a model error, constant across geometries);
+it is applied to k, never to Q.  The velocity that sets Q is the velocity of the
+calibrated deflection, so the beam and the FEM see Q(v) at the same physical velocity.
+The original plate, whose Q = 54 was measured at its 15 V working point, keeps its
+deflection by construction when Q(v) passes through Q = 54 there.
+
+Required voltage: w grows monotonically with V, and at the target deflection w* the
+velocity v* = 2 pi f_r w* is known, so V* = w* / (Q(v*) k) in closed form (FEM:
+V* = V_0 w* / D(Q(v*)), D the deflection at V_0 as a function of Q, linear in V).
+"""
+
+from dataclasses import dataclass
+from typing import Dict, Optional, Sequence
+
+import numpy as np
+
+from workflow.damping.harmonic import self_consistent_amplitude_newton, self_consistent_deflection
+from workflow.damping.laws import LAWS, law_parameters
+from workflow.damping.posterior import DampingPosterior
+from workflow.models import analytical, materials
+from workflow.models.plate import ORIGINAL_PLATE, Plate
+from workflow.optimise.fem_optimum import optimise_fem
+from workflow.optimise.maps import grid_axes
+from workflow.optimise.problem import DesignProblem, Optimum, PlateModel, maximise_deflection
+
+QUANTILES = (0.05, 0.5, 0.95)
+"""Credible-interval quantiles reported for propagated quantities."""
+
+
+def damped_deflection(plate: Plate, voltage, law):
+    """Beam-model antinode deflection at resonance with Q = Q(2 pi f_r w) [m].
+
+    Parameters
+    ----------
+    plate : Plate
+        Fields may be arrays (a batch of geometries).
+    voltage : float or array
+        Drive amplitude across the ceramics [V peak].
+    law : Q(v) law
+        Parameters may be arrays broadcasting against the plate's (e.g. draws on a new axis).
+    """
+    frequency = analytical.resonance_frequency(plate)
+    per_volt = analytical.deflection_per_volt_per_q(plate)
+    return self_consistent_amplitude_newton(per_volt * np.asarray(voltage), frequency, frequency, law)
+
+
+def required_voltage(plate: Plate, law, target: float = materials.TARGET_DEFLECTION):
+    """Beam-model drive amplitude that gives the deflection ``target`` with Q(v) [V peak].
+
+    V* = w* / (Q(2 pi f_r w*) k), k = :func:`~workflow.analytical.deflection_per_volt_per_q`.
+    """
+    frequency = analytical.resonance_frequency(plate)
+    return target / (law.quality_factor(2 * np.pi * frequency * target) * analytical.deflection_per_volt_per_q(plate))
+
+
+def fem_damped_deflection(result, law):
+    """FEM deflection of a result's best mode with Q(v), solved self-consistently [m].
+
+    Parameters
+    ----------
+    result : workflow.fem.FemResult
+        Its ``deflection_at_q(q)`` gives the best mode's deflection at the result's
+        voltage for other Q without a new solve.
+    law : Q(v) law
+    """
+    omega = 2 * np.pi * result.frequency
+    return self_consistent_deflection(result.deflection_at_q, law.quality_factor, omega)
+
+
+def fem_required_voltage(result, law, target: float = materials.TARGET_DEFLECTION):
+    """FEM drive amplitude for the deflection ``target`` with Q(v) [V peak] (the FEM is linear in V)."""
+    q_target = law.quality_factor(2 * np.pi * result.frequency * target)
+    return result.voltage * target / result.deflection_at_q(q_target)
+
+
+@dataclass
+class DampedFemModel:
+    """The FEM with Q(v) as a :data:`~workflow.optimize.PlateModel`.
+
+    Attributes
+    ----------
+    law : Q(v) law
+    fem_model : workflow.fem_evaluations.FemModel
+        Evaluates (and caches) the FEM at its own voltage and Q; the Q only picks the
+        best mode, the deflection is then solved with Q(v).
+    voltage : float
+        Drive amplitude [V peak]; the FEM's response is scaled to it (linear in V).
+    """
+
+    law: object
+    fem_model: object
+    voltage: float = materials.DESIGN_VOLTAGE
+
+    def results(self, plate: Plate):
+        return self.fem_model.results(plate)
+
+    def responses(self, plate: Plate):
+        """Deflection with Q(v) [m], frequency [Hz] and transverse indicator [-] of each plate's best mode."""
+        results = self.results(plate)
+        shape = plate.batch_shape
+        scale = self.voltage / self.fem_model.voltage
+        deflection = np.array([float(fem_damped_deflection(_ScaledResult(r, scale), self.law)) for r in results])
+        frequency = np.array([r.frequency for r in results])
+        indicator = np.array([r.best.transverse_indicator for r in results])
+        return deflection.reshape(shape), frequency.reshape(shape), indicator.reshape(shape)
+
+    def __call__(self, plate: Plate):
+        return self.responses(plate)[:2]
+
+
+@dataclass(frozen=True)
+class _ScaledResult:
+    """A FEM result seen at another voltage (the FEM is linear in V)."""
+
+    result: object
+    scale: float
+
+    @property
+    def frequency(self):
+        return self.result.frequency
+
+    @property
+    def voltage(self):
+        return self.result.voltage * self.scale
+
+    def deflection_at_q(self, q):
+        return self.scale * self.result.deflection_at_q(q)
+
+
+def damped_model(law, voltage: float = materials.DESIGN_VOLTAGE, model: str = "analytical", fem_model=None) -> PlateModel:
+    """A plate model with Q(v), usable by :func:`~workflow.optimize.maximise_deflection`.
+
+    Parameters
+    ----------
+    law : Q(v) law
+        Scalar parameters.
+    voltage : float
+        Drive amplitude [V peak].
+    model : {"analytical", "fem"}
+    fem_model : workflow.fem_evaluations.FemModel, optional
+        For ``model="fem"``; default a new uncached one at ``voltage``.
+    """
+    if model == "analytical":
+
+        def beam(plate: Plate):
+            return damped_deflection(plate, voltage, law), analytical.resonance_frequency(plate)
+
+        return beam
+    if model == "fem":
+        if fem_model is None:
+            from workflow.optimise.fem_model import FemModel
+
+            fem_model = FemModel(voltage=voltage)
+        return DampedFemModel(law, fem_model, voltage)
+    raise ValueError(f"model must be 'analytical' or 'fem', got {model!r}")
+
+
+@dataclass(frozen=True)
+class DrawTask:
+    """One posterior draw's optimisation (module-level data, picklable for process pools)."""
+
+    law_name: str
+    parameters: tuple
+    problem: DesignProblem
+    target: float
+
+
+def optimise_draw(task: DrawTask) -> tuple:
+    """(lambda [m], h_i [m], deflection [m], frequency [Hz], required voltage [V]) of one draw's beam optimum."""
+    law = LAWS[task.law_name](*task.parameters)
+    optimum = maximise_deflection(damped_model(law, task.problem.voltage), task.problem)
+    voltage = float(required_voltage(optimum.plate, law, task.target))
+    return (
+        float(optimum.plate.wavelength),
+        float(optimum.plate.resonator_thickness),
+        optimum.deflection,
+        optimum.frequency,
+        voltage,
+    )
+
+
+@dataclass(frozen=True)
+class DampedOptimum:
+    """The beam optimum of one h_p with constant Q and with Q(v), and its posterior spread.
+
+    Attributes
+    ----------
+    problem : DesignProblem
+    constant_q : Optimum
+        With the plate's constant Q (:data:`~workflow.materials.PLATE_Q`).
+    damped : Optimum
+        With the posterior-median Q(v).
+    required_voltage : float
+        Voltage for the target deflection at ``damped`` with the median law [V].
+    draws : dict
+        "wavelength", "resonator_thickness" [m], "deflection" [m], "frequency" [Hz],
+        "required_voltage" [V]: one value per posterior draw.
+    """
+
+    problem: DesignProblem
+    constant_q: Optimum
+    damped: Optimum
+    required_voltage: float
+    draws: Dict[str, np.ndarray]
+
+    def interval(self, name: str) -> np.ndarray:
+        """(p05, p50, p95) of a drawn quantity."""
+        return np.quantile(self.draws[name], QUANTILES)
+
+
+@dataclass(frozen=True)
+class DampedDesign:
+    """Result of :func:`design_with_damping`.
+
+    Attributes
+    ----------
+    posterior : DampingPosterior
+    median_law : Q(v) law
+    optima : dict
+        h_p [m] -> :class:`DampedOptimum`.
+    original_deflection : numpy.ndarray
+        Original plate at the design voltage with Q(v): one value per draw [m].
+    original_required_voltage : numpy.ndarray
+        Original plate, voltage for the target: one value per draw [V].
+    target : float
+        Target deflection [m].
+    """
+
+    posterior: DampingPosterior
+    median_law: object
+    optima: Dict[float, DampedOptimum]
+    original_deflection: np.ndarray
+    original_required_voltage: np.ndarray
+    target: float
+
+
+def design_with_damping(
+    posterior: DampingPosterior,
+    problems: Sequence[DesignProblem],
+    draws: int = 100,
+    seed: int = 0,
+    target: float = materials.TARGET_DEFLECTION,
+    scheduler=None,
+    progress: bool = False,
+) -> DampedDesign:
+    """Optimise every problem with constant Q and with Q(v), and propagate the posterior.
+
+    Parameters
+    ----------
+    posterior : DampingPosterior
+    problems : sequence of DesignProblem
+        Typically one per commercial h_p.
+    draws : int
+        Posterior draws propagated through each optimisation.
+    seed : int
+        Selects the draws.
+    target : float
+        Deflection the required voltage aims at [m].
+    scheduler : None, "synchronous", str or distributed.Client
+        Where the per-draw optimisations run (:func:`workflow.parallel.map_evaluations`).
+    progress : bool
+    """
+    from workflow.execution.parallel import map_evaluations
+    from workflow.optimise.problem import analytical_model
+
+    median = posterior.median_law()
+    drawn = posterior.draws(draws, seed)
+    names = list(law_parameters(drawn))
+    columns = [np.ravel(getattr(drawn, name)) for name in names]
+    optima = {}
+    for problem in problems:
+        tasks = [DrawTask(posterior.law_name, tuple(float(c[i]) for c in columns), problem, target) for i in range(draws)]
+        rows = np.array(map_evaluations(optimise_draw, tasks, scheduler=scheduler, progress=progress, description="Q(v) draws"))
+        damped = maximise_deflection(damped_model(median, problem.voltage), problem)
+        optima[problem.ceramic_thickness] = DampedOptimum(
+            problem=problem,
+            constant_q=maximise_deflection(analytical_model(materials.PLATE_Q, problem.voltage), problem),
+            damped=damped,
+            required_voltage=float(required_voltage(damped.plate, median, target)),
+            draws=dict(zip(("wavelength", "resonator_thickness", "deflection", "frequency", "required_voltage"), rows.T)),
+        )
+    voltage = problems[0].voltage if problems else materials.DESIGN_VOLTAGE
+    return DampedDesign(
+        posterior=posterior,
+        median_law=median,
+        optima=optima,
+        original_deflection=damped_deflection(ORIGINAL_PLATE, voltage, drawn),
+        original_required_voltage=required_voltage(ORIGINAL_PLATE, drawn, target),
+        target=target,
+    )
+
+
+@dataclass(frozen=True)
+class DampedMaps:
+    """Beam-model maps over (lambda, h_i) with Q(v) for one h_p.
+
+    Attributes
+    ----------
+    wavelength, resonator_thickness : numpy.ndarray
+        Axes [m].
+    deflection : numpy.ndarray (n_lambda, n_h)
+        Deflection at the design voltage with the median law [m].
+    frequency : numpy.ndarray (n_lambda, n_h)
+        Resonance [Hz].
+    required_voltage : numpy.ndarray (n_lambda, n_h)
+        Voltage for the target deflection with the median law [V].
+    required_voltage_interval : numpy.ndarray (3, n_lambda, n_h) or None
+        p05, p50, p95 over posterior draws [V].
+    ceramic_thickness, min_frequency, min_resonator_thickness : float
+        h_p [m], the frequency limit [Hz] and the practical h_i minimum [m], for the figure.
+    optimum : Optimum or None
+        The Q(v) optimum, marked on the figure.
+    law_label : str
+    """
+
+    wavelength: np.ndarray
+    resonator_thickness: np.ndarray
+    deflection: np.ndarray
+    frequency: np.ndarray
+    required_voltage: np.ndarray
+    required_voltage_interval: Optional[np.ndarray]
+    ceramic_thickness: float
+    min_frequency: float
+    min_resonator_thickness: float
+    optimum: Optional[Optimum]
+    law_label: str
+
+
+def damped_maps(
+    posterior: DampingPosterior,
+    problem: DesignProblem,
+    grid: int = 41,
+    draws: int = 100,
+    seed: int = 0,
+    target: float = materials.TARGET_DEFLECTION,
+    optimum: Optional[Optimum] = None,
+) -> DampedMaps:
+    """Deflection and required-voltage maps with Q(v) over the problem's (lambda, h_i) box.
+
+    The whole grid is one vectorised solve; the posterior draws add an axis.
+    """
+    from workflow.models.materials import RESONATOR_THICKNESS_RANGE
+
+    wavelength = np.linspace(*problem.wavelength_range, grid)
+    thickness = np.linspace(RESONATOR_THICKNESS_RANGE[0], problem.max_resonator_thickness, grid)
+    plate = problem.plate(wavelength[:, None], thickness[None, :])
+    median = posterior.median_law()
+    interval = None
+    if draws:
+        drawn = posterior.draws(draws, seed)
+        on_axis = LAWS[posterior.law_name](**{k: np.reshape(v, (-1, 1, 1)) for k, v in law_parameters(drawn).items()})
+        interval = np.quantile(required_voltage(plate, on_axis, target), QUANTILES, axis=0)
+    parameters = ", ".join(f"{k} = {v:.4g}" for k, v in law_parameters(median).items())
+    return DampedMaps(
+        wavelength=wavelength,
+        resonator_thickness=thickness,
+        deflection=damped_deflection(plate, problem.voltage, median),
+        frequency=np.broadcast_to(analytical.resonance_frequency(plate), (grid, grid)),
+        required_voltage=required_voltage(plate, median, target),
+        required_voltage_interval=interval,
+        ceramic_thickness=problem.ceramic_thickness,
+        min_frequency=problem.min_frequency,
+        min_resonator_thickness=problem.min_resonator_thickness,
+        optimum=optimum,
+        law_label=f"{posterior.law_name} Q(v), median: {parameters}",
+    )
+
+
+def design_summary(design: DampedDesign) -> dict:
+    """JSON-able summary of a :class:`DampedDesign` in mm, um, kHz and V (for reports)."""
+    from workflow.units import KHZ, MM, UM
+
+    def optimum_keys(optimum: Optimum) -> dict:
+        return {
+            "lambda_mm": float(optimum.plate.wavelength) / MM,
+            "h_i_mm": float(optimum.plate.resonator_thickness) / MM,
+            "w_dyn_um": optimum.deflection / UM,
+            "f_r_khz": optimum.frequency / KHZ,
+        }
+
+    def interval(values, unit) -> dict:
+        p05, p50, p95 = np.quantile(values, QUANTILES) / unit
+        return {"p05": p05, "p50": p50, "p95": p95}
+
+    optima = []
+    for h_p, optimum in design.optima.items():
+        draws = optimum.draws
+        optima.append(
+            {
+                "h_p_mm": h_p / MM,
+                "constant_q": optimum_keys(optimum.constant_q),
+                "q_of_v": dict(optimum_keys(optimum.damped), required_voltage_v=optimum.required_voltage),
+                "q_of_v_intervals": {
+                    "lambda_mm": interval(draws["wavelength"], MM),
+                    "h_i_mm": interval(draws["resonator_thickness"], MM),
+                    "w_dyn_um": interval(draws["deflection"], UM),
+                    "required_voltage_v": interval(draws["required_voltage"], 1.0),
+                },
+            }
+        )
+    return {
+        "law": design.posterior.law_name,
+        "median_law": law_parameters(design.median_law),
+        "target_um": design.target / UM,
+        "draws": int(len(design.original_deflection)),
+        "optima": optima,
+        "original_plate": {
+            "w_dyn_um": interval(design.original_deflection, UM),
+            "required_voltage_v": interval(design.original_required_voltage, 1.0),
+        },
+    }
+
+
+def damped_optimum(law, problem: DesignProblem) -> Optimum:
+    """The beam optimum with the Q(v) ``law`` solved self-consistently at ``problem.voltage``."""
+    return maximise_deflection(damped_model(law, problem.voltage), problem)
+
+
+def damped_fem_optimum(law, problem: DesignProblem, fem_model, method: str):
+    """The FEM optimum with the Q(v) ``law``, and the FEM result of its geometry.
+
+    The fine model is the FEM with Q(v) solved self-consistently on each geometry's best
+    mode; the coarse model (space mapping, and the direct run's start) is the beam model
+    with the same law.  ``fem_model`` evaluates at ``problem.voltage``.
+
+    Returns
+    -------
+    (FemOptimum, FemResult)
+    """
+    fine = damped_model(law, problem.voltage, model="fem", fem_model=fem_model)
+    found = optimise_fem(problem, fine, method, coarse_model=damped_model(law, problem.voltage))
+    (result,) = fem_model.results(found.optimum.plate)
+    return found, result
+
+
+def fem_damped_maps(posterior: DampingPosterior, problem: DesignProblem, fem_model, points: int, draws: int = 100,
+                    optimum=None) -> "DampedMaps":
+    """FEM maps with Q(v) over the Table 1 (lambda, h_i) box, like :func:`damped_maps`.
+
+    Each grid point's best mode (picked at ``fem_model.q``) gets its deflection at
+    ``fem_model.voltage`` solved self-consistently with the posterior-median Q(v), and the
+    voltage for the target deflection (median law, and p05/p50/p95 over ``draws`` posterior
+    draws), from the cached FEM results without new solves.
+    """
+    wavelength, thickness = grid_axes(points)
+    results = fem_model.results(problem.plate(*np.meshgrid(wavelength, thickness, indexing="ij")))
+    law, drawn = posterior.median_law(), posterior.draws(draws)
+    shape = (points, points)
+
+    def grid(values):
+        return np.reshape(np.array(values, dtype=float), shape + np.shape(values)[1:])
+
+    parameters = ", ".join(f"{k} = {v:.4g}" for k, v in law_parameters(law).items())
+    return DampedMaps(
+        wavelength=wavelength,
+        resonator_thickness=thickness,
+        deflection=grid([fem_damped_deflection(r, law) for r in results]),
+        frequency=grid([r.frequency for r in results]),
+        required_voltage=grid([fem_required_voltage(r, law) for r in results]),
+        required_voltage_interval=np.moveaxis(
+            grid([np.quantile(fem_required_voltage(r, drawn), QUANTILES) for r in results]), -1, 0
+        ),
+        ceramic_thickness=problem.ceramic_thickness,
+        min_frequency=problem.min_frequency,
+        min_resonator_thickness=problem.min_resonator_thickness,
+        optimum=optimum,
+        law_label=f"FEM, {posterior.law_name} Q(v), median: {parameters}",
+    )

@@ -1,0 +1,158 @@
+"""Many FEM evaluations: cached on disk by content, run in parallel, usable as a plate model.
+
+:class:`FemModel` turns :func:`workflow.fem.evaluate_fem` into a
+:data:`~workflow.optimize.PlateModel` (a batch of plates in, deflection and frequency of
+each plate's best mode out), so the optimiser, space mapping and the maps all drive the
+FEM the same way.  Every geometry is one :class:`FemTask`; tasks run through
+:func:`~workflow.evaluation_cache.cached_map`, whose key holds the model name, the plate's
+fields, Q, the voltage, the FEM settings and a hash of the FEM's source code.
+:meth:`FemModel.gradients` adds the design sensitivities of :mod:`workflow.fem.sensitivity`
+(results with tangents are cached under their own model name).
+"""
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from workflow.execution.cache import EvaluationCache, cached_map, source_version
+from workflow.models import fem, materials
+from workflow.models.fem import FemResult, FemSettings, evaluate_fem
+from workflow.models.fem.sensitivity import DESIGN_PARAMETERS, best_mode_gradients, evaluate_fem_with_tangents
+from workflow.models.plate import Plate
+
+FEM_SOURCE = str(Path(fem.__file__).parent)
+"""Directory whose sources version the cached FEM results."""
+
+
+@dataclass(frozen=True)
+class FemTask:
+    """One FEM evaluation: a scalar plate, Q [-], voltage [V], the settings and whether to add the tangents.
+
+    With ``tangents`` the result also carries the derivatives of its probe model with respect
+    to lambda and h_i (:func:`workflow.fem.sensitivity.evaluate_fem_with_tangents`).
+    """
+
+    plate: Plate
+    q: float
+    voltage: float
+    settings: FemSettings
+    tangents: bool = False
+
+
+def run_fem_task(task: FemTask) -> FemResult:
+    """Evaluate one task (module level, so that process pools and Dask can pickle it)."""
+    evaluate = evaluate_fem_with_tangents if task.tangents else evaluate_fem
+    return evaluate(task.plate, task.q, task.voltage, task.settings)
+
+
+def describe_fem_task(task: FemTask) -> dict:
+    """The cache-key content of a task (results with tangents under their own model name)."""
+    return {
+        "model": "fem+tangents" if task.tangents else "fem",
+        "plate": task.plate,
+        "q": float(task.q),
+        "voltage": float(task.voltage),
+        "settings": task.settings.as_dict(),
+        "code": source_version(FEM_SOURCE),
+    }
+
+
+def scalar_plates(plate: Plate) -> list[Plate]:
+    """The plates of a batch (array fields broadcast together), flattened in C order."""
+    names = ("wavelength", "resonator_thickness", "ceramic_thickness", "width")
+    arrays = np.broadcast_arrays(*(np.asarray(getattr(plate, name), dtype=float) for name in names))
+    return [plate.with_(**{name: float(a.flat[i]) for name, a in zip(names, arrays)}) for i in range(arrays[0].size)]
+
+
+def best_mode_values(results, shape: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Deflection [m], frequency [Hz] and transverse indicator [-] of each result's best mode, shaped ``shape``."""
+    return tuple(
+        np.array([getattr(r.best, name) for r in results]).reshape(shape)
+        for name in ("deflection", "frequency", "transverse_indicator")
+    )
+
+
+@dataclass
+class FemModel:
+    """The FEM as a batched plate model, with a disk cache and parallel evaluation.
+
+    Attributes
+    ----------
+    q : float
+        Plate quality factor [-].
+    voltage : float
+        Drive amplitude [V].
+    settings : FemSettings
+    cache : EvaluationCache or None
+        None recomputes everything.
+    scheduler : None, str or distributed.Client
+        Where batches run (see :func:`~workflow.parallel.map_evaluations`).
+    progress : bool
+        Progress bar for batches.
+    evaluations : int
+        Geometries requested so far (cached or not).
+    """
+
+    q: float = materials.PLATE_Q
+    voltage: float = materials.DESIGN_VOLTAGE
+    settings: FemSettings = field(default_factory=FemSettings)
+    cache: EvaluationCache | None = None
+    scheduler: object = None
+    progress: bool = False
+    evaluations: int = 0
+
+    def results(self, plate: Plate, with_tangents: bool = False) -> list[FemResult]:
+        """The full FEM result of every plate of the batch.
+
+        Parameters
+        ----------
+        plate : Plate
+            A batch of geometries [m].
+        with_tangents : bool
+            Also compute the derivatives of each result's probe model with respect to lambda
+            and h_i (``FemResult.tangents``; about 1.7 times the cost, cached separately).
+        """
+        tasks = [FemTask(p, self.q, self.voltage, self.settings, with_tangents) for p in scalar_plates(plate)]
+        self.evaluations += len(tasks)
+        return cached_map(
+            run_fem_task, tasks, describe_fem_task, self.cache, self.scheduler, self.progress, description="FEM"
+        )
+
+    def gradients(self, plate: Plate) -> tuple[np.ndarray, np.ndarray]:
+        """Gradients over (lambda, h_i) of the best mode's deflection and frequency of each plate.
+
+        The best mode's index is held fixed (the one-sided derivative of the max over the modes).
+
+        Returns
+        -------
+        deflection_gradient : array
+            Batch shape + (2,), d w / d (lambda, h_i) [m/m].
+        frequency_gradient : array
+            Batch shape + (2,), d f_r / d (lambda, h_i) [Hz/m].
+        """
+        return self.responses_with_gradients(plate)[3:]
+
+    def responses_with_gradients(self, plate: Plate) -> tuple[np.ndarray, ...]:
+        """:meth:`responses` and :meth:`gradients` of each plate from one evaluation with tangents.
+
+        Returns
+        -------
+        deflection, frequency, indicator : array
+            Batch shape: [m], [Hz], [-].
+        deflection_gradient, frequency_gradient : array
+            Batch shape + (2,), over (lambda, h_i): [m/m], [Hz/m].
+        """
+        results = self.results(plate, with_tangents=True)
+        pairs = [best_mode_gradients(result) for result in results]
+        gradient_shape = plate.batch_shape + (len(DESIGN_PARAMETERS),)
+        gradients = tuple(np.array([pair[k] for pair in pairs]).reshape(gradient_shape) for k in (1, 0))
+        return best_mode_values(results, plate.batch_shape) + gradients
+
+    def responses(self, plate: Plate) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Deflection [m], frequency [Hz] and transverse indicator [-] of the best mode of each plate."""
+        return best_mode_values(self.results(plate), plate.batch_shape)
+
+    def __call__(self, plate: Plate) -> tuple[np.ndarray, np.ndarray]:
+        """Deflection [m] and frequency [Hz] of the best mode of each plate, shaped like the batch."""
+        return self.responses(plate)[:2]

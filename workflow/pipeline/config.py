@@ -1,0 +1,164 @@
+"""The run configuration: embedded defaults, overridden by a user TOML file.
+
+The embedded ``defaults.toml`` is the schema: a user file may only use its sections and
+keys, with values of the same type (an int is accepted where a float is expected).
+"""
+
+import copy
+import sys
+from dataclasses import MISSING, fields
+from importlib import resources
+from pathlib import Path
+
+from workflow.errors import InputFileError
+from workflow.models import materials
+from workflow.models.plate import ORIGINAL_PLATE
+from workflow.units import KHZ, MM, UM
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+
+def default_config() -> dict:
+    """The embedded defaults, as nested dicts: Table 1 for [design], ``defaults.toml`` for the rest."""
+    embedded = tomllib.loads(resources.files(__package__).joinpath("defaults.toml").read_text(encoding="utf-8"))
+    embedded["fem"] = {**fem_defaults(), **embedded["fem"]}
+    return {"design": design_defaults(), **embedded, "campaign": campaign_defaults(), "simulator": simulator_defaults()}
+
+
+def fem_defaults() -> dict:
+    """The mesh keys of [fem] from :class:`workflow.fem.FemSettings`."""
+    from workflow.models.fem import FemSettings
+
+    return FemSettings().as_dict()
+
+
+def campaign_defaults() -> dict:
+    """The [campaign] section from the Q(v) campaign procedure's defaults."""
+    from instruments.procedures.sweeps import CampaignPlan
+
+    return {
+        "logs": [],
+        "voltages_v": list(CampaignPlan.voltages),
+        "points_per_sweep": CampaignPlan.points_per_sweep,
+        "span_hz": CampaignPlan.span,
+        "seed": 0,
+    }
+
+
+def simulator_defaults() -> dict:
+    """The [simulator] section from the bench simulator's defaults."""
+    from instruments.simulator.bench import DEFAULT_DRIFT_RATE, BenchSettings
+    from instruments.simulator.physics import DEFAULT_LOW_VELOCITY_Q
+
+    bench = {f.name: f.default for f in fields(BenchSettings) if f.default is not MISSING}
+    return {
+        "low_velocity_q": DEFAULT_LOW_VELOCITY_Q,
+        "working_q": materials.PLATE_Q,
+        "drift_hz_per_s": DEFAULT_DRIFT_RATE,
+        "amplifier_gain": float(bench["amplifier_gain"]),
+        "ceramic_voltage_limit_v": float(bench["ceramic_voltage_limit"]),
+        "relative_noise": bench["relative_noise"],
+        "floor_fraction": bench["floor_fraction"],
+        "phase_noise_deg": bench["phase_noise"],
+    }
+
+
+def design_defaults() -> dict:
+    """The [design] section from Table 1 (:mod:`workflow.materials`), in the units of the file."""
+    mm = [t / MM for t in materials.CERAMIC_THICKNESSES]
+    section = {
+        "ceramic_thicknesses_mm": mm,
+        "wavelength_min_mm": materials.WAVELENGTH_RANGE[0] / MM,
+        "wavelength_max_mm": materials.WAVELENGTH_RANGE[1] / MM,
+        "hi_min_mm": materials.PRACTICAL_MIN_RESONATOR_THICKNESS / MM,
+        "hi_max_mm": materials.RESONATOR_THICKNESS_RANGE[1] / MM,
+        "width_mm": ORIGINAL_PLATE.width / MM,
+        "voltage_v": materials.DESIGN_VOLTAGE,
+        "min_frequency_khz": materials.MIN_FREQUENCY / KHZ,
+        "target_deflection_um": materials.TARGET_DEFLECTION / UM,
+        "q": materials.PLATE_Q,
+    }
+    return {key: [round(v, 9) for v in value] if isinstance(value, list) else round(value, 9) for key, value in section.items()}
+
+
+def load_config(path=None) -> dict:
+    """The effective configuration: the defaults updated by the TOML file at ``path``.
+
+    Raises
+    ------
+    InputFileError
+        Unreadable or malformed file, unknown section or key, or a value of the wrong type,
+        naming the file and the key.
+    """
+    config = default_config()
+    if path is None:
+        return config
+    path = Path(path)
+    try:
+        user = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputFileError(f"{path}: no such configuration file") from None
+    except UnicodeDecodeError:
+        raise InputFileError(f"{path}: not a UTF-8 text file") from None
+    except tomllib.TOMLDecodeError as error:
+        raise InputFileError(f"{path}: not valid TOML: {error}") from None
+    return merge(config, user, source=str(path))
+
+
+def merge(defaults: dict, user: dict, source: str = "configuration") -> dict:
+    """``defaults`` updated by ``user``, checking sections, keys and types."""
+    merged = copy.deepcopy(defaults)
+    for section, values in user.items():
+        if section not in defaults:
+            raise InputFileError(f"{source}: unknown section [{section}]; known: {', '.join(defaults)}")
+        if not isinstance(values, dict):
+            raise InputFileError(f"{source}: '{section}' must be a [section] table")
+        for key, value in values.items():
+            if key not in defaults[section]:
+                raise InputFileError(
+                    f"{source}: unknown key '{section}.{key}'; known keys of [{section}]: {', '.join(defaults[section])}"
+                )
+            merged[section][key] = _checked(value, defaults[section][key], f"{section}.{key}", source)
+    return merged
+
+
+def _checked(value, default, name: str, source: str):
+    expected = type(default)
+    if expected is float and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if isinstance(default, list):
+        if not isinstance(value, list):
+            raise InputFileError(f"{source}: '{name}' must be a list, got {type(value).__name__} {value!r}")
+        if default:
+            return [_checked(item, default[0], f"{name}[{i}]", source) for i, item in enumerate(value)]
+        return value
+    if type(value) is not expected:
+        raise InputFileError(f"{source}: '{name}' must be {_type_name(expected)}, got {type(value).__name__} {value!r}")
+    return value
+
+
+def _type_name(kind) -> str:
+    return {float: "a number", int: "an integer", str: "a string", bool: "true or false"}.get(kind, kind.__name__)
+
+
+def to_toml(config: dict) -> str:
+    """The configuration as TOML text (for --print-config)."""
+    lines = []
+    for section, values in config.items():
+        lines.append(f"[{section}]")
+        lines.extend(f"{key} = {_toml_value(value)}" for key, value in values.items())
+        lines.append("")
+    return "\n".join(lines)
+
+
+def _toml_value(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, list):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    return repr(value)

@@ -1,0 +1,83 @@
+"""JSON records of the command-line contract (SI inside, mm, um, kHz in the keys).
+
+One place for the keys that several commands print: the geometry, an optimum, and the
+damping keys added when a posterior Q(v) is used (``--damping``).
+"""
+
+import numpy as np
+
+from workflow.damping.laws import law_parameters
+from workflow.models.analytical import resonance_frequency
+from workflow.models.materials import TARGET_DEFLECTION
+from workflow.models.plate import Plate
+from workflow.optimise.damped import damped_deflection, fem_damped_deflection, fem_required_voltage, required_voltage
+from workflow.optimise.problem import Optimum
+from workflow.units import KHZ, MM, UM
+
+POSTERIOR_DRAWS = 200
+"""Posterior draws behind the intervals of a single evaluation or optimum."""
+
+
+def geometry_record(plate: Plate) -> dict:
+    """The geometry keys of the JSON contract, in mm."""
+    return {
+        "lambda_mm": float(plate.wavelength) / MM,
+        "h_i_mm": float(plate.resonator_thickness) / MM,
+        "h_p_mm": float(plate.ceramic_thickness) / MM,
+        "b_mm": float(plate.width) / MM,
+    }
+
+
+def optimum_record(optimum: Optimum, **counts) -> dict:
+    """The JSON keys of one optimum, with evaluation counts or other extra keys."""
+    return {
+        **geometry_record(optimum.plate),
+        "w_dyn_um": optimum.deflection / UM,
+        "f_r_khz": optimum.frequency / KHZ,
+        "constraint_active": optimum.constraint_active,
+        "status": optimum.status,
+        **counts,
+    }
+
+
+def damping_record(posterior, plate: Plate, voltage: float, draws: int = POSTERIOR_DRAWS) -> dict:
+    """JSON keys for a beam-model evaluation with Q(v): the posterior-median law's deflection,
+    the Q it settles at, 90 % intervals over posterior draws and the voltage for the target."""
+    law, drawn = posterior.median_law(), posterior.draws(draws)
+    deflection = float(damped_deflection(plate, voltage, law))
+    w05, w95 = np.quantile(damped_deflection(plate, voltage, drawn), [0.05, 0.95])
+    return {
+        "w_dyn_um_p05": w05 / UM,
+        "w_dyn_um_p95": w95 / UM,
+        **damping_keys(posterior, deflection, float(resonance_frequency(plate)), required_voltage(plate, drawn)),
+    }
+
+
+def fem_damping_record(posterior, result, draws: int = POSTERIOR_DRAWS) -> dict:
+    """JSON keys for a FEM evaluation with Q(v): the best mode's self-consistent deflection with
+    the posterior-median law, the Q it settles at, and the voltage for the target deflection."""
+    deflection = float(fem_damped_deflection(result, posterior.median_law()))
+    voltages = fem_required_voltage(result, posterior.draws(draws))
+    return damping_keys(posterior, deflection, result.frequency, voltages)
+
+
+def damped_optimum_record(posterior, optimum: Optimum, draws: int = POSTERIOR_DRAWS) -> dict:
+    """Damping keys of a beam optimum found with Q(v): the Q it settles at and the voltage for
+    the target deflection there (median law and 90 % interval over posterior draws)."""
+    voltages = required_voltage(optimum.plate, posterior.draws(draws))
+    keys = damping_keys(posterior, optimum.deflection, optimum.frequency, voltages)
+    del keys["w_dyn_um"]
+    return keys
+
+
+def damping_keys(posterior, deflection: float, frequency: float, required_voltages) -> dict:
+    """Deflection [um] and the Q it settles at, the voltage for the target deflection (median
+    and 90 % over posterior draws) and the law used."""
+    law = posterior.median_law()
+    v05, v50, v95 = np.quantile(required_voltages, [0.05, 0.5, 0.95])
+    return {
+        "w_dyn_um": deflection / UM,
+        "q": float(law.quality_factor(2 * np.pi * frequency * deflection)),
+        "required_voltage_v": {"target_um": TARGET_DEFLECTION / UM, "p05": v05, "p50": v50, "p95": v95},
+        "damping": {"law": posterior.law_name, "median": law_parameters(law), "posterior": posterior.source},
+    }

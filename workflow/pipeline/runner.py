@@ -1,0 +1,127 @@
+"""Running ``tactile run``'s steps: context, timing, progress, caching and failures.
+
+Each :class:`Step` computes ``compute(context) -> result`` from a :class:`RunContext`;
+results are kept by key for the steps after it and for the report.  A step that fails
+stops the run with a :class:`StepError` naming the step and the reason.  The steps
+themselves are in :mod:`workflow.steps`.
+"""
+
+import hashlib
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Dict, List, Optional
+
+from workflow.errors import TactileError
+from workflow.execution.cache import EvaluationCache, content_key, source_version
+
+
+class StepError(TactileError):
+    """A step of ``tactile run`` failed."""
+
+
+@dataclass
+class StepTiming:
+    """How long a step took [s] and whether its result came from the cache."""
+
+    name: str
+    seconds: float
+    cached: bool = False
+
+
+@dataclass
+class RunContext:
+    """What the steps share: the configuration, the output folder, the results so far."""
+
+    config: dict
+    out: Path
+    scheduler: Optional[str] = None
+    logs: List[Path] = field(default_factory=list)
+    results: Dict[str, Any] = field(default_factory=dict)
+    timings: List[StepTiming] = field(default_factory=list)
+    figures: Dict[str, str] = field(default_factory=dict)
+    cache: Optional[EvaluationCache] = None
+
+    def figure_path(self, name: str) -> Path:
+        """Where the figure ``name`` (a PNG file name) is written; recorded for the report."""
+        self.figures[name] = name
+        return self.out / name
+
+
+@dataclass(frozen=True)
+class Step:
+    """One step of the run.
+
+    Attributes
+    ----------
+    title : str
+        Shown in the progress lines, the timings and the error message.
+    key : str
+        Name of the result in ``context.results``.
+    compute : callable
+        ``compute(context) -> result`` (no figures).
+    figures : callable or None
+        ``figures(context, result)`` writes the step's figures into the output folder.
+    cacheable : bool
+        Keep the result in the evaluation cache, keyed by the configuration, the logs'
+        contents and the code, so that a rerun reuses it.
+    """
+
+    title: str
+    key: str
+    compute: Callable[[RunContext], Any]
+    figures: Optional[Callable[[RunContext, Any], None]] = None
+    cacheable: bool = True
+
+
+def _step_key(context: RunContext, step: Step) -> str:
+    """Content key of a step's result: step, configuration, logs' bytes, code."""
+    package = Path(__file__).resolve().parents[1]
+    logs = [hashlib.sha256(Path(path).read_bytes()).hexdigest() for path in context.results.get("logs", [])]
+    return content_key(
+        {
+            "step": step.key,
+            "config": context.config,
+            "logs": logs,
+            "code": [source_version(str(package)), source_version(str(package.parent / "instruments"))],
+        }
+    )
+
+
+def _compute(context: RunContext, step: Step):
+    """(result, from cache) of a step, through the cache when it may be used."""
+    if not (step.cacheable and context.cache is not None):
+        return step.compute(context), False
+    key = _step_key(context, step)
+    found, value = context.cache.load(key)
+    if found:
+        return value, True
+    value = step.compute(context)
+    context.cache.store(key, value)
+    return value, False
+
+
+def run_steps(context: RunContext, steps: List[Step], stream=None) -> RunContext:
+    """Run ``steps`` in order, printing progress and timings to ``stream`` (stderr)."""
+    stream = sys.stderr if stream is None else stream
+    context.out.mkdir(parents=True, exist_ok=True)
+    for number, step in enumerate(steps, start=1):
+        print(f"[{number}/{len(steps)}] {step.title} ...", file=stream, flush=True)
+        start = time.perf_counter()
+        try:
+            result, cached = _compute(context, step)
+            context.results[step.key] = result
+            if step.figures is not None:
+                step.figures(context, result)
+        except StepError:
+            raise
+        except TactileError as error:
+            raise StepError(f"step '{step.title}' failed: {error}") from None
+        except Exception as error:  # an unexpected failure still names its step
+            raise StepError(f"step '{step.title}' failed unexpectedly: {type(error).__name__}: {error}") from error
+        seconds = time.perf_counter() - start
+        context.timings.append(StepTiming(step.title, seconds, cached))
+        note = " (from cache)" if cached else ""
+        print(f"[{number}/{len(steps)}] {step.title}: done in {seconds:.1f} s{note}", file=stream, flush=True)
+    return context

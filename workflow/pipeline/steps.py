@@ -1,0 +1,315 @@
+"""The steps of ``tactile run``, in order: campaign, optimisation, Q(v) fit and design, FEM, maps.
+
+Each step reads the configuration and earlier results from the :class:`RunContext` and
+returns a result; its figure function, if any, writes PNGs into the output folder.
+"""
+
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Dict, List, Optional
+
+import numpy as np
+
+from workflow.errors import TactileError
+from workflow.optimise.problem import DesignProblem, optimise_analytical
+from workflow.pipeline.runner import RunContext, Step
+from workflow.units import KHZ, MM, UM
+
+
+def design_problems(config: dict, thicknesses_mm=None) -> Dict[float, DesignProblem]:
+    """One :class:`DesignProblem` per h_p (default: those of the [design] section), keyed by h_p [m]."""
+    design = config["design"]
+    thicknesses_mm = design["ceramic_thicknesses_mm"] if thicknesses_mm is None else thicknesses_mm
+    return {
+        thickness * MM: DesignProblem(
+            ceramic_thickness=thickness * MM,
+            width=design["width_mm"] * MM,
+            voltage=design["voltage_v"],
+            min_frequency=design["min_frequency_khz"] * KHZ,
+            min_resonator_thickness=design["hi_min_mm"] * MM,
+            max_resonator_thickness=design["hi_max_mm"] * MM,
+            wavelength_range=(design["wavelength_min_mm"] * MM, design["wavelength_max_mm"] * MM),
+        )
+        for thickness in thicknesses_mm
+    }
+
+
+def analytical_optima(context: RunContext):
+    """The beam-model optimum with constant Q for every h_p."""
+    q = context.config["design"]["q"]
+    return {hp: optimise_analytical(problem, q=q) for hp, problem in design_problems(context.config).items()}
+
+
+def bench_settings(config: dict):
+    """The simulated bench of the [simulator] section (original plate)."""
+    from instruments.simulator.bench import default_bench_settings
+    from instruments.simulator.physics import default_law
+
+    simulator = config["simulator"]
+    law = default_law(low_velocity_q=simulator["low_velocity_q"], working_q=simulator["working_q"])
+    return default_bench_settings(
+        law=law,
+        drift_rate=simulator["drift_hz_per_s"],
+        amplifier_gain=simulator["amplifier_gain"],
+        ceramic_voltage_limit=simulator["ceramic_voltage_limit_v"],
+        relative_noise=simulator["relative_noise"],
+        floor_fraction=simulator["floor_fraction"],
+        phase_noise=simulator["phase_noise_deg"],
+        seed=config["campaign"]["seed"],
+    )
+
+
+def campaign_logs(context: RunContext) -> List[Path]:
+    """The interferometer logs to fit: the given ones, or a campaign on the simulated bench."""
+    if context.logs:
+        missing = [str(path) for path in context.logs if not Path(path).is_file()]
+        if missing:
+            raise TactileError(f"no such log file: {', '.join(missing)}")
+        return [Path(path) for path in context.logs]
+    from instruments.procedures.simulated import simulate_campaign
+
+    campaign = context.config["campaign"]
+    path = context.out / "simulated_campaign.csv"
+    simulate_campaign(
+        path,
+        settings=bench_settings(context.config),
+        voltages=tuple(campaign["voltages_v"]),
+        points_per_sweep=campaign["points_per_sweep"],
+        span=campaign["span_hz"],
+    )
+    return [path]
+
+
+def damping_fit(context: RunContext):
+    """Q(v) fitted to the logs with emcee (:func:`workflow.damping.fit.fit_damping`)."""
+    from workflow.damping.fit import fit_damping
+    from workflow.damping.logs import drop_short_sweeps, read_logs
+
+    damping = context.config["damping"]
+    log = drop_short_sweeps(read_logs(context.results["logs"]))
+    for warning in log.warnings:
+        print(f"warning: {warning}", file=sys.stderr)
+    return fit_damping(
+        log,
+        laws=tuple(damping["laws"]),
+        seed=damping["seed"],
+        max_steps=damping["max_steps"],
+        n_walkers=damping["walkers"],
+        progress=sys.stderr.isatty(),
+    )
+
+
+def damping_fit_files(context: RunContext, fit) -> None:
+    """The posterior, ``fit.json`` and the fit's figures under ``damping/``."""
+    from workflow.pipeline.damping_files import write_fit
+
+    protect = {Path(path).resolve() for path in context.results["logs"]}
+    files = write_fit(fit, context.out / "damping", figures=True, protect=protect)
+    for path in files["figures"]:
+        name = Path(path).relative_to(context.out).as_posix()
+        context.figures[name] = name
+
+
+def damped_design(context: RunContext):
+    """Design with Q(v): optimum per h_p with credible intervals, and the Q(v) maps."""
+    from workflow.optimise.damped import damped_maps, design_with_damping
+
+    damping, design = context.config["damping"], context.config["design"]
+    posterior = context.results["damping_fit"].best.posterior()
+    problems = design_problems(context.config)
+    target = design["target_deflection_um"] * UM
+    result = design_with_damping(
+        posterior,
+        list(problems.values()),
+        draws=damping["posterior_draws"],
+        seed=damping["seed"],
+        target=target,
+        scheduler=context.scheduler,
+        progress=sys.stderr.isatty(),
+    )
+    maps = {
+        hp: damped_maps(
+            posterior,
+            problem,
+            grid=context.config["maps"]["grid"],
+            draws=damping["posterior_draws"],
+            seed=damping["seed"],
+            target=target,
+            optimum=result.optima[hp].damped,
+        )
+        for hp, problem in problems.items()
+    }
+    return result, maps
+
+
+def damped_design_figures(context: RunContext, result) -> None:
+    """Deflection and required-voltage maps with Q(v) for every h_p."""
+    from workflow.pipeline.figures.damping import design_map_figure
+
+    _, maps = result
+    for hp, hp_maps in maps.items():
+        for quantity in ("deflection", "voltage"):
+            save_figure(design_map_figure(hp_maps, quantity), context.figure_path(f"qv_{quantity}_hp{hp / MM:g}mm.png"))
+
+
+def save_figure(figure, path: Path) -> None:
+    """Write a matplotlib figure as PNG and release it."""
+    import matplotlib.pyplot as plt
+
+    figure.savefig(path, dpi=120, bbox_inches="tight")
+    plt.close(figure)
+
+
+def fem_settings(config: dict):
+    """The FEM mesh of the [fem] section."""
+    from workflow.models.fem import FemSettings
+
+    names = FemSettings().as_dict()
+    return FemSettings(**{name: config["fem"][name] for name in names})
+
+
+def fem_model(context: RunContext, q: Optional[float] = None):
+    """The cached, parallel FEM plate model of the run."""
+    from workflow.optimise.fem_model import FemModel
+
+    design = context.config["design"]
+    return FemModel(
+        q=design["q"] if q is None else q,
+        voltage=design["voltage_v"],
+        settings=fem_settings(context.config),
+        cache=context.cache,
+        scheduler=context.scheduler,
+        progress=sys.stderr.isatty(),
+    )
+
+
+def fem_original(context: RunContext):
+    """The FEM of the original plate (all evaluated modes)."""
+    from workflow.models.plate import ORIGINAL_PLATE
+
+    return fem_model(context).results(ORIGINAL_PLATE)[0]
+
+
+def fem_original_figures(context: RunContext, result) -> None:
+    from workflow.pipeline.figures.fem_responses import modes_figure
+
+    save_figure(modes_figure(result), context.figure_path("fem_modes_original.png"))
+
+
+def fem_responses(context: RunContext):
+    """Frequency response around the working mode and the switch-on transient of the original plate."""
+    from workflow.models.fem.responses import frequency_response, transient_response
+
+    result, q = context.results["fem_original"], context.config["design"]["q"]
+    return frequency_response(result, q), transient_response(result, q)
+
+
+def fem_responses_figures(context: RunContext, responses) -> None:
+    from workflow.pipeline.figures.fem_responses import frequency_response_figure, transient_figure
+
+    frequency, transient = responses
+    save_figure(frequency_response_figure(frequency), context.figure_path("fem_frequency_response.png"))
+    save_figure(transient_figure(transient), context.figure_path("fem_transient.png"))
+
+
+@dataclass(frozen=True)
+class FemOptima:
+    """The FEM optimum of one h_p by space mapping, and by direct NLopt when asked."""
+
+    space_mapping: Any
+    direct: Optional[Any] = None
+
+
+def fem_optima(context: RunContext) -> Dict[float, FemOptima]:
+    """FEM optimum per h_p by aggressive space mapping (and the direct NLopt run if configured)."""
+    from workflow.optimise.fem_optimum import optimise_fem
+
+    model = fem_model(context)
+    direct = context.config["fem"]["direct_nlopt"]
+    return {
+        hp: FemOptima(
+            space_mapping=optimise_fem(problem, model, "space-mapping"),
+            direct=optimise_fem(problem, model, "nlopt") if direct else None,
+        )
+        for hp, problem in design_problems(context.config).items()
+    }
+
+
+def fem_optima_figures(context: RunContext, optima) -> None:
+    from workflow.pipeline.figures.space_mapping import trajectory_figure
+
+    searches = {hp: (record.space_mapping, record.direct) for hp, record in optima.items()}
+    minimum = context.config["design"]["min_frequency_khz"] * KHZ
+    save_figure(trajectory_figure(searches, minimum), context.figure_path("space_mapping_trajectories.png"))
+
+
+def analytical_maps(context: RunContext):
+    """Beam-model maps of w_dyn and f_r over (lambda, h_i) for every h_p, with the optimum."""
+    from workflow.optimise.maps import design_map
+    from workflow.optimise.problem import analytical_model
+
+    design = context.config["design"]
+    model = analytical_model(design["q"], design["voltage_v"])
+    optima = context.results["analytical_optima"]
+    return {
+        hp: design_map(model, problem, context.config["maps"]["grid"], "analytical", optima[hp])
+        for hp, problem in design_problems(context.config).items()
+    }
+
+
+def fem_maps(context: RunContext):
+    """FEM maps over a (coarse by default) (lambda, h_i) grid for the configured h_p values."""
+    from workflow.optimise.maps import design_map
+
+    problems = design_problems(context.config, context.config["maps"]["fem_ceramic_thicknesses_mm"])
+    optima = context.results.get("fem_optima", {})
+    return {
+        hp: design_map(
+            fem_model(context),
+            problem,
+            context.config["maps"]["fem_grid"],
+            "fem",
+            optima[hp].space_mapping.optimum if hp in optima else None,
+        )
+        for hp, problem in problems.items()
+    }
+
+
+def maps_figures(context: RunContext, maps) -> None:
+    """One two-panel contour figure per map."""
+    from workflow.pipeline.figures.maps import map_figure
+
+    for hp, design_map in maps.items():
+        save_figure(map_figure(design_map), context.figure_path(f"map_{design_map.model}_hp{hp / MM:g}mm.png"))
+
+
+def fem_width_sweep(context: RunContext):
+    """w(b) and f(b) of the original plate with the FEM."""
+    from workflow.models.plate import ORIGINAL_PLATE
+    from workflow.optimise.maps import width_sweep
+
+    fem = context.config["fem"]
+    widths = np.linspace(fem["width_min_mm"], fem["width_max_mm"], fem["width_points"]) * MM
+    return width_sweep(fem_model(context), ORIGINAL_PLATE, widths)
+
+
+def width_sweep_figures(context: RunContext, sweep) -> None:
+    from workflow.pipeline.figures.maps import width_sweep_figure
+
+    save_figure(width_sweep_figure(sweep), context.figure_path("width_sweep_fem.png"))
+
+
+STEPS: List[Step] = [
+    Step("interferometer logs (simulated campaign unless --logs)", "logs", campaign_logs, cacheable=False),
+    Step("analytical optimisation (constant Q)", "analytical_optima", analytical_optima, cacheable=False),
+    Step("Q(v) fit (emcee)", "damping_fit", damping_fit, damping_fit_files),
+    Step("design with Q(v) and posterior propagation", "damped_design", damped_design, damped_design_figures),
+    Step("FEM of the original plate", "fem_original", fem_original, fem_original_figures, cacheable=False),
+    Step("FEM responses of the original plate", "fem_responses", fem_responses, fem_responses_figures),
+    Step("FEM optimum per h_p (space mapping)", "fem_optima", fem_optima, fem_optima_figures),
+    Step("analytical maps", "analytical_maps", analytical_maps, maps_figures, cacheable=False),
+    Step("FEM maps", "fem_maps", fem_maps, maps_figures),
+    Step("FEM width sweep of the original plate", "width_sweep", fem_width_sweep, width_sweep_figures),
+]
+"""The steps in the order they run."""
