@@ -3,8 +3,11 @@
 An evaluation is named by a plain description (model name, plate fields, Q, voltage,
 settings, code version...); the key is the SHA-256 of its canonical JSON, so the same
 inputs always find the same file and any change of input gives a new key.  Values are
-pickled; writes go to a temporary file in the cache directory and are renamed into place,
-so a reader never sees a half-written entry and concurrent writers cannot corrupt one.
+stored as data (:mod:`workflow.execution.datafile`: npz arrays and a JSON tree, checksummed;
+nothing is pickled, so a planted or damaged file cannot run code: it is ignored with a
+warning and recomputed).  Writes go to a temporary file in the cache directory and are
+renamed into place, so a reader never sees a half-written entry and concurrent writers
+cannot corrupt one.
 
 The directory is ``$TACTILE_CACHE`` if set, else ``.cache/tactile`` under the working
 directory.
@@ -14,7 +17,7 @@ import dataclasses
 import hashlib
 import json
 import os
-import pickle
+import sys
 import tempfile
 from functools import lru_cache
 from pathlib import Path
@@ -22,6 +25,7 @@ from typing import Callable, Iterable, List, Optional
 
 import numpy as np
 
+from workflow.execution import datafile
 from workflow.execution.parallel import map_evaluations
 
 CACHE_VARIABLE = "TACTILE_CACHE"
@@ -63,7 +67,7 @@ def content_key(description: dict) -> str:
 
 
 class EvaluationCache:
-    """Pickled values on disk, one file per content key.
+    """Values on disk as data files, one per content key.
 
     Attributes
     ----------
@@ -77,14 +81,22 @@ class EvaluationCache:
         self.hits = self.misses = 0
 
     def _path(self, key: str) -> Path:
-        return self.directory / key[:2] / f"{key}.pkl"
+        return self.directory / key[:2] / f"{key}.npz"
 
     def load(self, key: str):
-        """(True, value) when the key is stored, else (False, None); unreadable entries count as missing."""
+        """(True, value) when the key is stored, else (False, None).
+
+        A damaged or foreign entry counts as missing: one warning line on stderr, and the
+        value is recomputed (and the entry replaced) by the caller.
+        """
+        path = self._path(key)
         try:
-            with open(self._path(key), "rb") as handle:
-                value = pickle.load(handle)
-        except (OSError, EOFError, pickle.UnpicklingError, AttributeError, ImportError):
+            value = datafile.loads(path.read_bytes())
+        except FileNotFoundError:
+            self.misses += 1
+            return False, None
+        except (OSError, datafile.DataFileError) as error:
+            print(f"tactile: warning: ignoring cache entry {path}: {error}; recomputing it", file=sys.stderr)
             self.misses += 1
             return False, None
         self.hits += 1
@@ -97,7 +109,7 @@ class EvaluationCache:
         handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=".", suffix=".tmp")
         try:
             with os.fdopen(handle, "wb") as stream:
-                pickle.dump(value, stream, protocol=pickle.HIGHEST_PROTOCOL)
+                stream.write(datafile.dumps(value))
             os.replace(temporary, path)
         except BaseException:
             Path(temporary).unlink(missing_ok=True)
