@@ -1,4 +1,4 @@
-"""The beam model (SPEC section 3) against independent computations and the paper."""
+"""The beam model (docs/model.md) against independent computations and the paper."""
 
 import numpy as np
 import pytest
@@ -110,7 +110,7 @@ def test_original_plate_reproduces_the_paper():
 
 
 def test_literal_formula_gives_the_uncalibrated_value():
-    """SPEC section 3: taken literally with Q = 54 the formula gives 2.89 um."""
+    """docs/model.md: taken literally with Q = 54 the formula gives 2.89 um."""
     literal = analytical.dynamic_deflection(ORIGINAL_PLATE, 15.0, 54.0, calibration=1.0)
     assert literal * 1e6 == pytest.approx(FIGURES["literal_w"].value, rel=5e-3)
     assert analytical.BEAM_CALIBRATION == pytest.approx(0.370, abs=1e-3)

@@ -1,4 +1,4 @@
-"""The command line: JSON contract and one-line errors (SPEC section 8)."""
+"""The command line: JSON contract and one-line errors (docs/cli.md)."""
 
 import json
 import subprocess

@@ -117,7 +117,7 @@ def test_fem_optimize_with_damping_is_feasible_and_self_consistent(capsys, poste
     (result,) = coarse_fem().results(plate)
     assert damped["w_dyn_um"] * UM == pytest.approx(float(result.deflection_at_q(damped["q"])), rel=1e-6)
     assert damped["w_dyn_um"] != pytest.approx(constant["w_dyn_um"], rel=0.05)
-    # the optimum geometry barely moves with Q(v) (SPEC section 6)
+    # the optimum geometry barely moves with Q(v) (the paper, docs/damping.md)
     assert damped["lambda_mm"] == pytest.approx(constant["lambda_mm"], rel=0.02)
     v = damped["required_voltage_v"]
     assert v["p05"] <= v["p50"] <= v["p95"]

@@ -61,7 +61,7 @@ def test_damped_model_drives_the_optimiser():
     assert constant.deflection == pytest.approx(reference.deflection, rel=1e-6)
     damped = maximise_deflection(damped_model(LAW), problem)
     assert damped.frequency >= problem.min_frequency * (1 - 1e-6)
-    # the optimum geometry barely moves (SPEC section 6)
+    # the optimum geometry barely moves (the paper, docs/damping.md)
     assert float(damped.plate.wavelength) == pytest.approx(float(reference.plate.wavelength), rel=0.02)
     assert damped.deflection == pytest.approx(float(damped_deflection(damped.plate, problem.voltage, LAW)), rel=1e-9)
 

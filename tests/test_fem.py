@@ -17,7 +17,7 @@ from workflow.models.plate import ORIGINAL_PLATE
 COARSE = FemSettings(elements_per_ceramic=2, elements_per_layer=1, elements_across_half_width=3)
 """A mesh for fast structural tests (not for accuracy)."""
 CLEAN_WIDTH = 55e-3
-"""A width whose working mode is free of transverse interference (SPEC section 4) [m]."""
+"""A width whose working mode is free of transverse interference (docs/fem.md) [m]."""
 
 
 @pytest.fixture(scope="module")

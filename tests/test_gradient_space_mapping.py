@@ -187,8 +187,8 @@ def test_fem_responses_with_gradients_match_the_plain_evaluation():
     ("ceramic_thickness", "width_mm"), [(0.5e-3, 49), (1e-3, 49), (2e-3, 49), (2e-3, 40), (2e-3, 55), (2e-3, 70)]
 )
 def test_space_mapping_on_the_fem_matches_the_direct_run(tmp_path, ceramic_thickness, width_mm):
-    """SPEC 5 (b): at most 4 FEM evaluations, within 0.1 mm of the direct run, on the original plate
-    (b = 49 mm) and at h_p = 2 mm for other widths, where transverse modes move the most with the
+    """The paper's figure (docs/fem.md): at most 4 FEM evaluations, within 0.1 mm of the direct run, on
+    the original plate (b = 49 mm) and at h_p = 2 mm for other widths, where transverse modes move the most with the
     width (at 55 mm the responses-only search once never reached f_min)."""
     from workflow.execution.cache import EvaluationCache
 

@@ -1,4 +1,4 @@
-"""NLopt optimisation of the beam model (SPEC section 5)."""
+"""NLopt optimisation of the beam model (docs/model.md)."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""Interferometer log format, version 1 (SPEC section 7): the names, once.
+"""Interferometer log format, version 1 (docs/log-format.md): the names, once.
 
 UTF-8 CSV.  Optional leading metadata lines ``# key: value`` (the first may be a title
 line), then one header row and the data rows.  Readers live in

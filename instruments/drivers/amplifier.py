@@ -1,4 +1,4 @@
-"""The power amplifier between the generator and the ceramics (SPEC section 7).
+"""The power amplifier between the generator and the ceramics (docs/instruments.md).
 
 The generator is set in volts peak-to-peak at its output; the ceramics see the
 amplifier's voltage gain times the generator's peak voltage.  Logs record the peak

@@ -1,4 +1,4 @@
-"""Driver for a Keysight/Agilent 33500-series function generator (the SCPI subset of SPEC section 7).
+"""Driver for a Keysight/Agilent 33500-series function generator (the SCPI subset of docs/instruments.md).
 
 The driver refuses, before sending anything, any setting whose output peak voltage
 (amplitude/2 + |offset|) exceeds ``max_peak_voltage``: the safety limit across the

@@ -1,4 +1,4 @@
-"""Writer of interferometer logs (SPEC section 7, format version 1) that survives crashes.
+"""Writer of interferometer logs (docs/log-format.md, format version 1) that survives crashes.
 
 Every row is written, flushed and fsync'd as soon as it is measured.  Resuming a log
 reads the rows already there; the procedures skip the planned points they cover (keyed

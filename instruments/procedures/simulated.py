@@ -58,7 +58,7 @@ def simulate_campaign(
     Parameters
     ----------
     path : path-like
-        The log (SPEC section 7 format) to write.
+        The log (docs/log-format.md) to write.
     settings : BenchSettings or None
         The bench (plate physics, law, noise, drift, faults); default
         :func:`.simulator.bench.default_bench_settings`.

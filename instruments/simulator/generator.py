@@ -1,4 +1,4 @@
-"""Simulated function generator: the 33500-series SCPI subset of SPEC section 7, one channel.
+"""Simulated function generator: the 33500-series SCPI subset of docs/instruments.md, one channel.
 
 State changes that would exceed the output's peak-voltage limit (amplitude/2 + |offset|)
 are refused with ``-222,"Data out of range"`` in the error queue; the output keeps its

@@ -1,6 +1,6 @@
 """The simulated plate: one flexural mode with amplitude-dependent damping and thermal drift.
 
-Deflection amplitude at the antinode (SPEC section 6)
+Deflection amplitude at the antinode (docs/damping.md)
 
     w = w_s / sqrt((1 - r^2)^2 + (r / Q(v))^2),   r = f / f_r(t),   v = 2 pi f w,
 

@@ -1,4 +1,4 @@
-"""The ``tactile`` command line (SPEC section 8).
+"""The ``tactile`` command line (docs/cli.md).
 
 Each command lives in its own module with ``register(subparsers)`` that adds its parser
 and sets ``handler``.  A handler returns a JSON-able dict (printed on the last line of

@@ -19,12 +19,12 @@ def register(subparsers) -> None:
         "fit-damping",
         help="fit Q(v) to interferometer logs with emcee",
         description="Infer the amplitude-dependent quality factor Q(v) from frequency sweeps at several "
-        "drive voltages (interferometer logs, SPEC section 7), with the resonance of each sweep, the "
+        "drive voltages (interferometer logs, format in docs/log-format.md), with the resonance of each sweep, the "
         "drive-to-deflection gain and the noise as nuisance parameters.  Laws are compared with WAIC "
         "(BIC at the MAP also reported).  Writes posterior.npz (what --damping reads), fit.json and "
         "figures into --out.",
     )
-    parser.add_argument("logs", nargs="+", metavar="LOG.csv", help="interferometer log(s), SPEC section 7 format")
+    parser.add_argument("logs", nargs="+", metavar="LOG.csv", help="interferometer log(s) (docs/log-format.md)")
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
     parser.add_argument(
         "--law",

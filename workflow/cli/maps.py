@@ -113,7 +113,7 @@ def run(args) -> dict:
 
 
 def _map_keys(args, wavelength, resonator_thickness, deflection, frequency) -> dict:
-    """The SPEC section 8 keys of a map (grids indexed [lambda, h_i])."""
+    """The docs/cli.md keys of a map (grids indexed [lambda, h_i])."""
     return {
         "model": args.model,
         "h_p_mm": args.hp_mm,

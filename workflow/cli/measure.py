@@ -28,7 +28,7 @@ def register(subparsers) -> None:
         "measure",
         help="run a bench procedure (resonance, campaign, voltage-sweep) and log it",
         description="Run a measurement procedure against serial ports (--generator/--vibrometer) or the in-process "
-        "simulator (--simulate). Each point is appended to a CSV log (SPEC section 7) at once; rerunning the "
+        "simulator (--simulate). Each point is appended to a CSV log (docs/log-format.md) at once; rerunning the "
         "same command resumes an interrupted log.",
     )
     procedures = parser.add_subparsers(dest="procedure", metavar="PROCEDURE", parser_class=type(parser))

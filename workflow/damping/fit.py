@@ -546,7 +546,7 @@ def velocity_grid(log: CampaignLog, n: int = 50) -> np.ndarray:
 
 
 def fit_summary(fit: DampingFit) -> dict:
-    """The JSON of ``tactile fit-damping`` (SPEC section 8) for the preferred law."""
+    """The JSON of ``tactile fit-damping`` (docs/cli.md) for the preferred law."""
     best = fit.best
     velocity = velocity_grid(fit.log)
     q05, q50, q95 = best.quality_factor_quantiles(velocity)

@@ -1,6 +1,6 @@
 """Laws for the quality factor as a function of the vibration velocity, Q(v).
 
-v is the peak surface velocity amplitude at the antinodes [m/s] (SPEC section 6).  Each
+v is the peak surface velocity amplitude at the antinodes [m/s] (docs/damping.md).  Each
 law is a frozen dataclass whose parameters may be numpy arrays (e.g. one value per
 walker, shape (n, 1)) that broadcast against the velocities.  Every law is
 non-increasing in |v|, which the harmonic solve relies on.

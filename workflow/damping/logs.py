@@ -1,4 +1,4 @@
-"""Reading and validating interferometer logs (SPEC section 7, format version 1).
+"""Reading and validating interferometer logs (docs/log-format.md, format version 1).
 
 The reader only opens files for reading: an input file is never modified.  Anything a
 user must fix raises :class:`~workflow.errors.InputFileError` naming the file, the line

@@ -71,7 +71,7 @@ def simulate_campaign(
 
 
 def campaign_csv(log: CampaignLog, title: str = "synthetic Q(v) campaign") -> str:
-    """The campaign as log-format text (SPEC section 7), timestamps one second apart."""
+    """The campaign as log-format text (docs/log-format.md), timestamps one second apart."""
     header = ",".join((logformat.SWEEP, logformat.TIMESTAMP, logformat.FREQUENCY, logformat.DRIVE_VOLTAGE, logformat.VELOCITY))
     lines = [f"{logformat.METADATA_PREFIX}{title}", f"{logformat.METADATA_PREFIX}format_version: {logformat.FORMAT_VERSION}", header]
     for i, (k, f, v, u) in enumerate(zip(log.sweep, log.frequency, log.drive_voltage, log.velocity)):

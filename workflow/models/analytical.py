@@ -1,6 +1,6 @@
 """Bernoulli-Euler model of the plate: a half-wavelength simply supported bilayer beam.
 
-SPEC section 3.  All functions are pure and vectorised: the fields of :class:`Plate`
+Equations in docs/model.md.  All functions are pure and vectorised: the fields of :class:`Plate`
 may be numpy arrays that broadcast together.  z is measured from the free face of
 the ceramic (ceramic in [0, h_p], resonator in [h_p, h_p + h_i]).
 """
@@ -13,8 +13,8 @@ BEAM_CALIBRATION = 20.0 / 54.0
 """Effective-amplification calibration of the beam model [-].
 
 The paper's analytical figures (original plate, Q = 54, 15 V: 1.070 um, 32.13 kHz)
-correspond to an effective dynamic amplification of 20 where the formula of SPEC
-section 3, taken literally with Q = 54, gives 2.89 um.  The ratio 20/54 = 0.370 is the
+correspond to an effective dynamic amplification of 20 where the formula of
+docs/model.md, taken literally with Q = 54, gives 2.89 um.  The ratio 20/54 = 0.370 is the
 same for every geometry, so it is applied as one constant factor to the dynamic
 deflection of the beam model only.  It is not a change of the plate's quality factor:
 the FEM, the damping fit and the instruments use Q unscaled.

@@ -111,7 +111,7 @@ def _show(value: np.ndarray) -> str:
 
 
 ORIGINAL_PLATE = Plate(wavelength=24e-3, resonator_thickness=2.0e-3, ceramic_thickness=1.0e-3, width=49e-3)
-"""The paper's original plate (SPEC section 2)."""
+"""The paper's original plate (docs/model.md)."""
 
 
 def check_design_space(plate: Plate, min_resonator_thickness: float = materials.RESONATOR_THICKNESS_RANGE[0]) -> Plate:

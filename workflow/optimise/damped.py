@@ -1,4 +1,4 @@
-"""Design with the amplitude-dependent quality factor Q(v) (SPEC section 6).
+"""Design with the amplitude-dependent quality factor Q(v) (docs/damping.md).
 
 At resonance the antinode deflection is proportional to Q: w = Q k V with k the
 deflection per volt and per unit of Q.  With Q = Q(v) and v = 2 pi f_r w the deflection

@@ -1,4 +1,4 @@
-"""The FEM optimum of SPEC 5: direct NLopt from the beam optimum, or space mapping.
+"""The FEM optimum (docs/fem.md): direct NLopt from the beam optimum, or space mapping.
 
 Space mapping uses the FEM's design sensitivities when the fine model has them
 (:mod:`workflow.gradient_space_mapping`, the plain FEM) and responses only otherwise

@@ -1,4 +1,4 @@
-"""Design maps over (lambda, h_i) and the width sweep (SPEC section 5).
+"""Design maps over (lambda, h_i) and the width sweep (docs/model.md, docs/fem.md).
 
 A map evaluates one model on a grid of the whole Table 1 box (so the 0.5 mm practical limit
 shows): the beam model in one vectorised call, the FEM through

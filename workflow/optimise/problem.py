@@ -1,4 +1,4 @@
-"""Constrained maximisation of the deflection with NLopt (SPEC section 5).
+"""Constrained maximisation of the deflection with NLopt (docs/model.md).
 
 The design variables are x = (lambda, h_i); h_p, b and the drive voltage are fixed by a
 :class:`DesignProblem`.  The optimiser takes any plate model as a callable
@@ -276,5 +276,5 @@ _STATUS = {
 
 
 def optimise_analytical(problem: DesignProblem, q: float = materials.PLATE_Q) -> Optimum:
-    """The beam-model optimum with constant Q (SPEC section 5)."""
+    """The beam-model optimum with constant Q (docs/model.md)."""
     return maximise_deflection(analytical_model(q, problem.voltage), problem)

@@ -1,4 +1,4 @@
-"""Space-mapping optimisation from the fine responses only: the FEM optimum from a handful of FEM evaluations (SPEC 5 (b)).
+"""Space-mapping optimisation from the fine responses only: the FEM optimum from a few FEM evaluations (docs/fem.md).
 
 With the FEM's design sensitivities, :mod:`workflow.gradient_space_mapping` needs fewer
 (``optimise_fem`` uses it for the plain FEM); this search serves fine models without them

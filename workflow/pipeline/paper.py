@@ -1,4 +1,4 @@
-"""Figures quoted from the source paper (SPEC.md, marked *(paper)*): validation targets.
+"""Figures quoted from the source paper (docs/model.md cites it): validation targets.
 
 They are used by tests and shown beside our results in the report's reproduction table;
 no computation returns them.

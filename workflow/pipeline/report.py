@@ -60,7 +60,7 @@ def _analytical_optima(context: RunContext, optima) -> str:
     ]
     return (
         "## Analytical optimum with constant Q\n\n"
-        f"Beam model (SPEC section 3) with Q = {context.config['design']['q']:g}, calibrated by the paper's "
+        f"Beam model (docs/model.md) with Q = {context.config['design']['q']:g}, calibrated by the paper's "
         f"effective amplification ({BEAM_CALIBRATION:.3f}), maximised with NLopt SLSQP.\n\n"
         + table(
             ["h_p [mm]", "lambda [mm]", "h_i [mm]", "L [mm]", "w_dyn [um]", "f_r [kHz]", "on 25 kHz line", "evaluations"],
@@ -321,7 +321,7 @@ def _reproduction(context: RunContext) -> str:
         rows.append((r.paper.description, f"{r.paper.value:g}{unit}", f"{r.ours:.4g}{unit}", f"{r.difference:+.3g}{relative}", r.how))
     return (
         "## Reproduction of the paper\n\n"
-        "Each figure the paper reports (SPEC.md, marked *(paper)*) beside ours; the paper's values are "
+        "Each figure the paper reports beside ours; the paper's values are "
         "validation targets, never inputs.\n\n" + table(["paper figure", "paper", "ours", "difference", "ours from"], rows)
     )
 

@@ -1,4 +1,4 @@
-"""The reproduction table: each *(paper)* figure of SPEC.md beside ours.
+"""The reproduction table: each figure quoted from the source paper beside ours.
 
 :func:`reproduce` takes the results of ``tactile run`` (keyed by step) and computes our
 value for every paper figure it can; figures whose step did not run are left out.

@@ -1,4 +1,4 @@
-"""3D finite-element model of the quarter plate (SPEC section 4).
+"""3D finite-element model of the quarter plate (docs/fem.md).
 
 Structured triquadratic bricks, exact element integrals scattered in one vectorised
 assembly, shift-invert eigenmodes near the beam resonance and harmonic responses by

@@ -1,4 +1,4 @@
-"""The FEM cost function: modes near the beam resonance and their driven deflection (SPEC section 4)."""
+"""The FEM cost function: modes near the beam resonance and their driven deflection (docs/fem.md)."""
 
 from dataclasses import dataclass, replace
 

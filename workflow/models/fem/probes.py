@@ -1,4 +1,4 @@
-"""The 44 deflection probes on the top face and the transverse-mode indicator (SPEC section 4)."""
+"""The 44 deflection probes on the top face and the transverse-mode indicator (docs/fem.md)."""
 
 import numpy as np
 import scipy.sparse as sp
