@@ -68,10 +68,10 @@ def width_sweep_figure(sweep: WidthSweep, design_width: float = None):
     width = sweep.width / MM
     mixed = sweep.transverse
     for b, modes in zip(width, sweep.modes):
-        bottom.plot(np.full(len(modes), b), [m.frequency / KHZ for m in modes], "_", color="0.55", ms=5, mew=1.2)
+        bottom.plot(np.full(len(modes), b), [m.frequency / KHZ for m in modes], "_", color="0.55", ms=4, mew=1.2)
     for ax, values, label in ((top, sweep.deflection / UM, "w_dyn [um]"), (bottom, sweep.frequency / KHZ, "f_r [kHz]")):
         ax.plot(width, values, "o-", color="C0", ms=4, lw=1.2)
-        ax.plot(width[mixed], values[mixed], "rs", ms=9, mfc="none")
+        ax.plot(width[mixed], values[mixed], "o", ms=6, color="tab:red", zorder=3)
         ax.axvline(design_width / MM, color="k", ls="--", lw=1)
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
@@ -79,9 +79,9 @@ def width_sweep_figure(sweep: WidthSweep, design_width: float = None):
                  xytext=(3, -3), textcoords="offset points", ha="left", va="top", fontsize=8)
     handles = [
         Line2D([], [], marker="o", ms=4, color="C0", label="working mode (best deflection)"),
-        Line2D([], [], marker="s", ms=9, mfc="none", mec="r", ls="none",
+        Line2D([], [], marker="o", ms=6, color="tab:red", ls="none",
                label=f"working mode mixed (transverse indicator > {TRANSVERSE_THRESHOLD:g})"),
-        Line2D([], [], marker="_", ms=5, mew=1.2, color="0.55", ls="none", label="other modes (FEM eigenfrequencies)"),
+        Line2D([], [], marker="_", ms=4, mew=1.2, color="0.55", ls="none", label="other modes (FEM eigenfrequencies)"),
         Line2D([], [], color="k", ls="--", lw=1, label="design width"),
     ]
     legend_below(figure, handles, columns=2)
