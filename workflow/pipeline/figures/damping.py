@@ -22,7 +22,7 @@ from instruments.drivers.amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT  # noqa:
 from workflow.damping.fit import DampingFit, LawFit, parameter_summary, sweep_estimates, velocity_grid  # noqa: E402
 from workflow.damping.likelihood import predicted_velocity  # noqa: E402
 from workflow.models.materials import DESIGN_VOLTAGE  # noqa: E402
-from workflow.pipeline.figures.marks import label_contour, legend_below, mark_design_limits  # noqa: E402
+from workflow.pipeline.figures.marks import label_contour, legend_below, mark_design_limits, optimum_point  # noqa: E402
 from workflow.units import KHZ, MM, PM_PER_V, UM  # noqa: E402
 
 PERCENT = 1e-2
@@ -56,12 +56,28 @@ def _band_note(ax, band_width, relative_width, line_width: float) -> str:
     return note + (", thinner than the line" if _drawn_height(ax, band_width) < line_width else "")
 
 
+def _band_panels():
+    """A figure with a tall panel for the curves and a short one for relative widths and residuals [%]."""
+    return plt.subplots(2, 1, figsize=(8, 6), sharex=True, height_ratios=(3, 1.25), layout="constrained")
+
+
+def _finish_band_figure(figure, handles, columns: int, title: str, ylabels, xlabel: str):
+    """Legend under the panels, title and labels, a zero line on the lower panel, grids."""
+    top, bottom = figure.axes[:2]
+    figure.legend(handles=handles, fontsize=8, ncol=columns, loc="outside lower center", frameon=False)
+    top.set_title(title)
+    for ax, label in zip((top, bottom), ylabels):
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    bottom.axhline(0, color="k", lw=0.6)
+    bottom.set_xlabel(xlabel)
+    return figure
+
+
 def q_of_v_figure(fit: DampingFit, draws: int = 200, seed: int = 0):
     """Q(v) of each sampled law (median, 90 % band) with the band's width drawn below; the half-power Q
     of each measured sweep beside the same estimate from the preferred law's noise-free curves."""
-    figure, (top, bottom) = plt.subplots(
-        2, 1, figsize=(7.5, 6), sharex=True, height_ratios=(3, 1.2), layout="constrained"
-    )
+    figure, (top, bottom) = _band_panels()
     velocity = velocity_grid(fit.log, 200)
     lines = {}
     for name, law_fit in fit.fits.items():
@@ -87,15 +103,10 @@ def q_of_v_figure(fit: DampingFit, draws: int = 200, seed: int = 0):
                label=f"{name} law: median, {_band_note(top, band, relative, line.get_linewidth())} (lower panel)")
         for name, (line, band, relative) in lines.items()
     ] + top.get_legend_handles_labels()[0]
-    figure.legend(handles=handles, fontsize=8, loc="outside lower center", frameon=False)
-    top.set_ylabel("quality factor Q [-]")
-    top.set_title(f"Q(v): preferred law {fit.preferred} (lowest WAIC)")
-    bottom.axhline(0, color="k", lw=0.6)
-    bottom.set_ylabel("90 % band\n/ median - 1 [%]")
-    bottom.set_xlabel("peak velocity v [m/s]")
-    for ax in (top, bottom):
-        ax.grid(alpha=0.3)
-    return figure
+    return _finish_band_figure(
+        figure, handles, 1, f"Q(v): preferred law {fit.preferred} (lowest WAIC)",
+        ("quality factor Q [-]", "90 % band\n/ median - 1 [%]"), "peak velocity v [m/s]",
+    )
 
 
 def _predicted_rows(law_fit: LawFit, log, draws: int, seed: int) -> np.ndarray:
@@ -109,9 +120,7 @@ def resonance_curves_figure(fit: DampingFit, draws: int = 200, points: int = 200
     residuals and the prediction's 90 % band relative to the median."""
     best, log = fit.best, fit.log
     theta = _posterior_draws(best, draws, seed)
-    figure, (top, bottom) = plt.subplots(
-        2, 1, figsize=(8, 6), sharex=True, height_ratios=(3, 1.3), layout="constrained"
-    )
+    figure, (top, bottom) = _band_panels()
     colours = plt.cm.viridis(np.linspace(0, 0.9, log.n_sweeps))
     median_at_rows = np.median(_predicted_rows(best, log, draws, seed), axis=0)
     widths, relative = [], []
@@ -133,15 +142,10 @@ def resonance_curves_figure(fit: DampingFit, draws: int = 200, points: int = 200
         Line2D([], [], color="0.3", lw=1, label="posterior median"),
         Patch(color="0.3", alpha=0.3, label=_band_note(top, widths, relative, 1.0)),
     ]
-    figure.legend(handles=handles, fontsize=8, ncol=4, loc="outside lower center", frameon=False)
-    top.set_ylabel("velocity amplitude [m/s]")
-    top.set_title(f"sweeps and the posterior prediction of the {fit.preferred} law")
-    bottom.axhline(0, color="k", lw=0.6)
-    bottom.set_ylabel("data, band\n/ median - 1 [%]")
-    bottom.set_xlabel("frequency [kHz]")
-    for ax in (top, bottom):
-        ax.grid(alpha=0.3)
-    return figure
+    return _finish_band_figure(
+        figure, handles, 4, f"sweeps and the posterior prediction of the {fit.preferred} law",
+        ("velocity amplitude [m/s]", "data, band\n/ median - 1 [%]"), "frequency [kHz]",
+    )
 
 
 def _display_columns(law_fit: LawFit):
@@ -300,9 +304,8 @@ def design_map_figure(maps, quantity: str = "deflection", design_voltage: float 
         ax, maps.wavelength, maps.resonator_thickness, maps.frequency, maps.min_frequency,
         maps.min_resonator_thickness, maps.optimum,
     )
-    avoid = [(line.get_xdata()[0], line.get_ydata()[0]) for line in handles[2:]]
     for line, text, style in references:
-        label_contour(ax, line, text, avoid, colour="tab:blue")
+        label_contour(ax, line, text, optimum_point(maps.optimum), colour="tab:blue")
         handles.append(Line2D([], [], color="tab:blue", lw=1.8, ls=style, path_effects=WHITE_EDGE,
                               label=f"required voltage = {text}"))
     legend_below(figure, handles, columns=2)

@@ -9,12 +9,14 @@ from workflow.units import KHZ, MM
 
 OUTLINE = [patheffects.withStroke(linewidth=3, foreground="black")]
 """Black edge around white lines: readable on light and dark colours alike."""
+LABEL_MARGIN = 0.12
+"""Nearest a contour label comes to the axes' edge, as a fraction of the axes [-]."""
+
+
 def label_box(colour: str) -> dict:
     """Background of a label on a colour map: translucent black under white text, white under coloured text."""
     white_text = colour == "white"
     return dict(boxstyle="round,pad=0.15", fc="black" if white_text else "white", alpha=0.6 if white_text else 0.85, lw=0)
-LABEL_MARGIN = 0.12
-"""Nearest a contour label comes to the axes' edge, as a fraction of the axes [-]."""
 
 
 def label_contour(ax, contour, text: str, avoid=(), colour: str = "white") -> None:
@@ -43,6 +45,11 @@ def label_contour(ax, contour, text: str, avoid=(), colour: str = "white") -> No
     for label in labels:
         label.set_color(colour)
         label.set_bbox(label_box(colour))
+
+
+def optimum_point(optimum) -> list:
+    """[(lambda, h_i)] of an optimum in mm, or [] without one: the point a map's labels keep away from."""
+    return [] if optimum is None else [(optimum.plate.wavelength / MM, optimum.plate.resonator_thickness / MM)]
 
 
 def mark_design_limits(ax, wavelength, thickness, frequency, min_frequency: float, min_thickness: float, optimum=None):
@@ -76,11 +83,9 @@ def mark_design_limits(ax, wavelength, thickness, frequency, min_frequency: floa
         Line2D([], [], color="white", ls="--", lw=1.5, path_effects=OUTLINE,
                label=f"h_i = {min_thickness / MM:g} mm (practical minimum)"),
     ]
-    avoid = []
-    if optimum is not None:
-        point = (optimum.plate.wavelength / MM, optimum.plate.resonator_thickness / MM)
-        handles += ax.plot(*point, "w*", ms=15, mec="k", mew=1.2, ls="none", label="optimum")
-        avoid.append(point)
+    avoid = optimum_point(optimum)
+    if avoid:
+        handles += ax.plot(*avoid[0], "w*", ms=15, mec="k", mew=1.2, ls="none", label="optimum")
     label_contour(ax, line, f"{min_frequency / KHZ:g} kHz", avoid)
     ax.set_xlabel("wavelength lambda [mm]")
     ax.set_ylabel("resonator thickness h_i [mm]")
