@@ -1,124 +1,243 @@
 """Figures of the Q(v) fit and of the design with Q(v).  Each function returns a Figure.
 
 They take the result objects of :mod:`workflow.damping.fit` and
-:mod:`workflow.damping.design`; saving is the caller's business.
+:mod:`workflow.optimise.damped`; saving is the caller's business.
 """
+
+import dataclasses
 
 import matplotlib
 
 matplotlib.use("Agg")
 
+import matplotlib.patheffects as patheffects  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.colors import LogNorm  # noqa: E402
+from matplotlib.lines import Line2D  # noqa: E402
+from matplotlib.patches import Patch  # noqa: E402
+from matplotlib.ticker import FixedLocator, FuncFormatter, MaxNLocator  # noqa: E402
 
-from workflow.damping.fit import DampingFit, LawFit, velocity_grid  # noqa: E402
+from instruments.drivers.amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT  # noqa: E402
+from workflow.damping.fit import DampingFit, LawFit, parameter_summary, sweep_estimates, velocity_grid  # noqa: E402
 from workflow.damping.likelihood import predicted_velocity  # noqa: E402
-from workflow.units import KHZ, MM, UM  # noqa: E402
+from workflow.models.materials import DESIGN_VOLTAGE  # noqa: E402
+from workflow.pipeline.figures.marks import label_contour, legend_below, mark_design_limits, optimum_point  # noqa: E402
+from workflow.units import KHZ, MM, PM_PER_V, UM  # noqa: E402
+
+PERCENT = 1e-2
+"""One per cent [-] (axis unit)."""
+DISPLAY_UNITS = {"gain": ("pm/V", PM_PER_V), "sigma_rel": ("%", PERCENT), "sigma_abs": ("um/s", UM)}
+"""Parameter -> (unit on the axis, its size in SI) where the SI value would need an exponent."""
+LOG_AXES = ("sigma_abs",)
+"""Parameters drawn on a logarithmic axis: their posterior spans decades (down to the prior's floor)."""
+WHITE_EDGE = [patheffects.withStroke(linewidth=3.5, foreground="white")]
+"""Edge of the reference-voltage contours, so that they stand out on dark and light colours."""
+PLAIN = FuncFormatter(lambda value, _: f"{value:g}")
+"""Tick labels as plain numbers, never an offset or a power of ten."""
 
 
-def q_of_v_figure(fit: DampingFit):
-    """Q(v): posterior median and 90 % band of each sampled law, and the model-free
-    half-power-bandwidth Q of each sweep at that sweep's peak velocity."""
-    figure, ax = plt.subplots(figsize=(6, 4))
-    velocity = velocity_grid(fit.log, 200)
-    for name, law_fit in fit.fits.items():
-        q05, q50, q95 = law_fit.quality_factor_quantiles(velocity)
-        preferred = name == fit.preferred
-        line = ax.plot(velocity, q50, lw=2 if preferred else 1, ls="-" if preferred else "--", label=f"{name} (median)")[0]
-        ax.fill_between(velocity, q05, q95, color=line.get_color(), alpha=0.25 if preferred else 0.12, label=f"{name} 90 %")
-    ax.plot(fit.sweeps.peak_velocity, fit.sweeps.quality_factor, "ko", label="half-power bandwidth, per sweep")
-    ax.set_xlabel("peak velocity v [m/s]")
-    ax.set_ylabel("quality factor Q")
-    ax.set_title(f"Q(v): preferred law {fit.preferred}")
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    figure.tight_layout()
+def _posterior_draws(law_fit: LawFit, draws: int, seed: int) -> np.ndarray:
+    """Up to ``draws`` posterior samples (sampled coordinates), drawn without replacement."""
+    rng = np.random.default_rng(seed)
+    return law_fit.samples[rng.choice(len(law_fit.samples), size=min(draws, len(law_fit.samples)), replace=False)]
+
+
+def _drawn_height(ax, span) -> float:
+    """Height on the page [points] of a span in y data units, once the layout is done."""
+    ax.figure.draw_without_rendering()
+    low, high = ax.get_ylim()
+    return float(np.max(span)) / (high - low) * ax.get_window_extent().height * 72 / ax.figure.dpi
+
+
+def _band_note(ax, band_width, relative_width, line_width: float) -> str:
+    """How wide a 90 % band is: its largest relative half-width, and whether it is thinner than its line."""
+    note = f"90 % band up to +/-{100 * np.max(relative_width) / 2:.2g} %"
+    return note + (", thinner than the line" if _drawn_height(ax, band_width) < line_width else "")
+
+
+def _band_panels():
+    """A figure with a tall panel for the curves and a short one for relative widths and residuals [%]."""
+    return plt.subplots(2, 1, figsize=(8, 6), sharex=True, height_ratios=(3, 1.25), layout="constrained")
+
+
+def _finish_band_figure(figure, handles, columns: int, title: str, ylabels, xlabel: str):
+    """Legend under the panels, title and labels, a zero line on the lower panel, grids."""
+    top, bottom = figure.axes[:2]
+    figure.legend(handles=handles, fontsize=8, ncol=columns, loc="outside lower center", frameon=False)
+    top.set_title(title)
+    for ax, label in zip((top, bottom), ylabels):
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    bottom.axhline(0, color="k", lw=0.6)
+    bottom.set_xlabel(xlabel)
     return figure
 
 
+def q_of_v_figure(fit: DampingFit, draws: int = 200, seed: int = 0):
+    """Q(v) of each sampled law (median, 90 % band) with the band's width drawn below; the half-power Q
+    of each measured sweep beside the same estimate from the preferred law's noise-free curves."""
+    figure, (top, bottom) = _band_panels()
+    velocity = velocity_grid(fit.log, 200)
+    lines = {}
+    for name, law_fit in fit.fits.items():
+        q05, q50, q95 = law_fit.quality_factor_quantiles(velocity)
+        width = 2 if name == fit.preferred else 1.2
+        line = top.plot(velocity, q50, lw=width, ls="-" if name == fit.preferred else "--")[0]
+        top.fill_between(velocity, q05, q95, color=line.get_color(), alpha=0.3)
+        order = 3 if name == fit.preferred else 2
+        bottom.fill_between(velocity, 100 * (q05 / q50 - 1), 100 * (q95 / q50 - 1), color=line.get_color(), alpha=0.35,
+                            zorder=order)
+        bottom.plot(velocity, 100 * np.transpose([q05 / q50 - 1, q95 / q50 - 1]), color=line.get_color(), lw=1, zorder=order)
+        lines[name] = (line, q95 - q05, (q95 - q05) / q50)
+    best = fit.best
+    model_curves = dataclasses.replace(fit.log, velocity=np.median(_predicted_rows(best, fit.log, draws, seed), axis=0))
+    estimated = sweep_estimates(model_curves)
+    top.plot(fit.sweeps.peak_velocity, fit.sweeps.quality_factor, "ko",
+             label="half-power Q of each measured sweep: below Q(v_peak), because off the peak the plate moves\n"
+             "slower and damps less, so the resonance is wider than a linear one with the peak's Q")
+    top.plot(estimated.peak_velocity, estimated.quality_factor, "s", ms=10, mfc="none", mec="k",
+             label=f"the same estimate on the {fit.preferred} law's noise-free sweeps: the same bias")
+    handles = [
+        Line2D([], [], color=line.get_color(), lw=line.get_linewidth(), ls=line.get_linestyle(),
+               label=f"{name} law: median, {_band_note(top, band, relative, line.get_linewidth())} (lower panel)")
+        for name, (line, band, relative) in lines.items()
+    ] + top.get_legend_handles_labels()[0]
+    return _finish_band_figure(
+        figure, handles, 1, f"Q(v): preferred law {fit.preferred} (lowest WAIC)",
+        ("quality factor Q [-]", "90 % band\n/ median - 1 [%]"), "peak velocity v [m/s]",
+    )
+
+
+def _predicted_rows(law_fit: LawFit, log, draws: int, seed: int) -> np.ndarray:
+    """Noise-free velocity at every logged row for posterior draws, shape (draws, rows) [m/s]."""
+    theta = _posterior_draws(law_fit, draws, seed)
+    return predicted_velocity(theta, law_fit.data.layout, log.frequency, log.drive_voltage, log.sweep)
+
+
 def resonance_curves_figure(fit: DampingFit, draws: int = 200, points: int = 200, seed: int = 0):
-    """Measured sweeps and the 90 % band of the preferred law's noise-free prediction."""
+    """Measured sweeps with the preferred law's noise-free prediction (median), and below, the
+    residuals and the prediction's 90 % band relative to the median."""
     best, log = fit.best, fit.log
-    rng = np.random.default_rng(seed)
-    theta = best.samples[rng.choice(len(best.samples), size=min(draws, len(best.samples)), replace=False)]
-    figure, ax = plt.subplots(figsize=(7, 4.5))
+    theta = _posterior_draws(best, draws, seed)
+    figure, (top, bottom) = _band_panels()
     colours = plt.cm.viridis(np.linspace(0, 0.9, log.n_sweeps))
+    median_at_rows = np.median(_predicted_rows(best, log, draws, seed), axis=0)
+    widths, relative = [], []
     for k in range(log.n_sweeps):
         mine = log.sweep == k
         grid = np.linspace(log.frequency[mine].min(), log.frequency[mine].max(), points)
         voltage = np.full(points, np.median(log.drive_voltage[mine]))
         predicted = predicted_velocity(theta, best.data.layout, grid, voltage, np.full(points, k))
         low, middle, high = np.quantile(predicted, [0.05, 0.5, 0.95], axis=0)
-        ax.fill_between(grid / KHZ, low, high, color=colours[k], alpha=0.3)
-        ax.plot(grid / KHZ, middle, color=colours[k], lw=1)
-        ax.plot(log.frequency[mine] / KHZ, log.velocity[mine], ".", color=colours[k], ms=3, label=f"{voltage[0]:g} V")
-    ax.set_xlabel("frequency [kHz]")
-    ax.set_ylabel("velocity amplitude [m/s]")
-    ax.set_title(f"sweeps and posterior prediction ({fit.preferred} law, 90 % band)")
-    ax.legend(fontsize=7, ncol=2)
-    ax.grid(alpha=0.3)
-    figure.tight_layout()
-    return figure
+        top.fill_between(grid / KHZ, low, high, color=colours[k], alpha=0.3)
+        top.plot(grid / KHZ, middle, color=colours[k], lw=1)
+        top.plot(log.frequency[mine] / KHZ, log.velocity[mine], ".", color=colours[k], ms=3, label=f"data, {voltage[0]:g} V peak")
+        bottom.fill_between(grid / KHZ, 100 * (low / middle - 1), 100 * (high / middle - 1), color=colours[k], alpha=0.25)
+        bottom.plot(log.frequency[mine] / KHZ, 100 * (log.velocity[mine] / median_at_rows[mine] - 1), ".",
+                    color=colours[k], ms=3)
+        widths.append(np.max(high - low))
+        relative.append(np.max((high - low) / middle))
+    handles = top.get_legend_handles_labels()[0] + [
+        Line2D([], [], color="0.3", lw=1, label="posterior median"),
+        Patch(color="0.3", alpha=0.3, label=_band_note(top, widths, relative, 1.0)),
+    ]
+    return _finish_band_figure(
+        figure, handles, 4, f"sweeps and the posterior prediction of the {fit.preferred} law",
+        ("velocity amplitude [m/s]", "data, band\n/ median - 1 [%]"), "frequency [kHz]",
+    )
 
 
-def _corner_columns(law_fit: LawFit):
-    """(label, values) of the parameters shown in the corner and trace plots."""
-    natural = law_fit.data.layout.natural(law_fit.samples)
-    shown = [name for name in natural if not name.startswith("f_r_") or name == "f_r_0"]
-    return [(name, natural[name]) for name in shown]
+def _display_columns(law_fit: LawFit):
+    """(name, axis label, conversion from SI, logarithmic) of the parameters in the corner and trace
+    plots: the law, gain, noise and the first sweep's resonance (shown as its offset from a round value)."""
+    columns = []
+    for name, entry in parameter_summary(law_fit).items():
+        if name.startswith("f_r_"):
+            if name != "f_r_0":
+                continue
+            reference = round(entry["median"])
+            data = law_fit.data
+            volts = np.median(data.voltage[data.sweep == 0])
+            label = f"f_r of the {volts:g} V sweep\n- {reference:g} Hz [Hz]"
+            columns.append((name, label, lambda x, r=reference: x - r, False))
+        elif name in DISPLAY_UNITS:
+            unit, size = DISPLAY_UNITS[name]
+            columns.append((name, f"{name} [{unit}]", lambda x, s=size: x / s, name in LOG_AXES))
+        else:
+            columns.append((name, f"{name} [{entry['unit']}]", lambda x: x, name in LOG_AXES))
+    return columns
+
+
+def _plain_ticks(axis, logarithmic: bool) -> None:
+    """Few tick labels, plain numbers (no offset text, no exponent)."""
+    if not logarithmic:
+        axis.set_major_locator(MaxNLocator(4))
+    axis.set_major_formatter(PLAIN)
+    axis.set_minor_formatter(FuncFormatter(lambda *_: ""))
 
 
 def corner_figure(law_fit: LawFit, bins: int = 30):
-    """Pairwise posterior histograms of the law, gain, noise and the first sweep's f_r."""
-    columns = _corner_columns(law_fit)
+    """Pairwise posterior histograms of the law, gain, noise and the first sweep's f_r, in units on each axis."""
+    natural = law_fit.data.layout.natural(law_fit.samples)
+    columns = [(label, convert(natural[name]), log) for name, label, convert, log in _display_columns(law_fit)]
+    edges = [np.geomspace(v.min(), v.max(), bins + 1) if log else np.linspace(v.min(), v.max(), bins + 1) for _, v, log in columns]
     n = len(columns)
-    figure, axes = plt.subplots(n, n, figsize=(1.6 * n + 1, 1.6 * n + 1), squeeze=False)
-    for i, (name_i, x_i) in enumerate(columns):
-        for j, (name_j, x_j) in enumerate(columns):
+    figure, axes = plt.subplots(n, n, figsize=(1.9 * n + 1, 1.9 * n + 1), squeeze=False, layout="constrained")
+    for i, (label_i, x_i, log_i) in enumerate(columns):
+        for j, (label_j, x_j, log_j) in enumerate(columns):
             ax = axes[i, j]
             if j > i:
                 ax.set_axis_off()
                 continue
             if i == j:
-                ax.hist(x_i, bins=bins, color="C0", histtype="stepfilled", alpha=0.6)
+                ax.hist(x_i, bins=edges[i], color="C0", histtype="stepfilled", alpha=0.6)
                 ax.set_yticks([])
             else:
-                ax.hist2d(x_j, x_i, bins=bins, cmap="Blues")
+                ax.hist2d(x_j, x_i, bins=(edges[j], edges[i]), cmap="Blues")
+                ax.set_yscale("log" if log_i else "linear")
+                _plain_ticks(ax.yaxis, log_i)
+            ax.set_xscale("log" if log_j else "linear")
+            _plain_ticks(ax.xaxis, log_j)
             if i == n - 1:
-                ax.set_xlabel(name_j, fontsize=8)
+                ax.set_xlabel(label_j, fontsize=8)
+                ax.tick_params(axis="x", labelrotation=45)
             else:
                 ax.set_xticklabels([])
             if j == 0 and i > 0:
-                ax.set_ylabel(name_i, fontsize=8)
-            elif j > 0:
+                ax.set_ylabel(label_i, fontsize=8)
+            elif i != j:
                 ax.set_yticklabels([])
-            ax.tick_params(labelsize=6)
-    figure.suptitle(f"posterior, {law_fit.law_name} law")
-    figure.tight_layout()
+            ax.tick_params(labelsize=7)
+    figure.suptitle(f"posterior of the {law_fit.law_name} law ({len(law_fit.samples)} samples)")
     return figure
 
 
 def trace_figure(law_fit: LawFit):
-    """Walker traces of the sampled coordinates, burn-in shaded."""
-    names = law_fit.data.layout.names
-    shown = [i for i, name in enumerate(names) if not name.startswith("f_r_") or name == "f_r_0"]
+    """Walker traces of the shown parameters in their units, the discarded burn-in shaded."""
     trace = law_fit.trace
     steps = np.linspace(0, law_fit.diagnostics.n_steps, len(trace))
-    figure, axes = plt.subplots(len(shown), 1, figsize=(7, 1.3 * len(shown) + 0.5), sharex=True, squeeze=False)
-    for ax, index in zip(axes[:, 0], shown):
-        ax.plot(steps, trace[:, :, index], color="k", alpha=0.15, lw=0.5)
-        ax.axvspan(0, law_fit.diagnostics.burn_in, color="C3", alpha=0.1)
-        ax.set_ylabel(names[index], fontsize=8)
+    natural = law_fit.data.layout.natural(trace.reshape(-1, trace.shape[-1]))
+    columns = _display_columns(law_fit)
+    figure, axes = plt.subplots(len(columns), 1, figsize=(7.5, 1.3 * len(columns) + 1), sharex=True, squeeze=False,
+                                layout="constrained")
+    d = law_fit.diagnostics
+    for ax, (name, label, convert, log) in zip(axes[:, 0], columns):
+        ax.plot(steps, convert(natural[name]).reshape(trace.shape[:2]), color="k", alpha=0.15, lw=0.5)
+        ax.axvspan(0, d.burn_in, color="C3", alpha=0.15)
+        ax.set_yscale("log" if log else "linear")
+        _plain_ticks(ax.yaxis, log)
+        ax.set_ylabel(label, fontsize=8)
         ax.tick_params(labelsize=7)
     axes[-1, 0].set_xlabel("step")
-    d = law_fit.diagnostics
-    axes[0, 0].set_title(
+    handles = [Patch(color="C3", alpha=0.15, label=f"burn-in: first {d.burn_in} steps (discarded)"),
+               Line2D([], [], color="k", alpha=0.4, lw=0.5, label=f"one walker ({d.n_walkers} in all)")]
+    legend_below(figure, handles, columns=2)
+    figure.suptitle(
         f"{law_fit.law_name}: {d.n_steps} steps, tau_max {d.tau_max:.0f}, acceptance {d.acceptance:.2f}, "
         f"{'converged' if d.converged else 'NOT converged'}",
         fontsize=9,
     )
-    figure.tight_layout()
     return figure
 
 
@@ -138,35 +257,57 @@ def fit_figures(fit: DampingFit) -> dict:
     return figures
 
 
-def design_map_figure(maps, quantity: str = "deflection"):
+def _volt_ticks(low: float, high: float) -> list:
+    """1-2-5 steps of volts within [low, high] [V]."""
+    decades = np.arange(np.floor(np.log10(low)), np.ceil(np.log10(high)) + 1)
+    ticks = [step * 10.0**decade for decade in decades for step in (1, 2, 5)]
+    return [tick for tick in ticks if low <= tick <= high]
+
+
+def design_map_figure(maps, quantity: str = "deflection", design_voltage: float = DESIGN_VOLTAGE,
+                      voltage_limit: float = DEFAULT_CERAMIC_VOLTAGE_LIMIT):
     """Contour map over (lambda, h_i) with Q(v): the deflection [um] at the design voltage
     or the voltage [V] needed for the target deflection; the 25 kHz line, the h_i
-    practical minimum and the optimum are marked.
+    practical minimum and the optimum are marked, and on the voltage map the design voltage
+    and the bench's safety limit.
 
     Parameters
     ----------
     maps : DampedMaps
-        From :func:`workflow.damping.design.damped_maps`.
+        From :func:`workflow.optimise.damped.damped_maps`.
     quantity : {"deflection", "voltage"}
+    design_voltage, voltage_limit : float
+        Peak voltage across the ceramics [V] of the design and of the bench's safety limit,
+        drawn as contours on the voltage map.
     """
-    values = maps.deflection / UM if quantity == "deflection" else maps.required_voltage
-    label = "deflection with Q(v) [um]" if quantity == "deflection" else "voltage for the target deflection [V]"
-    figure, ax = plt.subplots(figsize=(6, 4.5))
+    figure, ax = plt.subplots(figsize=(6.5, 5.6), layout="constrained")
     x, y = maps.wavelength / MM, maps.resonator_thickness / MM
+    references = []
     if quantity == "deflection":
-        contour = ax.contourf(x, y, values.T, levels=20, cmap="viridis")
-    else:  # spans orders of magnitude: logarithmic levels
+        contour = ax.contourf(x, y, maps.deflection.T / UM, levels=20, cmap="viridis")
+        figure.colorbar(contour, ax=ax, label="deflection with Q(v) [um]")
+    else:  # spans orders of magnitude: logarithmic levels, ticks in plain volts
+        values = maps.required_voltage
         levels = np.geomspace(np.min(values), np.max(values), 21)
         contour = ax.contourf(x, y, values.T, levels=levels, norm=LogNorm(levels[0], levels[-1]), cmap="magma_r")
-    figure.colorbar(contour, ax=ax, label=label, format="%.3g", ticks=contour.levels[::4])
-    lines = ax.contour(x, y, maps.frequency.T / KHZ, levels=[maps.min_frequency / KHZ], colors="w", linewidths=1.5)
-    ax.clabel(lines, fmt=lambda f: f"{f:g} kHz", fontsize=8)
-    ax.axhline(maps.min_resonator_thickness / MM, color="w", ls="--", lw=1, label=f"h_i = {maps.min_resonator_thickness / MM:g} mm")
-    if maps.optimum is not None:
-        ax.plot(maps.optimum.plate.wavelength / MM, maps.optimum.plate.resonator_thickness / MM, "r*", ms=12, label="optimum with Q(v)")
-    ax.set_xlabel("wavelength lambda [mm]")
-    ax.set_ylabel("resonator thickness h_i [mm]")
+        bar = figure.colorbar(contour, ax=ax, label="voltage for the target deflection [V]")
+        bar.ax.yaxis.set_major_locator(FixedLocator(_volt_ticks(levels[0], levels[-1])))
+        bar.ax.yaxis.set_major_formatter(PLAIN)
+        bar.ax.yaxis.set_minor_formatter(FuncFormatter(lambda *_: ""))
+        for volts, style, what in ((design_voltage, "-", "design"), (voltage_limit, "--", "bench limit")):
+            if levels[0] < volts < levels[-1]:
+                line = ax.contour(x, y, values.T, levels=[volts], colors="tab:blue", linewidths=1.8, linestyles=style)
+                line.set_path_effects(WHITE_EDGE)
+                references.append((line, f"{volts:g} V {what}", style))
+                bar.ax.axhline(volts, color="tab:blue", ls=style, lw=1.8)
+    handles = mark_design_limits(
+        ax, maps.wavelength, maps.resonator_thickness, maps.frequency, maps.min_frequency,
+        maps.min_resonator_thickness, maps.optimum,
+    )
+    for line, text, style in references:
+        label_contour(ax, line, text, optimum_point(maps.optimum), colour="tab:blue")
+        handles.append(Line2D([], [], color="tab:blue", lw=1.8, ls=style, path_effects=WHITE_EDGE,
+                              label=f"required voltage = {text}"))
+    legend_below(figure, handles, columns=2)
     ax.set_title(f"h_p = {maps.ceramic_thickness / MM:g} mm, {maps.law_label}", fontsize=9)
-    ax.legend(fontsize=7, loc="upper right")
-    figure.tight_layout()
     return figure
