@@ -14,7 +14,7 @@ optimum z*.  With the frequency constraint active, P(x) = z* only puts x on the 
 curve; where along it the fine deflection peaks is fine-model information (the deflection
 ratio) that P(x) = z* ignores.
 
-One search (:mod:`.search`), two ways to fit the mapping:
+One search (:mod:`.search`, over the fine steps of :mod:`.steps`), two ways to fit the mapping:
 
 - :mod:`.from_sensitivities`: each fine point gives the ratios' values and slopes (the FEM's
   design sensitivities); ``optimise_fem`` uses it for the plain FEM;
@@ -24,12 +24,8 @@ One search (:mod:`.search`), two ways to fit the mapping:
 
 from workflow.optimise.space_mapping.from_responses import NEAR_CURVE, ResponseMapping
 from workflow.optimise.space_mapping.from_sensitivities import SensitivityMapping, finite_difference_gradients
-from workflow.optimise.space_mapping.search import (
-    FREQUENCY_TOLERANCE,
-    SpaceMappingResult,
-    coarse_wavelength,
-    space_mapping_optimum,
-)
+from workflow.optimise.space_mapping.search import SpaceMappingResult, coarse_wavelength, space_mapping_optimum
+from workflow.optimise.space_mapping.steps import FREQUENCY_TOLERANCE
 
 __all__ = [
     "FREQUENCY_TOLERANCE",

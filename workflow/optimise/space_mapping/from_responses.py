@@ -52,13 +52,11 @@ import numpy as np
 
 from workflow.optimise.maps import TRANSVERSE_THRESHOLD
 from workflow.optimise.problem import DesignProblem
-from workflow.optimise.space_mapping.search import (
+from workflow.optimise.space_mapping.search import Proposal, Surrogate, coarse_wavelength
+from workflow.optimise.space_mapping.steps import (
     FREQUENCY_TOLERANCE,
     FineStep,
-    Proposal,
-    Surrogate,
     best_step,
-    coarse_wavelength,
     nearest_to_curve,
     reaches_min_frequency,
 )
@@ -215,22 +213,13 @@ def fit_mapping(
 
 
 class ResponseMapping:
-    """The mapping fitted to fine responses, for :func:`~.search.space_mapping_optimum`.
-
-    Parameters
-    ----------
-    coarse : PlateModel
-        Cheap model of (deflection [m], frequency [Hz]), batched.
-    problem : DesignProblem
-    tolerance : float
-        A proposal within this of an evaluated h_i [m] (and within the frequency tolerance of
-        its wavelength) counts as that point: the search then checks the bracket and stops.
-    gain_tolerance : float
-        Below this relative gain of deflection promised by the surrogate [-], the search
-        checks the bracket and stops.
+    """The mapping fitted to fine responses (a :class:`~.search.Mapping` of ``coarse`` and ``problem``).
 
     The fine model returns (deflection [m], frequency [Hz]) or (deflection, frequency,
     transverse indicator [-]) for one geometry; the indicator keeps mixed points out of the mapping.
+    A proposal within ``tolerance`` [m] of an evaluated h_i (and within the frequency tolerance of
+    its wavelength) counts as that point, and so does one promising less than ``gain_tolerance``
+    [-] more deflection: the search then checks the bracket and stops.
     """
 
     what = "design"

@@ -60,14 +60,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from workflow.optimise.problem import DesignProblem
-from workflow.optimise.space_mapping.search import (
-    FineStep,
-    Proposal,
-    Surrogate,
-    best_step,
-    coarse_wavelength,
-    nearest_to_curve,
-)
+from workflow.optimise.space_mapping.search import Proposal, Surrogate, coarse_wavelength
+from workflow.optimise.space_mapping.steps import FineStep, best_step, nearest_to_curve
 from workflow.units import MM
 
 TRUST_MM = 0.3
@@ -291,18 +285,11 @@ def _near_mixed_points(grid_mm, steps) -> np.ndarray:
 
 
 class SensitivityMapping:
-    """The mapping from fine values and slopes, for :func:`~.search.space_mapping_optimum`.
+    """The mapping from fine values and slopes (a :class:`~.search.Mapping` of ``coarse`` and ``problem``).
 
-    Parameters
-    ----------
-    coarse : PlateModel
-        Cheap model of (deflection [m], frequency [Hz]), batched.
-    problem : DesignProblem
-    gain_tolerance : float
-        Below this relative gain promised by the surrogate over the best feasible fine point
-        [-], the search ends.
-
-    The fine model is a :data:`GradientFineModel`; only clean points count as answers.
+    The fine model is a :data:`GradientFineModel`; only clean points count as answers.  Below
+    ``gain_tolerance``, the relative gain promised by the surrogate over the best of them [-],
+    the search ends.
     """
 
     what = "clean design"

@@ -20,52 +20,19 @@ candidate thicknesses, and when a proposal counts as reached or as a repeat.
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import ClassVar, Protocol
+from typing import Protocol
 
 import numpy as np
 
 from workflow.errors import InfeasibleError
 from workflow.optimise.problem import DesignProblem, Optimum, maximise_deflection
+from workflow.optimise.space_mapping.steps import FREQUENCY_TOLERANCE, FineStep
 from workflow.units import MM
 
-FREQUENCY_TOLERANCE = 2e-4
-"""Relative shortfall of f below f_min accepted at a fine point [-] (5 Hz at 25 kHz)."""
 BISECTION_STEPS = 48
 """Bisection steps of the coarse wavelength at a given frequency [-] (1e-12 m)."""
 REACH_SLACK_MM = 1e-12
 """Rounding slack of the trust interval's edge [mm]."""
-
-
-@dataclass(frozen=True)
-class FineStep:
-    """One fine evaluation.
-
-    Attributes
-    ----------
-    design : ndarray
-        (lambda, h_i) [m].
-    deflection, frequency : float
-        Fine response [m], [Hz].
-    transverse_indicator : float
-        Of the fine model's working mode [-] (0 when the fine model does not report it).
-    """
-
-    mixing_limit: ClassVar[float]
-    """Transverse indicator above which the step is mixed [-] (set by each mapping)."""
-
-    design: np.ndarray
-    deflection: float
-    frequency: float
-    transverse_indicator: float
-
-    @property
-    def thickness_mm(self) -> float:
-        return float(self.design[1] / MM)
-
-    @property
-    def mixed(self) -> bool:
-        """Whether a transverse mode mixes into the working mode (the step does not shape the mapping)."""
-        return self.transverse_indicator > self.mixing_limit
 
 
 @dataclass(frozen=True)
@@ -75,7 +42,8 @@ class Surrogate:
     Attributes
     ----------
     anchor : FineStep
-        The fine step the mapping is centred on.
+        The fine step the mapping is centred on (the best feasible clean step, else one near the
+        f_min curve: each mapping says which).
     anchor_log_deflection : float
         ln w of the anchor on the fine f_min curve [ln m].
     feasible : ndarray of bool
@@ -230,23 +198,6 @@ def coarse_wavelength(coarse, problem: DesignProblem, thickness, frequency) -> n
         above = found > frequency
         low, high = np.where(above, middle, low), np.where(above, high, middle)
     return 0.5 * (low + high)
-
-
-def reaches_min_frequency(step: FineStep, problem: DesignProblem) -> bool:
-    """Whether a fine step reached f_min within :data:`FREQUENCY_TOLERANCE` [-]."""
-    return step.frequency >= problem.min_frequency * (1 - FREQUENCY_TOLERANCE)
-
-
-def best_step(steps, problem: DesignProblem, accept_mixed: bool) -> FineStep | None:
-    """The feasible clean step of largest deflection (``accept_mixed``: a mixed one when none is clean)."""
-    feasible = [s for s in steps if reaches_min_frequency(s, problem)]
-    pool = [s for s in feasible if not s.mixed] or (feasible if accept_mixed else [])
-    return max(pool, key=lambda s: s.deflection) if pool else None
-
-
-def nearest_to_curve(steps, problem: DesignProblem) -> FineStep:
-    """The step whose frequency is nearest f_min (in ln f)."""
-    return min(steps, key=lambda s: abs(np.log(s.frequency / problem.min_frequency)))
 
 
 def space_mapping_optimum(
