@@ -18,7 +18,7 @@ import numpy as np
 from workflow.optimise.fem_model import FemModel
 from workflow.optimise.fem_optimum import optimise_fem
 from workflow.optimise.problem import DesignProblem, analytical_model
-from workflow.optimise.space_mapping import space_mapping_optimum
+from workflow.optimise.space_mapping import ResponseMapping, space_mapping_optimum
 from workflow.units import MM, UM
 
 
@@ -33,7 +33,8 @@ def compare(ceramic_thickness_mm: float, width_mm: float | None = None) -> dict:
         start = time.perf_counter()
         fem_model = FemModel(scheduler="synchronous")
         if method == "space-mapping-responses-only":
-            found = space_mapping_optimum(fem_model.responses, analytical_model(fem_model.q, problem.voltage), problem)
+            coarse = analytical_model(fem_model.q, problem.voltage)
+            found = space_mapping_optimum(fem_model.responses, coarse, problem, ResponseMapping)
         else:
             found = optimise_fem(problem, fem_model, method)
         plate = found.optimum.plate

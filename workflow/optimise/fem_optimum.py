@@ -1,15 +1,14 @@
 """The FEM optimum (docs/fem.md): direct NLopt from the beam optimum, or space mapping.
 
-Space mapping uses the FEM's design sensitivities when the fine model has them
-(:mod:`workflow.gradient_space_mapping`, the plain FEM) and responses only otherwise
-(:mod:`workflow.space_mapping`, e.g. the FEM with Q(v)).
+Space mapping (:mod:`workflow.optimise.space_mapping`) maps the beam onto the FEM with the FEM's
+design sensitivities when the fine model has them (the plain FEM) and from its responses only
+otherwise (e.g. the FEM with Q(v)).
 """
 
 from dataclasses import dataclass
 
 import numpy as np
 
-from workflow.optimise.gradient_space_mapping import gradient_space_mapping_optimum
 from workflow.optimise.problem import (
     DesignProblem,
     Optimum,
@@ -17,7 +16,7 @@ from workflow.optimise.problem import (
     analytical_model,
     maximise_deflection,
 )
-from workflow.optimise.space_mapping import space_mapping_optimum
+from workflow.optimise.space_mapping import ResponseMapping, SensitivityMapping, space_mapping_optimum
 
 METHODS = ("nlopt", "space-mapping")
 """Ways to reach the FEM optimum."""
@@ -43,7 +42,7 @@ class FemOptimum:
         One of :data:`METHODS`.
     fine_evaluations, coarse_evaluations : int
         FEM and beam-model geometries evaluated.
-    trajectory : tuple of SpaceMappingStep or GradientStep
+    trajectory : tuple of FineStep
         The FEM points of a space-mapping search in evaluation order (empty for the direct run).
     """
 
@@ -79,10 +78,10 @@ def optimise_fem(
         coarse_model = analytical_model(fem_model.q if q is None else q, problem.voltage)
     if method == "space-mapping":
         if hasattr(fem_model, "responses_with_gradients"):  # the FEM: exact design sensitivities
-            result = gradient_space_mapping_optimum(fem_model.responses_with_gradients, coarse_model, problem)
-        else:  # e.g. the FEM with Q(v): responses only
-            fine = getattr(fem_model, "responses", fem_model)  # with the transverse indicator when there is one
-            result = space_mapping_optimum(fine, coarse_model, problem)
+            fine, mapping = fem_model.responses_with_gradients, SensitivityMapping
+        else:  # e.g. the FEM with Q(v): responses only, with the transverse indicator when there is one
+            fine, mapping = getattr(fem_model, "responses", fem_model), ResponseMapping
+        result = space_mapping_optimum(fine, coarse_model, problem, mapping)
         return FemOptimum(result.optimum, method, result.fine_evaluations, result.coarse_evaluations, result.trajectory)
     if method == "nlopt":
         coarse = maximise_deflection(coarse_model, problem)

@@ -1,13 +1,14 @@
-"""Space mapping with FEM design sensitivities: the FEM optimum in about four FEM evaluations.
+"""The mapping from the FEM's design sensitivities: the FEM optimum in about four FEM evaluations.
 
-The search of :mod:`workflow.space_mapping` learns how the fine (FEM) model departs from
-the coarse (beam) one from the fine responses alone, so it spends its first fine points on
-exploring.  Here every fine evaluation also returns the gradients of its deflection and
-frequency over (lambda, h_i) (:mod:`workflow.fem.sensitivity`, about 1.6 times the cost of a
-plain evaluation), and each fine point then fixes the mapping's value *and slope*.
+The mapping of :mod:`workflow.optimise.space_mapping.from_responses` learns how the fine (FEM)
+model departs from the coarse (beam) one from the fine responses alone, so the search spends
+its first fine points on exploring.  Here every fine evaluation also returns the gradients of
+its deflection and frequency over (lambda, h_i) (:mod:`workflow.models.fem.sensitivity`, about
+1.6 times the cost of a plain evaluation), and each fine point then fixes the mapping's value
+*and slope*.
 
-Curve and mapping.  As in :mod:`workflow.space_mapping`, the constrained optimum lies on the
-fine f_min curve and the search runs along it, parametrised by u = h_i [mm]; v = ln lambda.
+Curve and mapping.  The search runs along the fine f_min curve, parametrised by u = h_i [mm];
+v = ln lambda.
 Each fine point k is projected onto the curve at its own h_i by one Newton step in v
 (v*_k = v_k + ln(f_min / f_k) / (d ln f / d v)); the curve's slope there is the fine
 iso-frequency tangent t_k = -(d ln f / d u) / (d ln f / d v), and the deflection on the curve
@@ -24,8 +25,8 @@ points, weighted towards the anchor (the best feasible clean point, else the cle
 nearest the curve): with one point it is the first-order (value and slope) correction of the
 coarse model, from two on a local quadratic, whose curvature comes from the slopes of
 neighbouring points (a secant on the derivative).  The surrogate deflection along its f_min
-curve is ln w_c(v_f(u), u) + ln rho(u); the next fine point is its maximiser within a trust
-interval of u around the anchor.  Its wavelength comes from ln m refitted around its own
+curve is ln w_c(v_f(u), u) + ln rho(u); the mapping is always determined (the search never
+explores nor asks for a bracket).  A new point's wavelength comes from ln m refitted around its own
 thickness (fine points there count most: repeated points at one h_i converge as a secant in
 frequency), a little (:data:`FREQUENCY_MARGIN`) above f_min.
 
@@ -43,9 +44,9 @@ Transverse modes.  A point whose working mode has a transverse indicator above
 :data:`MIXED_EXCLUSION_MM` of it, nor beyond halfway to the nearest clean point.
 
 Stop.  When the surrogate's next point is within :data:`STEP_TOLERANCE_MM` in h_i and
-:data:`WAVELENGTH_TOLERANCE` in lambda of the best feasible fine point, or promises less than
-``gain_tolerance`` over it, the search ends without evaluating it; the answer is the best
-feasible fine point.  An exact repeat of an evaluated point also ends it.
+:data:`WAVELENGTH_TOLERANCE` in lambda of the best feasible clean fine point, or promises less
+than ``gain_tolerance`` over it, the search ends without evaluating it; the answer is that
+point.  An exact repeat of an evaluated point also ends it.
 
 Measured (``python bench/bench_space_mapping.py 0.5 1 2 [--width-mm B]``): 4 FEM evaluations
 for the original plate (b = 49 mm, h_p = 0.5, 1, 2 mm), 2 to 6 at b = 40, 55, 70 mm, within
@@ -58,14 +59,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from workflow.optimise.problem import DesignProblem, maximise_deflection
-from workflow.optimise.space_mapping import (
-    CountedModel,
-    SpaceMappingResult,
-    coarse_wavelength,
-    reaches_min_frequency,
-    search_result,
-)
+from workflow.optimise.problem import DesignProblem
+from workflow.optimise.space_mapping.search import Proposal, Surrogate, coarse_wavelength
+from workflow.optimise.space_mapping.steps import FineStep, best_step, nearest_to_curve
 from workflow.units import MM
 
 TRUST_MM = 0.3
@@ -95,6 +91,8 @@ STEP_TOLERANCE_MM = 0.02
 """A proposal within this h_i [mm] (and :data:`WAVELENGTH_TOLERANCE`) of the best point ends the search."""
 WAVELENGTH_TOLERANCE = 1e-3
 """Relative lambda tolerance of the stop [-]."""
+REPEAT_TOLERANCE_MM, REPEAT_WAVELENGTH_TOLERANCE = 1e-3, 2e-5
+"""A proposal closer than these in h_i [mm] and ln lambda [-] to an evaluated point repeats it."""
 MAPPING_DEGREE = 2
 """Degree of the polynomials ln m(u), ln rho(u) once two thicknesses are known [-]."""
 VALUE_NOISE, SLOPE_NOISE = 1e-4, 1e-3
@@ -116,33 +114,19 @@ d deflection / d (lambda, h_i) [m/m], d frequency / d (lambda, h_i) [Hz/m]) for 
 
 
 @dataclass(frozen=True)
-class GradientStep:
+class GradientStep(FineStep):
     """One fine evaluation with its gradients.
 
     Attributes
     ----------
-    design : ndarray
-        (lambda, h_i) [m].
-    deflection, frequency, transverse_indicator : float
-        [m], [Hz], [-].
     deflection_gradient, frequency_gradient : ndarray
         Over (lambda, h_i) [m/m], [Hz/m].
     """
 
-    design: np.ndarray
-    deflection: float
-    frequency: float
-    transverse_indicator: float
+    mixing_limit = MIXING_LIMIT
+
     deflection_gradient: np.ndarray
     frequency_gradient: np.ndarray
-
-    @property
-    def thickness_mm(self) -> float:
-        return float(self.design[1] / MM)
-
-    @property
-    def mixed(self) -> bool:
-        return self.transverse_indicator > MIXING_LIMIT
 
     def logarithmic_slopes(self) -> tuple[float, float, float, float]:
         """d ln f/du [1/mm], d ln f/dv, d ln w/du [1/mm], d ln w/dv (u = h_i [mm], v = ln lambda)."""
@@ -167,7 +151,7 @@ def finite_difference_gradients(model, relative_step: float = 1e-6) -> GradientF
     """A :data:`GradientFineModel` from a cheap (deflection, frequency[, indicator]) model by central differences.
 
     For synthetic fine models and tests; the FEM gives exact gradients
-    (:meth:`workflow.fem_evaluations.FemModel.responses_with_gradients`).
+    (:meth:`workflow.optimise.fem_model.FemModel.responses_with_gradients`).
     """
 
     def fine(plate):
@@ -184,12 +168,6 @@ def finite_difference_gradients(model, relative_step: float = 1e-6) -> GradientF
         return deflection[0], frequency[0], indicator, gradient(deflection), gradient(frequency)
 
     return fine
-
-
-def _evaluate(fine, design: np.ndarray, problem: DesignProblem) -> GradientStep:
-    response = fine(problem.plate(float(design[0]), float(design[1])))
-    values = [float(np.ravel(a)[0]) for a in response[:3]]
-    return GradientStep(np.asarray(design, float), *values, *(np.ravel(np.asarray(g, float)) for g in response[3:5]))
 
 
 def _coarse_log_deflection(coarse, problem: DesignProblem, log_wavelength, thickness_mm):
@@ -306,96 +284,93 @@ def _near_mixed_points(grid_mm, steps) -> np.ndarray:
     return near
 
 
-def _best(steps, problem: DesignProblem) -> GradientStep | None:
-    """The feasible clean step of largest deflection."""
-    pool = [s for s in steps if not s.mixed and reaches_min_frequency(s, problem)]
-    return max(pool, key=lambda s: s.deflection) if pool else None
+class SensitivityMapping:
+    """The mapping from fine values and slopes (a :class:`~.search.Mapping` of ``coarse`` and ``problem``).
 
-
-def gradient_space_mapping_optimum(
-    fine: GradientFineModel,
-    coarse,
-    problem: DesignProblem,
-    max_fine_evaluations: int = 12,
-    gain_tolerance: float = 1e-4,
-) -> SpaceMappingResult:
-    """Maximise the fine deflection subject to the fine f_r >= f_min by space mapping with fine gradients.
-
-    Parameters
-    ----------
-    fine : GradientFineModel
-        Expensive model with gradients, called with one geometry at a time.
-    coarse : PlateModel
-        Cheap model of (deflection [m], frequency [Hz]), batched.
-    problem : DesignProblem
-    max_fine_evaluations : int
-        Upper limit on fine evaluations.
-    gain_tolerance : float
-        Below this relative gain promised by the surrogate over the best feasible fine point
-        [-], the search ends.
-
-    Returns
-    -------
-    SpaceMappingResult
-        ``mapping`` is None (the fitted polynomials live only inside the search).
-
-    Raises
-    ------
-    InfeasibleError
-        When no clean fine point reached f_min.
+    The fine model is a :data:`GradientFineModel`; only clean points count as answers.  Below
+    ``gain_tolerance``, the relative gain promised by the surrogate over the best of them [-],
+    the search ends.
     """
-    fine, coarse = CountedModel(fine), CountedModel(coarse)
-    coarse_optimum = maximise_deflection(coarse, problem)
-    log_min_frequency = np.log(problem.min_frequency)
-    grid_mm = np.linspace(problem.lower[1] / MM, problem.upper[1] / MM, CURVE_POINTS)
-    coarse_curve = np.log(coarse_wavelength(coarse, problem, grid_mm * MM, problem.min_frequency))
-    coarse_slope = np.gradient(coarse_curve, grid_mm)
-    design = np.array([coarse_optimum.plate.wavelength, coarse_optimum.plate.resonator_thickness])
-    steps, trust, promised, reference, at_edge = [], TRUST_MM, None, None, False
-    converged, status = False, f"stopped: {max_fine_evaluations} fine evaluations"
-    while fine.evaluations < max_fine_evaluations:
-        steps.append(_evaluate(fine, design, problem))
-        new = steps[-1]
-        if promised is not None:
-            delivered = new.on_curve(problem.min_frequency)[2] - reference
-            if new.mixed or (promised > 0 and delivered < ACCEPTED_GAIN_RATIO * promised):
-                trust /= 2
-            elif at_edge and delivered >= GROWING_GAIN_RATIO * promised > 0:
-                trust = min(2 * trust, TRUST_MM)
-        best = _best(steps, problem)
+
+    what = "clean design"
+
+    def __init__(self, coarse, problem: DesignProblem, gain_tolerance: float = 1e-4):
+        self.coarse, self.problem, self.gain_tolerance = coarse, problem, gain_tolerance
+        self.thickness_mm = np.linspace(problem.lower[1] / MM, problem.upper[1] / MM, CURVE_POINTS)
+        self.coarse_curve = np.log(coarse_wavelength(coarse, problem, self.thickness_mm * MM, problem.min_frequency))
+        self.coarse_slope = np.gradient(self.coarse_curve, self.thickness_mm)
+        self.trust_mm = TRUST_MM
+
+    def evaluate(self, fine, design: np.ndarray) -> GradientStep:
+        """One fine evaluation at (lambda, h_i) [m] with its gradients."""
+        response = fine(self.problem.plate(float(design[0]), float(design[1])))
+        values = [float(np.ravel(a)[0]) for a in response[:3]]
+        gradients = (np.ravel(np.asarray(g, float)) for g in response[3:5])
+        return GradientStep(np.asarray(design, float), *values, *gradients)
+
+    def best(self, steps) -> GradientStep | None:
+        """The feasible clean step of largest deflection."""
+        return best_step(steps, self.problem, accept_mixed=False)
+
+    def surrogate(self, steps) -> Surrogate:
+        """The mapping fitted around the anchor: the best step, else the clean step nearest the f_min curve,
+        else the step nearest it."""
+        problem = self.problem
         clean = [s for s in steps if not s.mixed] or steps
-        anchor = best or min(clean, key=lambda s: abs(np.log(s.frequency) - log_min_frequency))
-        mapping = _MappingData.of(clean, anchor, coarse, problem, grid_mm, coarse_curve, coarse_slope)
-        curve, predicted = _surrogate(mapping, anchor, coarse, problem, grid_mm, coarse_curve)
-        offset = grid_mm - anchor.thickness_mm
-        reach = trust if any(not s.mixed for s in steps) else MIXED_TRUST_MM
-        allowed = (curve >= np.log(problem.wavelength_range[0])) & (np.abs(offset) <= reach + 1e-12)
-        allowed &= ~_near_mixed_points(grid_mm, steps)
-        if mapping.first_order and not anchor.mixed:
-            modest = allowed & (predicted - anchor.on_curve(problem.min_frequency)[2] <= FIRST_ORDER_GAIN)
+        anchor = self.best(steps) or nearest_to_curve(clean, problem)
+        mapping = _MappingData.of(
+            clean, anchor, self.coarse, problem, self.thickness_mm, self.coarse_curve, self.coarse_slope
+        )
+        curve, predicted = _surrogate(mapping, anchor, self.coarse, problem, self.thickness_mm, self.coarse_curve)
+        feasible = curve >= np.log(problem.wavelength_range[0])
+        return Surrogate(anchor, anchor.on_curve(problem.min_frequency)[2], feasible, predicted, True, mapping)
+
+    def reach(self, steps, surrogate: Surrogate) -> float:
+        """The trust half-width, :data:`MIXED_TRUST_MM` while every step is mixed [mm]."""
+        return self.trust_mm if any(not s.mixed for s in steps) else MIXED_TRUST_MM
+
+    def candidates(self, within: np.ndarray, steps, surrogate: Surrogate) -> np.ndarray:
+        """``within`` away from mixed steps; while the mapping is first-order, promising at most
+        :data:`FIRST_ORDER_GAIN` [bool]."""
+        allowed = within & ~_near_mixed_points(self.thickness_mm, steps)
+        if surrogate.mapping.first_order and not surrogate.anchor.mixed:
+            modest = allowed & (surrogate.log_deflection - surrogate.anchor_log_deflection <= FIRST_ORDER_GAIN)
             allowed = modest if np.any(modest) else allowed
-        if not np.any(allowed):
-            status = "stopped: no thickness within reach reaches f_min on the surrogate"
-            break
-        index = int(np.argmax(np.where(allowed, predicted, -np.inf)))
-        at_edge = abs(offset[index]) >= reach - (grid_mm[1] - grid_mm[0])
-        placed = coarse_curve[index] - mapping.fit(grid_mm[index])[0][0] - FREQUENCY_MARGIN / 2
-        design = np.array([np.clip(np.exp(placed), *problem.wavelength_range), grid_mm[index] * MM])
-        if best is not None and (
-            predicted[index] - np.log(best.deflection) <= gain_tolerance
-            or (
-                abs(grid_mm[index] - best.thickness_mm) <= STEP_TOLERANCE_MM
-                and abs(np.log(design[0] / best.design[0])) <= WAVELENGTH_TOLERANCE
-            )
-        ):
-            converged, status = True, "converged"
-            break
-        if any(
-            abs(s.thickness_mm - grid_mm[index]) < 1e-3 and abs(np.log(design[0] / s.design[0])) < 2e-5 for s in steps
-        ):
-            status = "stopped: the next point was evaluated already"
-            break
-        reference = np.log(best.deflection) if best is not None else anchor.on_curve(problem.min_frequency)[2]
-        promised = predicted[index] - reference
-    answer = _best(steps, problem)
-    return search_result(steps, answer, problem, fine, coarse, coarse_optimum, status, None, converged, "clean design")
+        return allowed
+
+    def place(self, steps, surrogate: Surrogate, thickness_mm: float) -> np.ndarray:
+        """The design (lambda, h_i) [m] at ``thickness_mm``, :data:`FREQUENCY_MARGIN` above the f_min curve
+        of ln m refitted around it."""
+        coarse_curve = np.interp(thickness_mm, self.thickness_mm, self.coarse_curve)
+        placed = coarse_curve - surrogate.mapping.fit(thickness_mm)[0][0] - FREQUENCY_MARGIN / 2
+        return np.array([np.clip(np.exp(placed), *self.problem.wavelength_range), thickness_mm * MM])
+
+    def reached(self, thickness_mm: float, design: np.ndarray, best: GradientStep, steps) -> bool:
+        """Whether the proposal is within :data:`STEP_TOLERANCE_MM` and :data:`WAVELENGTH_TOLERANCE` of ``best``."""
+        return (
+            abs(thickness_mm - best.thickness_mm) <= STEP_TOLERANCE_MM
+            and abs(np.log(design[0] / best.design[0])) <= WAVELENGTH_TOLERANCE
+        )
+
+    def repeats(self, thickness_mm: float, design: np.ndarray, steps) -> bool:
+        """Whether a step lies within :data:`REPEAT_TOLERANCE_MM` in h_i and
+        :data:`REPEAT_WAVELENGTH_TOLERANCE` in ln lambda of the proposal."""
+        return any(
+            abs(s.thickness_mm - thickness_mm) < REPEAT_TOLERANCE_MM
+            and abs(np.log(design[0] / s.design[0])) < REPEAT_WAVELENGTH_TOLERANCE
+            for s in steps
+        )
+
+    def bracket_thickness(self, steps, best: GradientStep, surrogate: Surrogate) -> None:
+        """The slopes at the fine points show the peak: no bracket is asked for."""
+        return None
+
+    def learn(self, proposal: Proposal, step: GradientStep) -> None:
+        """Halve the trust interval when the step is mixed or delivers under :data:`ACCEPTED_GAIN_RATIO` of its promise;
+        double it (up to :data:`TRUST_MM`) when a step to its edge delivers :data:`GROWING_GAIN_RATIO`."""
+        promised = proposal.promised
+        delivered = step.on_curve(self.problem.min_frequency)[2] - proposal.reference
+        if step.mixed or (promised > 0 and delivered < ACCEPTED_GAIN_RATIO * promised):
+            self.trust_mm /= 2
+        elif proposal.at_edge and delivered >= GROWING_GAIN_RATIO * promised > 0:
+            self.trust_mm = min(2 * self.trust_mm, TRUST_MM)
