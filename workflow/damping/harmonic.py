@@ -45,7 +45,7 @@ def response_amplitude(static_amplitude, frequency_ratio, q):
     return np.asarray(static_amplitude) / np.sqrt((1 - r**2) ** 2 + (r / np.asarray(q)) ** 2)
 
 
-def self_consistent_amplitude(static_amplitude, frequency, resonance_frequency, quality_factor, rtol=1e-10, max_iter=50):
+def self_consistent_amplitude(static_amplitude, frequency, resonance_frequency, quality_factor, rtol=1e-12, max_iter=50):
     """Solve w = w_s / sqrt((1 - r^2)^2 + (r / Q(2 pi f w))^2), r = f / f_r, for w, elementwise [m].
 
     The single-mode case of :func:`self_consistent_deflection` (same tolerance and errors).
@@ -80,13 +80,13 @@ def self_consistent_amplitude(static_amplitude, frequency, resonance_frequency, 
     return self_consistent_deflection(deflection_at_q, quality_factor, 2 * np.pi * f, rtol, max_iter)
 
 
-def self_consistent_deflection(deflection_at_q, quality_factor, angular_frequency, rtol=1e-10, max_iter=50):
+def self_consistent_deflection(deflection_at_q, quality_factor, angular_frequency, rtol=1e-12, max_iter=50):
     """Solve w = D(Q(omega w)) for w, elementwise, with D increasing in Q [m].
 
     Secant iteration on H(u) = u - ln D(Q(omega e^u)), u = ln w, from u_0 = ln D(Q(0)),
     kept inside the bracket [ln D(Q(omega w_0)), u_0] (bisection when a step leaves it).
-    dH/du >= 1, so the returned w has |ln w - ln w*| <= |H| <= ``rtol``; about six
-    iterations reach 1e-10 on the fit's campaigns.  D(Q(0)) = 0 gives w = 0.
+    dH/du >= 1, so the returned w has |ln w - ln w*| <= |H| <= ``rtol``; about seven
+    iterations reach 1e-12 on the fit's campaigns.  D(Q(0)) = 0 gives w = 0.
 
     Parameters
     ----------
