@@ -129,10 +129,10 @@ def self_consistent_deflection(deflection_at_q, quality_factor, angular_frequenc
         done = np.abs(h1) <= rtol
         if np.all(done):
             return np.where(moving, np.exp(u1), 0.0)
-        slope = h1 - h0
-        secant = u1 - h1 * (u1 - u0) / np.where(slope != 0, slope, 1.0)
-        inside = (secant >= low) & (secant <= high) & (slope != 0)
-        u = np.where(done, u1, np.where(inside, secant, 0.5 * (low + high)))
+        with np.errstate(divide="ignore", invalid="ignore"):  # h1 == h0 only where done
+            secant = u1 - h1 * (u1 - u0) / (h1 - h0)
+        u = np.where((secant >= low) & (secant <= high), secant, 0.5 * (low + high))
+        u = np.where(done, u1, u)
         h = residual(u)
         low, high = np.where(h < 0, u, low), np.where(h > 0, u, high)
         u0, h0, u1, h1 = u1, h1, u, h
