@@ -114,13 +114,13 @@ def self_consistent_deflection(deflection_at_q, quality_factor, angular_frequenc
     omega = np.asarray(angular_frequency, dtype=float)
     start = np.asarray(deflection_at_q(quality_factor(np.zeros_like(omega))), dtype=float)
     omega, start = np.broadcast_arrays(omega, start)
-    moving = start != 0  # NaN stays in and is reported
+    driven = start != 0  # NaN stays in and is reported
 
     def residual(u):
         deflection = deflection_at_q(quality_factor(omega * np.exp(u)))
-        return u - np.log(np.where(moving, deflection, 1.0))
+        return u - np.log(np.where(driven, deflection, 1.0))
 
-    u0 = np.log(np.where(moving, start, 1.0))
+    u0 = np.log(np.where(driven, start, 1.0))
     h0 = residual(u0)
     low, high = u0 - h0, u0
     u1 = u0 - FIRST_STEP
@@ -128,8 +128,8 @@ def self_consistent_deflection(deflection_at_q, quality_factor, angular_frequenc
     for _ in range(max_iter):
         done = np.abs(h1) <= rtol
         if np.all(done):
-            return np.where(moving, np.exp(u1), 0.0)
-        with np.errstate(divide="ignore", invalid="ignore"):  # h1 == h0 only where done
+            return np.where(driven, np.exp(u1), 0.0)
+        with np.errstate(divide="ignore", invalid="ignore"):  # h1 == h0 where done (held below)
             secant = u1 - h1 * (u1 - u0) / (h1 - h0)
         u = np.where((secant >= low) & (secant <= high), secant, 0.5 * (low + high))
         u = np.where(done, u1, u)
