@@ -36,10 +36,6 @@ class QuadraticLoss:
         """Loss factor 1/Q at ``velocity`` [m/s] -> [-]."""
         return 1.0 / np.asarray(self.q0) + np.asarray(self.alpha) * np.square(velocity)
 
-    def loss_slope(self, velocity):
-        """d(1/Q)/dv at ``velocity`` [m/s] -> [s/m]."""
-        return 2.0 * np.asarray(self.alpha) * np.asarray(velocity)
-
 
 @dataclass(frozen=True)
 class LinearLoss:
@@ -65,10 +61,6 @@ class LinearLoss:
         """Loss factor 1/Q at ``velocity`` [m/s] -> [-]."""
         return 1.0 / np.asarray(self.q0) + np.asarray(self.alpha) * np.abs(velocity)
 
-    def loss_slope(self, velocity):
-        """d(1/Q)/dv at ``velocity`` [m/s] -> [s/m]."""
-        return np.asarray(self.alpha) * np.sign(velocity)
-
 
 @dataclass(frozen=True)
 class ConstantQ:
@@ -86,14 +78,6 @@ class ConstantQ:
     def quality_factor(self, velocity):
         """Q0, broadcast to the shape of ``velocity`` [-]."""
         return np.asarray(self.q0) + np.zeros_like(np.asarray(velocity, dtype=float))
-
-    def loss(self, velocity):
-        """Loss factor 1/Q0, broadcast to the shape of ``velocity`` [-]."""
-        return 1.0 / self.quality_factor(velocity)
-
-    def loss_slope(self, velocity):
-        """d(1/Q)/dv = 0 [s/m]."""
-        return np.zeros(np.broadcast(np.asarray(self.q0), np.asarray(velocity)).shape)
 
 
 LAWS = {law.name: law for law in (QuadraticLoss, LinearLoss, ConstantQ)}

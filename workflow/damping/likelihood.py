@@ -5,9 +5,9 @@ frequency f and peak voltage V in sweep k has the antinode deflection
 
     w = g V / sqrt((1 - r^2)^2 + (r / Q(2 pi f w))^2),   r = f / f_r,k,
 
-solved self-consistently (:func:`~workflow.damping.harmonic.self_consistent_amplitude_newton`),
-and the vibrometer reads the velocity amplitude v = 2 pi f w.  Parameters, in the order of
-:attr:`ParameterLayout.names`:
+solved self-consistently (:func:`~workflow.damping.harmonic.self_consistent_amplitude`, the
+bench simulator's solve), and the vibrometer reads the velocity amplitude v = 2 pi f w.
+Parameters, in the order of :attr:`ParameterLayout.names`:
 
 - the law's parameters: ``ln_q0`` = ln Q0, and ``alpha`` (>= 0) for the velocity-dependent laws;
 - ``ln_gain``: ln g, g the quasi-static deflection per volt [m/V];
@@ -24,7 +24,7 @@ from typing import Tuple
 
 import numpy as np
 
-from workflow.damping.harmonic import self_consistent_amplitude_newton
+from workflow.damping.harmonic import self_consistent_amplitude
 from workflow.damping.laws import LAWS, parameter_names
 from workflow.damping.logs import CampaignLog
 
@@ -161,7 +161,7 @@ def predicted_velocity(theta, layout: ParameterLayout, frequency, voltage, sweep
     theta = np.atleast_2d(theta)
     gain = np.exp(theta[:, layout.gain_index : layout.gain_index + 1])
     resonance = theta[:, layout.resonance_slice][:, sweep]
-    deflection = self_consistent_amplitude_newton(gain * voltage, frequency, resonance, layout.law(theta))
+    deflection = self_consistent_amplitude(gain * voltage, frequency, resonance, layout.law(theta).quality_factor)
     return 2 * np.pi * frequency * deflection
 
 

@@ -11,7 +11,7 @@ from typing import Sequence
 import numpy as np
 
 from workflow import logformat
-from workflow.damping.harmonic import self_consistent_amplitude_newton
+from workflow.damping.harmonic import self_consistent_amplitude
 from workflow.damping.laws import QuadraticLoss
 from workflow.damping.logs import CampaignLog
 
@@ -63,7 +63,7 @@ def simulate_campaign(
     frequency = np.tile(np.linspace(resonance_frequency - half_span, resonance_frequency + half_span, points_per_sweep), n)
     sweep = np.repeat(np.arange(n), points_per_sweep)
     voltage = np.asarray(voltages, dtype=float)[sweep]
-    deflection = self_consistent_amplitude_newton(gain * voltage, frequency, resonances[sweep], law)
+    deflection = self_consistent_amplitude(gain * voltage, frequency, resonances[sweep], law.quality_factor)
     velocity = 2 * np.pi * frequency * deflection
     noise = np.sqrt((relative_noise * velocity) ** 2 + absolute_noise**2)
     measured = np.abs(velocity + noise * rng.standard_normal(velocity.shape))

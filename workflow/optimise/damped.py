@@ -23,7 +23,7 @@ from typing import Dict, Optional, Sequence
 
 import numpy as np
 
-from workflow.damping.harmonic import self_consistent_amplitude_newton, self_consistent_deflection
+from workflow.damping.harmonic import self_consistent_amplitude, self_consistent_deflection
 from workflow.damping.laws import LAWS, law_parameters
 from workflow.damping.posterior import DampingPosterior
 from workflow.models import analytical, materials
@@ -50,7 +50,7 @@ def damped_deflection(plate: Plate, voltage, law):
     """
     frequency = analytical.resonance_frequency(plate)
     per_volt = analytical.deflection_per_volt_per_q(plate)
-    return self_consistent_amplitude_newton(per_volt * np.asarray(voltage), frequency, frequency, law)
+    return self_consistent_amplitude(per_volt * np.asarray(voltage), frequency, frequency, law.quality_factor)
 
 
 def required_voltage(plate: Plate, law, target: float = materials.TARGET_DEFLECTION):
