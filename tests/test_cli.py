@@ -1,12 +1,27 @@
-"""The command line: JSON contract and one-line errors (SPEC section 8)."""
+"""The command line: JSON contract, one-line errors (SPEC section 8), readable human output."""
 
 import json
+import re
 import subprocess
 import sys
 
 import pytest
 
-from workflow.cli import main
+from workflow.cli import build_parser, main
+
+REPR = re.compile(r"\w+\(\w+=|[\[\]{}]")
+"""Python reprs in human output: ``Law(q0=...)``, lists, dicts."""
+NUMBER = re.compile(r"\d+(?:\.\d+)?")
+MAX_DIGITS = 8
+"""Most significant digits a number in human output may show."""
+
+
+def assert_readable(text: str) -> None:
+    """No Python repr, no long float, micrometres as µm (file paths, which may hold anything, are skipped)."""
+    words = " ".join(word for word in text.split() if "/" not in word or word in ("m/s", "pm/V", "s^2/m^2", "s/m"))
+    assert not REPR.search(words), text
+    assert all(len(n.replace(".", "").lstrip("0")) <= MAX_DIGITS for n in NUMBER.findall(words)), text
+    assert not re.search(r"\bum\b", words), text
 
 
 def run_cli(capsys, *argv):
@@ -75,3 +90,48 @@ def test_console_script_error_has_no_traceback():
     )
     assert result.returncode == 2
     assert result.stderr.count("\n") == 1 and "Traceback" not in result.stderr
+
+
+def test_the_fem_optimum_uses_space_mapping_by_default():
+    args = build_parser().parse_args(["optimize", "--model", "fem"])
+    assert args.method == "space-mapping"
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["evaluate", "--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "1"],
+        ["optimize"],
+        ["simulate"],
+        ["measure", "campaign", "--simulate", "--points", "9", "--voltages", "5,10"],
+        ["measure", "voltage-sweep", "--simulate", "--voltages", "1,2,3"],
+        ["measure", "resonance", "--simulate"],
+    ],
+    ids=lambda argv: " ".join(argv[:2]),
+)
+def test_human_output_is_readable(capsys, tmp_path, monkeypatch, argv):
+    monkeypatch.chdir(tmp_path)
+    status, out, err = run_cli(capsys, *argv)
+    assert status == 0, err
+    assert out.strip()
+    assert_readable(out)
+
+
+def test_the_checker_catches_what_it_must():
+    for bad in ("Q(v) law: QuadraticLoss(q0=150.0, alpha=0.25)", "voltage_v: [1.0, 2.0]", "sweeps: {'sweep': 0}",
+                "f_r 32125.44342976582 Hz", "w_dyn 1.07 um"):
+        with pytest.raises(AssertionError):
+            assert_readable(bad)
+    assert_readable("Q(v): quadratic law, Q0 150, alpha 0.254 s^2/m^2; log: /tmp/x[1]/a.csv; 32125.4 Hz, 1.07 µm")
+
+
+def test_evaluate_warns_above_the_bench_limit_and_still_computes(capsys):
+    base = ["evaluate", "--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "1", "--json", "--voltage"]
+    for voltage in ("15", "30"):
+        status, _, err = run_cli(capsys, *base, voltage)
+        assert status == 0 and err == ""
+    status, out, err = run_cli(capsys, *base, "40")
+    assert status == 0
+    assert json.loads(out.strip().splitlines()[-1])["voltage_v"] == 40.0
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "warning" in lines[0] and "30 V" in lines[0] and "refuse" in lines[0]
