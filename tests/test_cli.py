@@ -1,9 +1,11 @@
 """The command line: JSON contract, one-line errors (SPEC section 8), readable human output."""
 
+import argparse
 import json
 import re
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -135,3 +137,50 @@ def test_evaluate_warns_above_the_bench_limit_and_still_computes(capsys):
     assert json.loads(out.strip().splitlines()[-1])["voltage_v"] == 40.0
     lines = err.strip().splitlines()
     assert len(lines) == 1 and "warning" in lines[0] and "30 V" in lines[0] and "refuse" in lines[0]
+
+
+def _commands(parser, prefix=""):
+    """(command name, its parser) for every command and measure procedure."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                nested = list(_commands(sub, f"{prefix}{name} "))
+                yield from nested or [(f"{prefix}{name}", sub)]
+
+
+def _shown(default) -> str:
+    if isinstance(default, tuple):
+        return ",".join(f"{v:g}" for v in default)
+    return f"{default:g}" if isinstance(default, (int, float)) else str(default)
+
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+
+
+def test_the_readme_examples_of_the_beam_model_print_what_the_readme_shows(capsys):
+    """The quick examples (beam model, no files needed) reproduce exactly; the FEM and fit ones were pasted from runs."""
+    block = re.search(r"```console\n(.*?)```", README.read_text(encoding="utf-8"), re.S).group(1)
+    examples = re.findall(r"^\$ tactile (.+)\n((?:[^$].*\n)*)", block, re.M)
+    quick = [(command, shown) for command, shown in examples if "fem" not in command and "fit" not in command]
+    assert len(quick) >= 2
+    for command, shown in quick:
+        status, out, err = run_cli(capsys, *command.split())
+        assert status == 0, err
+        assert out == shown, command
+
+
+def test_the_readme_table_shows_every_option_with_its_default():
+    readme = README.read_text(encoding="utf-8")
+    rows = dict(re.findall(r"^\| `tactile ([^`]+)`[^|]*\| (.+?) \| [^|]+ \|$", readme, re.M))
+    for command, parser in _commands(build_parser()):
+        row = rows[command] + (rows["measure …"] if command.startswith("measure ") else "")
+        segments = {segment.split()[0].strip("`"): segment for segment in re.split(r"--(?=[a-z])", row)[1:]}
+        for action in parser._actions:
+            option = next((o[2:] for o in action.option_strings if o.startswith("--")), None)
+            if option in (None, "help"):
+                continue
+            assert option in segments, f"{command}: --{option} missing from the README table"
+            if action.default not in (None, False):
+                shown = _shown(action.default)
+                abridged = re.sub(r"^([^,]+,[^,]+),.*,([^,]+)$", r"\1,…,\2", shown)
+                assert shown in segments[option] or abridged in segments[option], f"{command} --{option} {shown}"

@@ -8,6 +8,7 @@ again resumes its log.
 import argparse
 from pathlib import Path
 
+from instruments.drivers.amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT, DEFAULT_GAIN
 from workflow.cli.options import add_bench_arguments, add_json_flag, bench_settings
 from workflow.errors import TactileError
 
@@ -45,9 +46,10 @@ def register(subparsers) -> None:
     ports.add_argument("--baudrate", type=int, default=9600, help="serial baud rate (default 9600)")
     ports.add_argument("--timeout", type=float, default=1.0, help="reply timeout [s] (default 1)")
     ports.add_argument("--retries", type=int, default=3, help="retries of a point after a timeout or garbled reply (default 3)")
-    ports.add_argument("--amplifier-gain", type=float, default=10.0, help="power amplifier voltage gain (default 10)")
-    ports.add_argument("--max-voltage", type=float, default=30.0, metavar="VOLTS",
-                       help="safety limit, peak volts across the ceramics (default 30)")
+    ports.add_argument("--amplifier-gain", type=float, default=DEFAULT_GAIN,
+                       help=f"power amplifier voltage gain (default {DEFAULT_GAIN:g})")
+    ports.add_argument("--max-voltage", type=float, default=DEFAULT_CERAMIC_VOLTAGE_LIMIT, metavar="VOLTS",
+                       help=f"safety limit, peak volts across the ceramics (default {DEFAULT_CERAMIC_VOLTAGE_LIMIT:g})")
     ports.add_argument("--out", type=Path, help=f"log file (default: {DEFAULT_DATA_DIR}/<procedure>.csv in the working "
                        "directory, a folder git ignores; the path is printed at the end)")
     ports.add_argument("--restart", action="store_true", help="overwrite an existing log instead of resuming it")
