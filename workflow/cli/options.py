@@ -138,9 +138,11 @@ def describe_law(name: str, parameters: dict) -> str:
     """A Q(v) law for people, e.g. ``"quadratic law, Q0 150, alpha 0.254 s^2/m^2"``."""
     from workflow.damping.fit import parameter_unit
 
-    items = [f"{'Q0' if key == 'q0' else key} {value:.4g}" + ("" if parameter_unit(name, key) == "-" else
-             f" {parameter_unit(name, key)}") for key, value in parameters.items()]
-    return ", ".join([f"{name} law"] + items)
+    items = [f"{name} law"]
+    for key, value in parameters.items():
+        unit = parameter_unit(name, key)
+        items.append(f"{'Q0' if key == 'q0' else key} {value:.4g}" + ("" if unit == "-" else f" {unit}"))
+    return ", ".join(items)
 
 
 def damping_line(record: dict) -> str:
