@@ -1,12 +1,29 @@
-"""The command line: JSON contract and one-line errors (docs/cli.md)."""
+"""The command line: JSON contract, one-line errors (docs/cli.md), readable human output."""
 
+import argparse
 import json
+import re
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
-from workflow.cli import main
+from workflow.cli import build_parser, main
+
+REPR = re.compile(r"\w+\(\w+=|[\[\]{}]")
+"""Python reprs in human output: ``Law(q0=...)``, lists, dicts."""
+NUMBER = re.compile(r"\d+(?:\.\d+)?")
+MAX_DIGITS = 8
+"""Most significant digits a number in human output may show."""
+
+
+def assert_readable(text: str) -> None:
+    """No Python repr, no long float, micrometres as µm (file paths, which may hold anything, are skipped)."""
+    words = " ".join(word for word in text.split() if "/" not in word or word in ("m/s", "pm/V", "s^2/m^2", "s/m"))
+    assert not REPR.search(words), text
+    assert all(len(n.replace(".", "").lstrip("0")) <= MAX_DIGITS for n in NUMBER.findall(words)), text
+    assert not re.search(r"\bum\b", words), text
 
 
 def run_cli(capsys, *argv):
@@ -75,3 +92,95 @@ def test_console_script_error_has_no_traceback():
     )
     assert result.returncode == 2
     assert result.stderr.count("\n") == 1 and "Traceback" not in result.stderr
+
+
+def test_the_fem_optimum_uses_space_mapping_by_default():
+    args = build_parser().parse_args(["optimize", "--model", "fem"])
+    assert args.method == "space-mapping"
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["evaluate", "--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "1"],
+        ["optimize"],
+        ["simulate"],
+        ["measure", "campaign", "--simulate", "--points", "9", "--voltages", "5,10"],
+        ["measure", "voltage-sweep", "--simulate", "--voltages", "1,2,3"],
+        ["measure", "resonance", "--simulate"],
+    ],
+    ids=lambda argv: " ".join(argv[:2]),
+)
+def test_human_output_is_readable(capsys, tmp_path, monkeypatch, argv):
+    monkeypatch.chdir(tmp_path)
+    status, out, err = run_cli(capsys, *argv)
+    assert status == 0, err
+    assert out.strip()
+    assert_readable(out)
+
+
+def test_the_checker_catches_what_it_must():
+    for bad in ("Q(v) law: QuadraticLoss(q0=150.0, alpha=0.25)", "voltage_v: [1.0, 2.0]", "sweeps: {'sweep': 0}",
+                "f_r 32125.44342976582 Hz", "w_dyn 1.07 um"):
+        with pytest.raises(AssertionError):
+            assert_readable(bad)
+    assert_readable("Q(v): quadratic law, Q0 150, alpha 0.254 s^2/m^2; log: /tmp/x[1]/a.csv; 32125.4 Hz, 1.07 µm")
+
+
+def test_evaluate_warns_above_the_bench_limit_and_still_computes(capsys):
+    base = ["evaluate", "--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "1", "--json", "--voltage"]
+    for voltage in ("15", "30"):
+        status, _, err = run_cli(capsys, *base, voltage)
+        assert status == 0 and err == ""
+    status, out, err = run_cli(capsys, *base, "40")
+    assert status == 0
+    assert json.loads(out.strip().splitlines()[-1])["voltage_v"] == 40.0
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "warning" in lines[0] and "30 V" in lines[0] and "refuse" in lines[0]
+
+
+def _commands(parser, prefix=""):
+    """(command name, its parser) for every command and measure procedure."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                nested = list(_commands(sub, f"{prefix}{name} "))
+                yield from nested or [(f"{prefix}{name}", sub)]
+
+
+def _shown(default) -> str:
+    if isinstance(default, tuple):
+        return ",".join(f"{v:g}" for v in default)
+    return f"{default:g}" if isinstance(default, (int, float)) else str(default)
+
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+
+
+def test_the_readme_examples_of_the_beam_model_print_what_the_readme_shows(capsys):
+    """The quick examples (beam model, no files needed) reproduce exactly; the FEM and fit ones were pasted from runs."""
+    block = re.search(r"```console\n(.*?)```", README.read_text(encoding="utf-8"), re.S).group(1)
+    examples = re.findall(r"^\$ tactile (.+)\n((?:[^$].*\n)*)", block, re.M)
+    quick = [(command, shown) for command, shown in examples if "fem" not in command and "fit" not in command]
+    assert len(quick) >= 2
+    for command, shown in quick:
+        status, out, err = run_cli(capsys, *command.split())
+        assert status == 0, err
+        assert out == shown, command
+
+
+def test_the_readme_table_shows_every_option_with_its_default():
+    readme = README.read_text(encoding="utf-8")
+    rows = dict(re.findall(r"^\| `tactile ([^`]+)`[^|]*\| (.+?) \| [^|]+ \|$", readme, re.M))
+    for command, parser in _commands(build_parser()):
+        row = rows[command] + (rows["measure …"] if command.startswith("measure ") else "")
+        segments = {segment.split()[0].strip("`"): segment for segment in re.split(r"--(?=[a-z])", row)[1:]}
+        for action in parser._actions:
+            option = next((o[2:] for o in action.option_strings if o.startswith("--")), None)
+            if option in (None, "help"):
+                continue
+            assert option in segments, f"{command}: --{option} missing from the README table"
+            if action.default not in (None, False):
+                shown = _shown(action.default)
+                abridged = re.sub(r"^([^,]+,[^,]+),.*,([^,]+)$", r"\1,…,\2", shown)
+                assert shown in segments[option] or abridged in segments[option], f"{command} --{option} {shown}"

@@ -1,9 +1,11 @@
-"""``tactile evaluate --model fem``: JSON contract and refusal of bad geometry."""
+"""``tactile evaluate --model fem``: JSON contract, human output and refusal of bad geometry."""
 
 import json
 
+import re
+
 import pytest
-from test_cli import run_cli
+from test_cli import assert_readable, run_cli
 
 
 def test_fem_evaluate_json_lists_the_modes(capsys):
@@ -17,6 +19,18 @@ def test_fem_evaluate_json_lists_the_modes(capsys):
     assert best["f_khz"] == pytest.approx(record["f_r_khz"]) and best["w_um"] == pytest.approx(record["w_dyn_um"])
     assert 29.0 < record["f_r_khz"] < 33.0
     assert 0 <= best["transverse"] < 0.1
+
+
+def test_fem_evaluate_marks_the_working_mode(capsys):
+    """The human mode list marks one mode, the one whose deflection and frequency are reported."""
+    status, out, _ = run_cli(capsys, "evaluate", "--model", "fem", "--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "1", "--b-mm", "55")
+    assert status == 0
+    assert_readable(out)
+    first, *modes = out.strip().splitlines()
+    reported = re.search(r"w_dyn ([\d.]+) µm at f_r ([\d.]+) kHz", first).groups()[::-1]
+    marked = [line for line in modes if "working mode" in line]
+    assert len(modes) == 6 and len(marked) == 1
+    assert re.search(r"mode +([\d.]+) kHz: ([\d.]+) µm", marked[0]).groups() == reported
 
 
 @pytest.mark.parametrize(

@@ -1,13 +1,17 @@
 """The Q(v) fit: recovery of a known law, model comparison, the CLI and its bad input."""
 
 import json
+import math
 import os
+import re
 
 import numpy as np
 import pytest
+from test_cli import assert_readable
 
+from workflow import progress
 from workflow.cli import main
-from workflow.damping.fit import fit_damping, fit_law, fit_summary, sweep_estimates
+from workflow.damping.fit import CHAIN_TAUS, fit_damping, fit_law, fit_summary, sweep_estimates
 from workflow.damping.laws import QuadraticLoss
 from workflow.damping.likelihood import fit_data, log_probability, log_probability_single
 from workflow.damping.posterior import load_posterior
@@ -103,7 +107,8 @@ def test_cli_writes_posterior_figures_and_leaves_the_log_alone(tmp_path, capsys)
     status, out, err = run_cli(capsys, "fit-damping", log, "--out", out_dir, "--law", "quadratic", "--max-steps", "600", "--json")
     assert status == 0, err
     assert (log.read_bytes(), os.stat(log).st_mtime_ns) == before
-    assert len(err.strip().splitlines()) == 1 and "dropped 1 row" in err
+    warnings = [line for line in err.splitlines() if "warning" in line]
+    assert len(warnings) == 1 and "dropped 1 row" in warnings[0]
     summary = json.loads(out.strip().splitlines()[-1])
     assert summary["law"] == "quadratic"
     for name in ("posterior.npz", "fit.json", "q_of_v.png", "resonance_curves.png", "corner_quadratic.png", "trace_quadratic.png"):
@@ -111,6 +116,26 @@ def test_cli_writes_posterior_figures_and_leaves_the_log_alone(tmp_path, capsys)
     posterior = load_posterior(out_dir)
     assert isinstance(posterior.median_law(), QuadraticLoss)
     assert posterior.median_law().q0 == pytest.approx(summary["parameters"]["q0"]["median"])
+
+
+def test_cli_shows_the_chain_progress_towards_convergence_on_a_piped_stderr(tmp_path, capsys, monkeypatch):
+    """Not a terminal: plain lines counting the steps run against the 50 tau the rule needs, not the cap."""
+    monkeypatch.setattr(progress, "LINE_INTERVAL", 0.0)  # a short chain, yet every 10 % shown
+    monkeypatch.setattr(progress, "QUIET_TASK", 0.0)
+    log = tmp_path / "campaign.csv"
+    log.write_text(campaign_csv(simulate_campaign(seed=5, **SMALL)))
+    status, out, err = run_cli(
+        capsys, "fit-damping", log, "--out", tmp_path / "fit", "--law", "quadratic", "--max-steps", "600", "--no-figures", "--json"
+    )
+    assert status == 0, err
+    chain = json.loads(out.strip().splitlines()[-1])["diagnostics"]
+    shown = [tuple(map(int, m)) for m in re.findall(r"^emcee, quadratic law: (\d+)/(\d+) steps", err, re.M)]
+    assert len(shown) >= 3, err
+    steps = [run for run, _ in shown]
+    assert steps == sorted(steps) and steps[-1] == chain["n_steps"] == 600
+    assert not chain["converged"] and CHAIN_TAUS * chain["tau_max"] > 600
+    assert shown[-1][1] == math.ceil(CHAIN_TAUS * chain["tau_max"])  # the length convergence needs, not the cap
+    assert f"{CHAIN_TAUS} tau needed" in err.splitlines()[-1]
 
 
 BAD_LOGS = {
@@ -194,5 +219,10 @@ def test_damping_option_on_evaluate_and_optimize(tmp_path, capsys):
     assert status == 0, err
     record = json.loads(out.strip().splitlines()[-1])
     assert record["f_r_khz"] >= 25.0 * (1 - 1e-6) and record["damping"]["law"] == "quadratic"
+    for command in (["optimize", "--hp-mm", "1"], ["evaluate", "--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "1"]):
+        status, out, err = run_cli(capsys, *command, "--damping", path)
+        assert status == 0, err
+        assert "Q(v) used: quadratic law, Q0 150" in out and "Q settles at" in out
+        assert_readable(out)
     status, _, err = run_cli(capsys, "optimize", "--hp-mm", "1", "--damping", tmp_path / "missing.npz")
     assert status != 0 and len(err.strip().splitlines()) == 1 and "Traceback" not in err

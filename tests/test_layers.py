@@ -12,7 +12,10 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
-BASE = ("workflow", "workflow.errors", "workflow.units", "workflow.serialise", "workflow.logformat", "instruments")
+BASE = (
+    "workflow", "workflow.errors", "workflow.units", "workflow.serialise", "workflow.logformat", "workflow.progress",
+    "instruments",
+)
 LAYER_PREFIXES = {
     "models": "workflow.models",
     "execution": "workflow.execution",

@@ -166,6 +166,18 @@ def test_cli_measure_simulated_campaign_and_resume(tmp_path, capsys):
     assert code == 0 and '"measured": 0' in stdout.splitlines()[-1] and '"resumed": 18' in stdout
 
 
+def test_cli_measure_logs_under_an_ignored_measurements_folder_by_default(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    code, stdout, _ = run_cli(capsys, "measure", "voltage-sweep", "--simulate", "--voltages", "1,2")
+    assert code == 0
+    assert (tmp_path / "measurements" / "voltage-sweep.csv").is_file()
+    assert (tmp_path / "measurements" / "voltage-sweep-resonance.csv").is_file()
+    assert "log: measurements/voltage-sweep.csv" in stdout and not (tmp_path / "data").exists()
+    if (ROOT / ".git").exists():
+        ignored = subprocess.run(["git", "check-ignore", "-q", "measurements/voltage-sweep.csv"], cwd=ROOT)
+        assert ignored.returncode == 0
+
+
 def test_cli_safety_limit_refuses_with_one_line(tmp_path, capsys):
     code, _, err = run_cli(capsys, "measure", "voltage-sweep", "--simulate", "--frequency-hz", "32126",
                            "--voltages", "10,35", "--out", str(tmp_path / "v.csv"))

@@ -1,11 +1,15 @@
 """``tactile run`` end to end on a tiny configuration; the report's links resolve."""
 
+import contextlib
+import io
 import json
 import re
 
 import pytest
 
+from workflow import progress
 from workflow.cli import main
+from workflow.pipeline.steps import STEPS
 from workflow.pipeline.config import default_config, tomllib
 
 TINY = """
@@ -33,18 +37,20 @@ posterior_draws = 8
 
 @pytest.fixture(scope="module")
 def tiny_run(tmp_path_factory):
+    """(exit status, output folder, configuration, stderr) of a tiny run whose stderr is not a terminal."""
     folder = tmp_path_factory.mktemp("run")
     config = folder / "tiny.toml"
     config.write_text(TINY)
     out = folder / "report"
-    with pytest.MonkeyPatch.context() as patch:
+    with pytest.MonkeyPatch.context() as patch, contextlib.redirect_stderr(io.StringIO()) as stderr:
         patch.setenv("TACTILE_CACHE", str(folder / "cache"))
+        patch.setattr(progress, "QUIET_TASK", 0.0)  # tiny steps, yet each batch reports
         status = main(["run", "--config", str(config), "--out", str(out)])
-    return status, out, config
+    return status, out, config, stderr.getvalue()
 
 
 def test_a_rerun_reuses_the_cached_steps(tiny_run, capsys, monkeypatch):
-    _, out, config = tiny_run
+    _, out, config, _ = tiny_run
     monkeypatch.setenv("TACTILE_CACHE", str(out.parent / "cache"))
     capsys.readouterr()
     assert main(["run", "--config", str(config), "--out", str(out), "--json"]) == 0
@@ -54,15 +60,25 @@ def test_a_rerun_reuses_the_cached_steps(tiny_run, capsys, monkeypatch):
 
 
 def test_tiny_run_writes_a_report(tiny_run):
-    status, out, _ = tiny_run
+    status, out, _, _ = tiny_run
     assert status == 0
     text = (out / "report.md").read_text()
     assert "## Analytical optimum with constant Q" in text
     assert "## Run time" in text
 
 
+def test_piped_progress_shows_every_step_and_the_long_computations_inside(tiny_run):
+    *_, err = tiny_run
+    for number, step in enumerate(STEPS, start=1):
+        assert f"[{number}/{len(STEPS)}] {step.title} ..." in err
+        assert re.search(rf"^\[{number}/{len(STEPS)}\] {re.escape(step.title)}: done in [\d.]+ s, .+ elapsed$", err, re.M)
+    assert re.search(r"^emcee, quadratic law: \d+/\d+ steps", err, re.M), err
+    assert re.search(r"^FEM evaluations: \d+/\d+ done in", err, re.M), err
+    assert "\r" not in err  # no bar on a pipe
+
+
 def test_every_link_of_the_report_resolves(tiny_run):
-    _, out, _ = tiny_run
+    _, out, _, _ = tiny_run
     text = (out / "report.md").read_text()
     targets = re.findall(r"\]\(([^)]+)\)", text)
     for target in targets:

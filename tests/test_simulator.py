@@ -171,11 +171,13 @@ def test_pymeasure_agilent33500_client_drives_the_simulator_unchanged():
 def test_pty_server_end_to_end():
     process = subprocess.Popen(
         [sys.executable, "-c", "import sys; from workflow.cli import main; sys.exit(main())", "simulate", "--pty"],
-        stdout=subprocess.PIPE, text=True,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
     try:
         ports = json.loads(process.stdout.readline())
         assert set(ports) == {"generator", "vibrometer"}
+        how_to_stop = process.stderr.readline()
+        assert "Ctrl-C" in how_to_stop and f"kill {process.pid}" in how_to_stop and ports["generator"] in how_to_stop
         generator = serial.Serial(ports["generator"], timeout=5)
         vibrometer = serial.Serial(ports["vibrometer"], timeout=5)
         generator.write(b"*IDN?\n")

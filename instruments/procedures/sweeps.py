@@ -2,7 +2,7 @@
 
 Each procedure plans its points, skips those already in its log (resume), measures the
 rest one by one, appending and fsync'ing a row per point (:mod:`.logwriter`), and shows
-a tqdm bar on stderr.  A timed-out or garbled exchange is retried a bounded number of
+its progress on stderr (:class:`~workflow.progress.Progress`).  A timed-out or garbled exchange is retried a bounded number of
 times; then a clear :class:`InstrumentError` stops the run, with the log intact for a
 resume.  The generator output is switched off at the end, also after an error.
 
@@ -10,14 +10,12 @@ Voltages are peak volts across the ceramics; the station converts them through t
 amplifier gain and refuses anything above its safety limit before sending it.
 """
 
-import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from instruments.drivers.amplifier import PowerAmplifier
 from instruments.drivers.errors import CommunicationError, InstrumentError, SafetyLimitError
@@ -25,6 +23,7 @@ from instruments.drivers.generator import FunctionGenerator
 from instruments.drivers.vibrometer import VelocityReading, Vibrometer, full_scale
 from instruments.procedures.logwriter import LogWriter, point_key
 from workflow import logformat
+from workflow.progress import Progress
 
 DEFAULT_RETRIES = 3
 """Retries of one point after a timeout or a garbled reply."""
@@ -210,7 +209,7 @@ def _measure_points(station: Station, log: LogWriter, points: list[PlannedPoint]
     stamps = [float(row[logformat.TIMESTAMP]) for row in log.rows if row[logformat.TIMESTAMP]]
     offset = max(stamps, default=0.0)
     start = station.clock()
-    with tqdm(total=len(points), initial=len(points) - len(todo), desc=label, unit="pt", file=sys.stderr, disable=None) as bar:
+    with Progress(len(todo), label, unit="points", enabled=bool(todo)) as bar:
         for point in todo:
             reading = station.measure(point)
             log.append(

@@ -1,5 +1,8 @@
 """``tactile evaluate``: deflection and resonance of one geometry."""
 
+import sys
+
+from instruments.drivers.amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT
 from workflow.cli.options import (
     add_ceramic_option,
     add_damping_option,
@@ -7,6 +10,7 @@ from workflow.cli.options import (
     add_json_flag,
     add_model_option,
     add_width_option,
+    damping_line,
     load_damping,
     plate_from_args,
     positive_float,
@@ -21,7 +25,9 @@ def register(subparsers) -> None:
         "evaluate",
         help="deflection and resonance frequency of one plate",
         description="Evaluate one plate geometry with the beam model or the FEM: the resonance "
-        "frequency and the antinode deflection amplitude at the drive voltage.",
+        "frequency and the antinode deflection amplitude at the drive voltage.  A --voltage above the "
+        f"bench's safety limit ({DEFAULT_CERAMIC_VOLTAGE_LIMIT:g} V peak across the ceramics) is still "
+        "evaluated, with a warning.",
     )
     add_model_option(parser)
     parser.add_argument("--lambda-mm", type=positive_float, required=True, help="wavelength lambda [mm]")
@@ -36,6 +42,12 @@ def register(subparsers) -> None:
 
 def run(args) -> dict:
     plate = plate_from_args(args)
+    if args.voltage > DEFAULT_CERAMIC_VOLTAGE_LIMIT:
+        print(
+            f"tactile evaluate: warning: {args.voltage:g} V is above the bench's safety limit of "
+            f"{DEFAULT_CERAMIC_VOLTAGE_LIMIT:g} V peak across the ceramics: the bench would refuse this drive",
+            file=sys.stderr,
+        )
     result = {
         "model": args.model,
         **geometry_record(plate),
@@ -62,11 +74,22 @@ def run(args) -> dict:
         if posterior is not None:
             result.update(fem_damping_record(posterior, fem))
     if not args.json:
-        print(
-            f"{args.model}: lambda {result['lambda_mm']:g} mm, h_i {result['h_i_mm']:g} mm, h_p {result['h_p_mm']:g} mm, "
-            f"b {result['b_mm']:g} mm, Q {result['q']:g}, {args.voltage:g} V -> "
-            f"w_dyn {result['w_dyn_um']:.4f} um at f_r {result['f_r_khz']:.3f} kHz"
-        )
-        for mode in result.get("modes", []):
-            print(f"  mode {mode['f_khz']:8.3f} kHz: {mode['w_um']:.4f} um, transverse indicator {mode['transverse']:.2f}")
+        _print_human(result, args.model, None if args.model == "analytical" else fem.best_index)
     return result
+
+
+def _print_human(result: dict, model: str, working_mode) -> None:
+    """The evaluation for people; ``working_mode`` is the index of the FEM mode whose deflection is reported."""
+    damped = "damping" in result
+    interval = (f" (90 %: {result['w_dyn_um_p05']:.3f} to {result['w_dyn_um_p95']:.3f} µm)"
+                if "w_dyn_um_p05" in result else "")
+    print(
+        f"{model}: lambda {result['lambda_mm']:g} mm, h_i {result['h_i_mm']:g} mm, h_p {result['h_p_mm']:g} mm, "
+        f"b {result['b_mm']:g} mm, {'Q(v)' if damped else 'Q ' + format(result['q'], 'g')}, "
+        f"{result['voltage_v']:g} V -> w_dyn {result['w_dyn_um']:.4f} µm{interval} at f_r {result['f_r_khz']:.3f} kHz"
+    )
+    if damped:
+        print(damping_line(result))
+    for index, mode in enumerate(result.get("modes", [])):
+        mark = "  <- working mode (reported above)" if index == working_mode else ""
+        print(f"  mode {mode['f_khz']:8.3f} kHz: {mode['w_um']:.4f} µm, transverse indicator {mode['transverse']:.2f}{mark}")

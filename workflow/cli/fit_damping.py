@@ -56,7 +56,7 @@ def run(args) -> dict:
     out = output_folder(args.out)
     input_paths = {Path(p).resolve() for p in args.logs}
     laws = SAMPLED_LAWS if args.law == "all" else (args.law,)
-    fit = fit_damping(log, laws=laws, seed=args.seed, max_steps=args.max_steps, progress=sys.stderr.isatty())
+    fit = fit_damping(log, laws=laws, seed=args.seed, max_steps=args.max_steps, progress=True)
     summary = dict(fit_summary(fit), files=write_fit(fit, out, figures=not args.no_figures, protect=input_paths))
     if not args.json:
         _print_human(summary)

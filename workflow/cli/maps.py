@@ -81,7 +81,7 @@ def run(args) -> dict:
         from workflow.optimise.fem_model import FemModel
 
         model = FemModel(
-            q=args.q, voltage=args.voltage, cache=EvaluationCache(), scheduler=args.scheduler, progress=not args.json
+            q=args.q, voltage=args.voltage, cache=EvaluationCache(), scheduler=args.scheduler, progress=True
         )
     args.out.mkdir(parents=True, exist_ok=True)
     if posterior is None:
@@ -106,7 +106,7 @@ def run(args) -> dict:
         voltage = "" if posterior is None else f", {o['required_voltage_v']['p50']:.3g} V for the target"
         print(
             f"{args.model} map {points}x{points}{damping}, h_p {args.hp_mm:g} mm: optimum lambda {o['lambda_mm']:.3f} mm, "
-            f"h_i {o['h_i_mm']:.3f} mm, w_dyn {o['w_dyn_um']:.3f} um at {o['f_r_khz']:.2f} kHz{voltage}; figures: "
+            f"h_i {o['h_i_mm']:.3f} mm, w_dyn {o['w_dyn_um']:.3f} µm at {o['f_r_khz']:.2f} kHz{voltage}; figures: "
             + ", ".join(figures)
         )
     return record

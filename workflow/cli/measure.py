@@ -1,15 +1,19 @@
 """``tactile measure``: run a bench procedure on serial ports or on the in-process simulator.
 
-Logs go under ``data/`` by default; running the same command again resumes its log.
+Logs go under ``measurements/`` in the working directory by default (ignored by git, so a
+measurement never lands among the repository's tracked files); running the same command
+again resumes its log.
 """
 
 import argparse
 from pathlib import Path
 
+from instruments.drivers.amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT, DEFAULT_GAIN
 from workflow.cli.options import add_bench_arguments, add_json_flag, bench_settings
 from workflow.errors import TactileError
 
-DEFAULT_DATA_DIR = Path("data")
+DEFAULT_DATA_DIR = Path("measurements")
+"""Folder of the logs when --out is not given, relative to the working directory."""
 PROCEDURES = ("resonance", "campaign", "voltage-sweep")
 
 
@@ -28,7 +32,8 @@ def register(subparsers) -> None:
         "measure",
         help="run a bench procedure (resonance, campaign, voltage-sweep) and log it",
         description="Run a measurement procedure against serial ports (--generator/--vibrometer) or the in-process "
-        "simulator (--simulate). Each point is appended to a CSV log (docs/log-format.md) at once; rerunning the "
+        "simulator (--simulate). Each point is appended to a CSV log (docs/log-format.md) at once, by default "
+        f"{DEFAULT_DATA_DIR}/<procedure>.csv in the working directory (a folder git ignores); rerunning the "
         "same command resumes an interrupted log.",
     )
     procedures = parser.add_subparsers(dest="procedure", metavar="PROCEDURE", parser_class=type(parser))
@@ -41,10 +46,12 @@ def register(subparsers) -> None:
     ports.add_argument("--baudrate", type=int, default=9600, help="serial baud rate (default 9600)")
     ports.add_argument("--timeout", type=float, default=1.0, help="reply timeout [s] (default 1)")
     ports.add_argument("--retries", type=int, default=3, help="retries of a point after a timeout or garbled reply (default 3)")
-    ports.add_argument("--amplifier-gain", type=float, default=10.0, help="power amplifier voltage gain (default 10)")
-    ports.add_argument("--max-voltage", type=float, default=30.0, metavar="VOLTS",
-                       help="safety limit, peak volts across the ceramics (default 30)")
-    ports.add_argument("--out", type=Path, help="log file (default data/<procedure>.csv)")
+    ports.add_argument("--amplifier-gain", type=float, default=DEFAULT_GAIN,
+                       help=f"power amplifier voltage gain (default {DEFAULT_GAIN:g})")
+    ports.add_argument("--max-voltage", type=float, default=DEFAULT_CERAMIC_VOLTAGE_LIMIT, metavar="VOLTS",
+                       help=f"safety limit, peak volts across the ceramics (default {DEFAULT_CERAMIC_VOLTAGE_LIMIT:g})")
+    ports.add_argument("--out", type=Path, help=f"log file (default: {DEFAULT_DATA_DIR}/<procedure>.csv in the working "
+                       "directory, a folder git ignores; the path is printed at the end)")
     ports.add_argument("--restart", action="store_true", help="overwrite an existing log instead of resuming it")
     add_bench_arguments(common)
     add_json_flag(common)
@@ -128,6 +135,8 @@ def _resonance_of(args, station, metadata, out: Path) -> float:
 
     path = out.with_name(f"{out.stem}-resonance{out.suffix}")
     result = resonance_search(station, path, ResonancePlan(), metadata=metadata, restart=args.restart)
+    if not args.json:
+        print(f"resonance search: {result.summary['resonance_frequency_hz']:.1f} Hz; log: {path}")
     return result.summary["resonance_frequency_hz"]
 
 
@@ -174,8 +183,26 @@ def run(args):
         **result.summary,
     }
     if not args.json:
-        print(f"{result.procedure}: {result.measured} points measured, {result.resumed} already in {result.path} "
-              f"({result.planned} planned)")
-        for key, value in result.summary.items():
-            print(f"  {key}: {value}")
+        print(f"{result.procedure}: {result.measured} points measured, {result.resumed} already logged "
+              f"({result.planned} planned); log: {result.path}")
+        _print_summary(result.procedure, result.summary)
     return summary
+
+
+def _print_summary(procedure: str, summary: dict) -> None:
+    """A procedure's results for people (the JSON keys hold the same numbers in full)."""
+    if procedure == "resonance":
+        print(f"  resonance {summary['resonance_frequency_hz']:.1f} Hz, peak velocity "
+              f"{summary['peak_velocity_m_s']:.4f} m/s, {_q_estimate(summary['q_estimate'])}")
+    elif procedure == "campaign":
+        for sweep in summary["sweeps"]:
+            print(f"  sweep {sweep['sweep']} at {sweep['voltage_v']:g} V: peak {sweep['peak_frequency_hz']:.1f} Hz, "
+                  f"{sweep['peak_velocity_m_s']:.4f} m/s, {_q_estimate(sweep['q_estimate'])}")
+    else:
+        for voltage, deflection in zip(summary["voltage_v"], summary["deflection_um"]):
+            print(f"  {voltage:g} V: deflection {deflection:.4f} µm")
+
+
+def _q_estimate(value) -> str:
+    """The half-power Q estimate, or why there is none."""
+    return "Q estimate n/a (no half-power bandwidth in the sweep)" if value is None else f"Q estimate {value:.1f}"

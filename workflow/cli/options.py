@@ -134,6 +134,28 @@ def load_damping(args):
     return None if path is None else load_posterior(path)
 
 
+def describe_law(name: str, parameters: dict) -> str:
+    """A Q(v) law for people, e.g. ``"quadratic law, Q0 150, alpha 0.254 s^2/m^2"``."""
+    from workflow.damping.fit import parameter_unit
+
+    items = [f"{name} law"]
+    for key, value in parameters.items():
+        unit = parameter_unit(name, key)
+        items.append(f"{'Q0' if key == 'q0' else key} {value:.4g}" + ("" if unit == "-" else f" {unit}"))
+    return ", ".join(items)
+
+
+def damping_line(record: dict) -> str:
+    """The ``--damping`` keys of a record for people: the Q(v) law used, the Q the plate settles
+    at, and the voltage for the target deflection with its 90 % interval."""
+    damping, voltage = record["damping"], record["required_voltage_v"]
+    return (
+        f"  Q(v) used: {describe_law(damping['law'], damping['median'])} (posterior median of {damping['posterior']}); "
+        f"Q settles at {record['q']:.1f}; {voltage['p50']:.2f} V for {voltage['target_um']:g} µm "
+        f"(90 %: {voltage['p05']:.2f} to {voltage['p95']:.2f} V)"
+    )
+
+
 def add_bench_arguments(parser) -> None:
     """Flags that configure a simulated bench (shared with ``tactile measure --simulate``)."""
     group = parser.add_argument_group("simulated bench")

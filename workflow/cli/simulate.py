@@ -1,9 +1,12 @@
 """``tactile simulate``: the bench simulator, on pseudo-terminals or as a summary of its physics."""
 
 import json
+import os
 import signal
+import sys
 
-from workflow.cli.options import add_bench_arguments, add_json_flag, bench_settings
+from workflow.cli.options import add_bench_arguments, add_json_flag, bench_settings, describe_law
+from workflow.units import KHZ, PM_PER_V
 
 
 def register(subparsers) -> None:
@@ -25,6 +28,7 @@ def run(args):
     from instruments.simulator import Bench
     from instruments.simulator.physics import working_point_velocity
     from instruments.simulator.ptyserver import open_ptys, serve
+    from workflow.damping.laws import law_parameters
     from workflow.models.materials import DESIGN_VOLTAGE, PLATE_Q
 
     settings = bench_settings(args)
@@ -33,6 +37,12 @@ def run(args):
         signal.signal(signal.SIGTERM, lambda signum, frame: terminated.append(signum))
         ptys = open_ptys()
         print(json.dumps({name: pair.path for name, pair in ptys.items()}), flush=True)
+        print(
+            f"tactile simulate: serving the generator on {ptys['generator'].path} and the vibrometer on "
+            f"{ptys['vibrometer'].path}; stop with Ctrl-C or 'kill {os.getpid()}'",
+            file=sys.stderr,
+            flush=True,
+        )
         try:
             serve(Bench(settings), ptys, should_stop=lambda: bool(terminated))
         finally:
@@ -48,7 +58,10 @@ def run(args):
         "working_q": float(response.law.quality_factor(v_work)),
     }
     if not args.json:
-        print(f"simulated plate: f_r = {response.resonance_frequency:.1f} Hz, w_s/V = {response.deflection_per_volt * 1e9:.4f} nm/V")
-        print(f"Q(v) law {response.law.name}: {response.law}")
-        print(f"working point {DESIGN_VOLTAGE:g} V: v = {v_work:.4f} m/s, Q = {result['working_q']:.2f}")
+        print(
+            f"simulated plate: resonance {response.resonance_frequency / KHZ:.3f} kHz, "
+            f"static deflection {response.deflection_per_volt / PM_PER_V:.1f} pm/V"
+        )
+        print(f"Q(v): {describe_law(response.law.name, law_parameters(response.law))}")
+        print(f"working point {DESIGN_VOLTAGE:g} V: velocity {v_work:.4f} m/s, Q {result['working_q']:.2f}")
     return result

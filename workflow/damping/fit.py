@@ -26,6 +26,7 @@ from workflow.damping.laws import LAWS
 from workflow.damping.likelihood import FitData, fit_data, log_probability, pointwise_log_likelihood
 from workflow.damping.logs import CampaignLog, drop_short_sweeps
 from workflow.damping.posterior import DampingPosterior
+from workflow.progress import Progress
 
 DEFAULT_LAWS = ("quadratic", "linear")
 """The laws sampled by default; every law of :data:`~workflow.damping.laws.LAWS` gets a MAP and a BIC."""
@@ -33,7 +34,9 @@ CRITERION = (
     "WAIC (widely applicable information criterion, deviance scale, from the posterior samples; "
     "lower is better); BIC at the MAP is also given"
 )
-CONVERGENCE_RULE = "n_steps >= 50 tau_max and every tau changed < 1 % since the previous check"
+CHAIN_TAUS = 50
+"""A converged chain is at least this many autocorrelation times long [-]."""
+CONVERGENCE_RULE = f"n_steps >= {CHAIN_TAUS} tau_max and every tau changed < 1 % since the previous check"
 _FD_STEP = 1e-4
 """Finite-difference step in standardised coordinates."""
 
@@ -323,8 +326,12 @@ def sample_posterior(
     max_steps: int = 20000,
     max_seconds: Optional[float] = None,
     progress: bool = False,
+    description: str = "emcee",
 ):
     """Run emcee in chunks until :data:`CONVERGENCE_RULE` holds or a cap is reached.
+
+    With ``progress``, the steps run are shown on stderr against the chain length the rule
+    needs (:data:`CHAIN_TAUS` tau_max, revised as tau is estimated), not against the cap.
 
     Returns
     -------
@@ -339,18 +346,25 @@ def sample_posterior(
     previous = np.full(n_dim, np.inf)
     converged = False
     start = time.perf_counter()
-    bar = _progress_bar(max_steps, progress)
-    while sampler.iteration < max_steps:
-        state = sampler.run_mcmc(state, min(check_every, max_steps - sampler.iteration), progress=False)
-        bar.update(check_every)
-        tau = sampler.get_autocorr_time(tol=0)
-        if np.all(np.isfinite(tau)) and np.all(50 * tau <= sampler.iteration) and np.all(np.abs(previous - tau) < 0.01 * tau):
-            converged = True
-            break
-        previous = tau
-        if max_seconds is not None and time.perf_counter() - start > max_seconds:
-            break
-    bar.close()
+    with Progress(None, description, unit="steps", enabled=progress) as shown:
+        while sampler.iteration < max_steps:
+            chunk = min(check_every, max_steps - sampler.iteration)
+            state = sampler.run_mcmc(state, chunk, progress=False)
+            tau = sampler.get_autocorr_time(tol=0)
+            needed = CHAIN_TAUS * np.max(tau)
+            if np.all(np.isfinite(tau)) and needed <= sampler.iteration and np.all(np.abs(previous - tau) < 0.01 * tau):
+                converged = True
+                shown.update(chunk, total=sampler.iteration, note="converged")
+                break
+            if np.isfinite(needed) and needed > sampler.iteration:
+                shown.update(chunk, total=int(np.ceil(needed)), note=f"tau {np.max(tau):.0f}, {CHAIN_TAUS} tau needed")
+            elif np.isfinite(needed):
+                shown.update(chunk, total=sampler.iteration + check_every, note=f"{CHAIN_TAUS} tau reached, tau still settling")
+            else:
+                shown.update(chunk)
+            previous = tau
+            if max_seconds is not None and time.perf_counter() - start > max_seconds:
+                break
     seconds = time.perf_counter() - start
     tau = sampler.get_autocorr_time(tol=0)
     finite_tau = np.where(np.isfinite(tau), tau, sampler.iteration)
@@ -367,12 +381,6 @@ def sample_posterior(
         seconds=seconds,
     )
     return sampler, diagnostics
-
-
-def _progress_bar(total: int, enabled: bool):
-    from tqdm import tqdm
-
-    return tqdm(total=total, desc="emcee steps", unit="step", disable=not enabled, leave=False)
 
 
 def waic(samples: np.ndarray, data: FitData, max_draws: int = 1000, chunk: int = 250) -> Tuple[float, float]:
@@ -423,7 +431,7 @@ def fit_law(
     max_steps, max_seconds, check_every : int, float, int
         Caps on the chain and the convergence-check interval [steps, s, steps].
     progress : bool
-        A tqdm bar on stderr.
+        Show the chain's progress towards convergence on stderr.
     """
     data, theta_map, scale, log_likelihood = map_fit(log, law_name, sweeps)
     rng = np.random.default_rng(seed)
@@ -433,7 +441,7 @@ def fit_law(
     covariance = laplace_covariance(data, theta_map, scale)
     walkers = initial_walkers(data, theta_map, covariance, n_walkers, rng)
     sampler, diagnostics = sample_posterior(
-        data, walkers, int(rng.integers(2**31)), check_every, max_steps, max_seconds, progress
+        data, walkers, int(rng.integers(2**31)), check_every, max_steps, max_seconds, progress, f"emcee, {law_name} law"
     )
     samples = sampler.get_chain(discard=diagnostics.burn_in, thin=diagnostics.thin, flat=True)
     chain = sampler.get_chain()
@@ -512,12 +520,17 @@ _UNITS = {"q0": "-", "gain": "m/V", "sigma_rel": "-", "sigma_abs": "m/s"}
 _ALPHA_UNITS = {"quadratic": "s^2/m^2", "linear": "s/m"}
 
 
+def parameter_unit(law_name: str, name: str) -> str:
+    """Unit of the fitted parameter ``name`` of the law ``law_name`` (``"-"`` when dimensionless)."""
+    return "Hz" if name.startswith("f_r_") else _ALPHA_UNITS.get(law_name) if name == "alpha" else _UNITS[name]
+
+
 def parameter_summary(law_fit: LawFit) -> dict:
     """Name -> {median, p05, p95, unit} in natural units (f_r_k in Hz)."""
     summary = {}
     for name, values in law_fit.data.layout.natural(law_fit.samples).items():
         p05, median, p95 = np.quantile(values, [0.05, 0.5, 0.95])
-        unit = "Hz" if name.startswith("f_r_") else _ALPHA_UNITS.get(law_fit.law_name) if name == "alpha" else _UNITS[name]
+        unit = parameter_unit(law_fit.law_name, name)
         summary[name] = {"median": float(median), "p05": float(p05), "p95": float(p95), "unit": unit}
     return summary
 

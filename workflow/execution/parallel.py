@@ -18,13 +18,11 @@ same numbers on every path, since the same function runs on the same inputs.
 
 import multiprocessing
 import os
-import sys
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Callable, Iterable, List, Optional
 
-from tqdm import tqdm
-
 from workflow.errors import TactileError
+from workflow.progress import Progress
 
 SYNCHRONOUS = "synchronous"
 """The ``scheduler`` value that runs every item in the calling process."""
@@ -65,11 +63,12 @@ def map_evaluations(
         None: local process pool; "synchronous": in this process; ``"tcp://host:port"``: the
         Dask scheduler of an existing cluster; a ``distributed.Client``: that client.
     progress : bool
-        Show a tqdm bar on stderr (tqdm hides it when stderr is not a terminal).
+        Show the progress on stderr (:class:`~workflow.progress.Progress`: a bar on a terminal,
+        plain lines when stderr is piped or logged).
     workers : int, optional
         Local processes (default: the cores available); ignored on a cluster.
     description : str
-        Label of the progress bar.
+        Label of the progress.
 
     Returns
     -------
@@ -82,15 +81,12 @@ def map_evaluations(
         When the scheduler address is malformed or unreachable.
     """
     items = list(items)
-    bar = tqdm(total=len(items), desc=description, file=sys.stderr, disable=None if progress else True)
-    try:
+    with Progress(len(items), description, enabled=progress and bool(items)) as bar:
         if scheduler is None:
             return _process_pool(function, items, workers or local_workers(), bar)
         if scheduler == SYNCHRONOUS:
             return _in_process(function, items, bar)
         return _dask(function, items, scheduler, bar)
-    finally:
-        bar.close()
 
 
 def _in_process(function, items, bar):

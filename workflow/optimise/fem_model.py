@@ -89,7 +89,7 @@ class FemModel:
     scheduler : None, str or distributed.Client
         Where batches run (see :func:`~workflow.parallel.map_evaluations`).
     progress : bool
-        Progress bar for batches.
+        Show each batch's progress on stderr (a bar on a terminal, plain lines otherwise).
     evaluations : int
         Geometries requested so far (cached or not).
     """
@@ -116,7 +116,7 @@ class FemModel:
         tasks = [FemTask(p, self.q, self.voltage, self.settings, with_tangents) for p in scalar_plates(plate)]
         self.evaluations += len(tasks)
         return cached_map(
-            run_fem_task, tasks, describe_fem_task, self.cache, self.scheduler, self.progress, description="FEM"
+            run_fem_task, tasks, describe_fem_task, self.cache, self.scheduler, self.progress, description="FEM evaluations"
         )
 
     def gradients(self, plate: Plate) -> tuple[np.ndarray, np.ndarray]:

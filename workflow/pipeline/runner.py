@@ -15,6 +15,7 @@ from typing import Any, Callable, Dict, List, Optional
 
 from workflow.errors import TactileError
 from workflow.execution.cache import EvaluationCache, content_key, source_version
+from workflow.progress import format_duration
 
 
 class StepError(TactileError):
@@ -103,9 +104,14 @@ def _compute(context: RunContext, step: Step):
 
 
 def run_steps(context: RunContext, steps: List[Step], stream=None) -> RunContext:
-    """Run ``steps`` in order, printing progress and timings to ``stream`` (stderr)."""
+    """Run ``steps`` in order, printing progress and timings to ``stream`` (stderr).
+
+    Each step prints a line when it starts and one when it ends, with its time and the run's
+    so far; inside a step, long computations show their own progress (emcee, FEM batches).
+    """
     stream = sys.stderr if stream is None else stream
     context.out.mkdir(parents=True, exist_ok=True)
+    run_start = time.perf_counter()
     for number, step in enumerate(steps, start=1):
         print(f"[{number}/{len(steps)}] {step.title} ...", file=stream, flush=True)
         start = time.perf_counter()
@@ -123,5 +129,7 @@ def run_steps(context: RunContext, steps: List[Step], stream=None) -> RunContext
         seconds = time.perf_counter() - start
         context.timings.append(StepTiming(step.title, seconds, cached))
         note = " (from cache)" if cached else ""
-        print(f"[{number}/{len(steps)}] {step.title}: done in {seconds:.1f} s{note}", file=stream, flush=True)
+        elapsed = format_duration(time.perf_counter() - run_start)
+        print(f"[{number}/{len(steps)}] {step.title}: done in {format_duration(seconds)}{note}, {elapsed} elapsed",
+              file=stream, flush=True)
     return context

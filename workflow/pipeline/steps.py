@@ -96,7 +96,7 @@ def damping_fit(context: RunContext):
         seed=damping["seed"],
         max_steps=damping["max_steps"],
         n_walkers=damping["walkers"],
-        progress=sys.stderr.isatty(),
+        progress=True,
     )
 
 
@@ -126,7 +126,7 @@ def damped_design(context: RunContext):
         seed=damping["seed"],
         target=target,
         scheduler=context.scheduler,
-        progress=sys.stderr.isatty(),
+        progress=True,
     )
     maps = {
         hp: damped_maps(
@@ -180,7 +180,7 @@ def fem_model(context: RunContext, q: Optional[float] = None):
         settings=fem_settings(context.config),
         cache=context.cache,
         scheduler=context.scheduler,
-        progress=sys.stderr.isatty(),
+        progress=True,
     )
 
 
