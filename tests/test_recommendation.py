@@ -73,11 +73,14 @@ def test_a_design_needing_18_v_is_flagged_and_one_at_12_v_is_not():
     assert "**NO**: it needs 18.0 V" in rows["2"]
 
 
-def test_a_design_below_the_frequency_limit_misses_the_goal():
-    modes = (ModeResult(24_990.0, 1e-6, 0.05),)
-    design = fem_recommendation(needing(12.0, modes), ORIGINAL_PLATE, PROBLEM, DRAWS, TARGET)
-    assert design.reaches_target and not design.meets_goal
-    assert "10 Hz below 25 kHz" in recommendation_section(Recommendation({1 * MM: design}, None, "constant", 3))
+def test_a_design_below_the_frequency_limit_misses_the_goal_one_on_it_does_not():
+    below, on = (
+        fem_recommendation(needing(12.0, (ModeResult(f, 1e-6, 0.05),)), ORIGINAL_PLATE, PROBLEM, DRAWS, TARGET)
+        for f in (24_990.0, 25_000.0 * (1 - 1e-7))  # the optimiser's constraint slack
+    )
+    assert below.reaches_target and not below.meets_goal and on.meets_goal
+    text = recommendation_section(Recommendation({1 * MM: below, 2 * MM: on}, None, "constant", 3))
+    assert "10 Hz below 25 kHz" in text and "| +0 Hz |" in text
 
 
 def test_the_nearest_transverse_mode_is_reported_with_its_distance():
@@ -130,3 +133,13 @@ def test_the_beam_and_fem_ratio_sentence_lists_the_ratios():
     }
     text = recommendation_section(Recommendation(designs, None, "constant", 3))
     assert "the FEM deflects ×1.75 / ×1.45 as much as the beam model (h_p = 0.5 / 2 mm)" in text
+
+
+def test_a_design_that_meets_the_goal_only_with_the_fem_is_flagged():
+    designs = {
+        hp * MM: fem_recommendation(needing(12.0), ORIGINAL_PLATE, PROBLEM, DRAWS, TARGET, beam_required_voltage=beam)
+        for hp, beam in ((1.0, 9.4), (2.0, 18.7))
+    }
+    text = recommendation_section(Recommendation(designs, None, "constant", 3))
+    assert "**h_p = 2 mm meets it only with the FEM: the beam model needs 18.7 V at its own optimum.**" in text
+    assert "h_p = 1 mm meets it only" not in text

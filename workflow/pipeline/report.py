@@ -106,19 +106,25 @@ _SOURCES = {"FEM": "FEM", "beam": "beam model"}
 
 def _verdict(recommendation) -> str:
     """Which h_p meet the goal, and why the others do not."""
-    designs = next(iter(recommendation.designs.values()), recommendation.original)
-    problem, target = designs.problem, designs.target / UM
+    first = next(iter(recommendation.designs.values()), recommendation.original)
+    problem, target = first.problem, first.target / UM
     text = [f"Goal: {target:g} µm at ≤ {problem.voltage:g} V with the resonance at or above {problem.min_frequency / KHZ:g} kHz."]
     met = [hp for hp, d in recommendation.designs.items() if d.meets_goal]
     if met:
+        text.append(f"Met with h_p = {_thicknesses(met)} mm.")
         uncertain = [hp for hp in met if recommendation.margin_within_mesh_error(recommendation.designs[hp])]
-        caveat = (
-            f" (h_p = {_thicknesses(uncertain)} mm: the margin to {problem.min_frequency / KHZ:g} kHz is within the FEM "
-            "mesh's frequency error, see below)"
-            if uncertain
-            else ""
-        )
-        text.append(f"Met with h_p = {_thicknesses(met)} mm{caveat}.")
+        if uncertain:
+            text.append(
+                f"The margin to {problem.min_frequency / KHZ:g} kHz of h_p = {_thicknesses(uncertain)} mm is within the "
+                "FEM mesh's frequency error (see FEM accuracy below)."
+            )
+        for hp in met:
+            beam_voltage = recommendation.designs[hp].beam_required_voltage
+            if beam_voltage is not None and beam_voltage > problem.voltage:
+                text.append(
+                    f"**h_p = {hp / MM:g} mm meets it only with the FEM: the beam model needs {beam_voltage:.1f} V at "
+                    "its own optimum.**"
+                )
     for hp, d in recommendation.designs.items():
         if not d.meets_goal:
             text.append(f"**Not met with h_p = {hp / MM:g} mm: {_shortfall(d)}.**")
@@ -140,7 +146,7 @@ def _shortfall(design) -> str:
     if not design.reaches_target:
         low, median, high = design.required_voltage
         reasons.append(f"it needs {median:.1f} V for {design.target / UM:g} µm (90 %: {low:.2f}–{high:.2f} V)")
-    if design.frequency_margin < 0:
+    if not design.above_frequency_limit:
         reasons.append(f"its resonance is {-design.frequency_margin:.0f} Hz below {design.problem.min_frequency / KHZ:g} kHz")
     return " and ".join(reasons)
 
@@ -157,7 +163,7 @@ def _recommendation_row(label: str, source: str, design, recommendation) -> tupl
             if mode is None
             else f"{design.transverse_distance:+.0f} Hz ({mode.frequency / KHZ:.3f} kHz, indicator {mode.transverse_indicator:.2f})"
         )
-    margin = f"{design.frequency_margin:+.0f} Hz"
+    margin = f"{round(design.frequency_margin):+d} Hz"
     if recommendation.margin_within_mesh_error(design):
         margin += " (within the mesh error)"
     return (

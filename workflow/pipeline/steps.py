@@ -277,7 +277,8 @@ def recommended_design(context: RunContext):
             optimum = fem_optima[hp].space_mapping.optimum
             (result,) = fem_model(context).results(optimum.plate)
             ratio = optimum.deflection / beam_optima[hp].deflection
-            designs[hp] = fem_recommendation(result, optimum.plate, problem, draws, target, ratio)
+            beam_voltage = float(damped.optima[hp].interval("required_voltage")[1])
+            designs[hp] = fem_recommendation(result, optimum.plate, problem, draws, target, ratio, beam_voltage)
         else:
             designs[hp] = beam_recommendation(damped.optima[hp].damped.plate, problem, draws, target)
     original = None
