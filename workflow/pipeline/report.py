@@ -254,7 +254,7 @@ def _analytical_optima(context: RunContext, optima) -> str:
 
 def _logs(context: RunContext, logs) -> str:
     names = ", ".join(f"[{Path(p).name}]({_relative(context, p)})" for p in logs)
-    origin = "simulated on the bench simulator (original plate)" if not context.logs else "given with --logs"
+    origin = "simulated on the bench simulator for the original plate" if not context.logs else "given with --logs"
     return f"## Interferometer logs\n\nFitted logs ({origin}): {names}."
 
 
