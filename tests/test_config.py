@@ -37,6 +37,7 @@ def test_a_user_file_overrides_only_its_keys(tmp_path):
         ("[desing]\nvoltage_v = 12\n", "[desing]"),
         ('[design]\nvoltage_v = "high"\n', "design.voltage_v"),
         ("[maps]\ngrid = 4.5\n", "maps.grid"),
+        ('[fem]\nfine_width_step_mm = "one"\n', "fem.fine_width_step_mm"),
         ('[design]\nceramic_thicknesses_mm = [1.0, "two"]\n', "design.ceramic_thicknesses_mm[1]"),
         ("[design\n", "not valid TOML"),
     ],

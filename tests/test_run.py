@@ -9,8 +9,10 @@ import pytest
 
 from workflow import progress
 from workflow.cli import main
-from workflow.pipeline.steps import STEPS
+from workflow.errors import TactileError
 from workflow.pipeline.config import default_config, tomllib
+from workflow.pipeline.steps import STEPS, sweep_widths
+from workflow.units import MM
 
 TINY = """
 [design]
@@ -24,6 +26,8 @@ elements_per_ceramic = 2
 elements_per_layer = 1
 elements_across_half_width = 3
 width_points = 3
+fine_width_min_mm = 48.0
+fine_width_max_mm = 50.0
 [campaign]
 voltages_v = [5.0, 15.0]
 points_per_sweep = 21
@@ -75,6 +79,48 @@ def test_piped_progress_shows_every_step_and_the_long_computations_inside(tiny_r
     assert re.search(r"^emcee, quadratic law: \d+/\d+ steps", err, re.M), err
     assert re.search(r"^FEM evaluations: \d+/\d+ done in", err, re.M), err
     assert "\r" not in err  # no bar on a pipe
+
+
+def test_the_report_opens_with_the_recommended_design(tiny_run):
+    _, out, *_ = tiny_run
+    text = (out / "report.md").read_text()
+    sections = re.findall(r"^## (.+)$", text, flags=re.MULTILINE)
+    assert sections[0] == "Recommended design"
+    assert text.index("# Tactile plate design note") < text.index("## Recommended design")
+    assert "Sensors and Actuators A: Physical (2010)" in text.split("## Recommended design")[0].replace("*", "")
+    assert "SPEC" not in text and " um" not in text and "[um]" not in text
+    recommended = text.split("## Recommended design")[1].split("\n## ")[0]
+    assert "| 1 | FEM |" in recommended  # h_p = 1 mm from the FEM optimum
+
+
+def test_the_reproduction_table_says_what_kind_of_comparison_each_row_is(tiny_run):
+    _, out, *_ = tiny_run
+    section = (out / "report.md").read_text().split("## Reproduction of the paper")[1].split("\n## ")[0]
+    assert "| paper figure | kind | paper |" in section
+    rows = {line.split("|")[1].strip(): line.split("|")[2].strip() for line in section.splitlines() if line.startswith("| ")}
+    assert rows["plate Q at the original working point"] == "consistency check"
+    assert rows["original plate, beam model, Q = 54, 15 V: deflection"] == "consistency check"
+    assert rows["original plate, FEM, Q = 54, 15 V: resonance"] == "validation"
+
+
+def test_the_width_sweep_marks_the_original_plate(tiny_run):
+    _, out, *_ = tiny_run
+    section = (out / "report.md").read_text().split("## Width sweep")[1].split("\n## ")[0]
+    marked = [line for line in section.splitlines() if "original plate" in line and line.startswith("| ")]
+    assert len(marked) == 1 and marked[0].startswith("| 49 |")
+    assert [line.split("|")[1].strip() for line in section.splitlines() if line.startswith("| ")][1:] == [
+        "30", "48", "49", "50", "65", "100"
+    ]
+
+
+def test_sweep_widths_join_the_coarse_and_fine_ranges_and_the_plate_width():
+    fem = {"width_min_mm": 30.0, "width_max_mm": 100.0, "width_points": 15,
+           "fine_width_min_mm": 45.0, "fine_width_max_mm": 56.0, "fine_width_step_mm": 1.0}
+    widths = sweep_widths(fem, 49.5 * MM) / MM
+    assert set(range(45, 57)) <= set(widths.round(9)) and 49.5 in widths and 100.0 in widths
+    assert len(widths) == 15 + 12 - 3 + 1  # 45, 50, 55 are in both ranges
+    with pytest.raises(TactileError, match="fine_width_step_mm"):
+        sweep_widths({**fem, "fine_width_step_mm": 0.0}, 49 * MM)
 
 
 def test_every_link_of_the_report_resolves(tiny_run):

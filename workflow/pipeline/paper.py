@@ -1,10 +1,16 @@
-"""Figures quoted from the source paper (docs/model.md cites it): validation targets.
+"""Figures quoted from the source paper (:data:`CITATION`): validation targets.
 
 They are used by tests and shown beside our results in the report's reproduction table;
 no computation returns them.
 """
 
 from dataclasses import dataclass
+
+CITATION = (
+    "P. Sergeant, F. Giraud, B. Lemaire-Semail, \"Geometrical optimization of an ultrasonic tactile plate "
+    "for surface texture rendering\", *Sensors and Actuators A: Physical* (2010)"
+)
+"""The source paper, as the report cites it (markdown)."""
 
 
 @dataclass(frozen=True)
@@ -32,11 +38,11 @@ class PaperFigure:
 FIGURES = {
     figure.key: figure
     for figure in (
-        PaperFigure("analytical_w", "original plate, beam model, Q = 54, 15 V: deflection", 1.070, "um"),
+        PaperFigure("analytical_w", "original plate, beam model, Q = 54, 15 V: deflection", 1.070, "µm"),
         PaperFigure("analytical_f", "original plate, beam model: resonance", 32.13, "kHz"),
-        PaperFigure("literal_w", "original plate, beam formula taken literally with Q = 54", 2.89, "um"),
+        PaperFigure("literal_w", "original plate, beam formula taken literally with Q = 54", 2.89, "µm"),
         PaperFigure("fem_f", "original plate, FEM, Q = 54, 15 V: resonance", 31.17, "kHz"),
-        PaperFigure("fem_w", "original plate, FEM, Q = 54, 15 V: deflection", 1.151, "um"),
+        PaperFigure("fem_w", "original plate, FEM, Q = 54, 15 V: deflection", 1.151, "µm"),
         PaperFigure("fem_nlopt_evaluations", "direct FEM optimisation (gradient method): FEM evaluations", 48, ""),
         PaperFigure("space_mapping_evaluations", "space mapping: FEM evaluations", 4, ""),
         PaperFigure("space_mapping_distance", "space-mapping optimum from the direct one: at most", 0.1, "mm"),

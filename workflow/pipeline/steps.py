@@ -222,9 +222,12 @@ class FemOptima:
 
 
 def fem_optima(context: RunContext) -> Dict[float, FemOptima]:
-    """FEM optimum per h_p by aggressive space mapping (and the direct NLopt run if configured)."""
+    """FEM optimum per h_p by aggressive space mapping (and the direct NLopt run if configured);
+    none when [fem] space_mapping is false."""
     from workflow.optimise.fem_optimum import optimise_fem
 
+    if not context.config["fem"]["space_mapping"]:
+        return {}
     model = fem_model(context)
     direct = context.config["fem"]["direct_nlopt"]
     return {
@@ -239,9 +242,57 @@ def fem_optima(context: RunContext) -> Dict[float, FemOptima]:
 def fem_optima_figures(context: RunContext, optima) -> None:
     from workflow.pipeline.figures.space_mapping import trajectory_figure
 
+    if not optima:
+        return
     searches = {hp: (record.space_mapping, record.direct) for hp, record in optima.items()}
     minimum = context.config["design"]["min_frequency_khz"] * KHZ
     save_figure(trajectory_figure(searches, minimum), context.figure_path("space_mapping_trajectories.png"))
+
+
+def recommended_design(context: RunContext):
+    """The design to build per h_p, with Q(v) (:mod:`workflow.pipeline.recommendation`).
+
+    The FEM optimum by space mapping where it ran, the beam optimum with Q(v) otherwise;
+    the original plate with the FEM as a reference when its FEM ran.
+    """
+    from workflow.models.fem import FemSettings
+    from workflow.models.plate import ORIGINAL_PLATE
+    from workflow.pipeline.recommendation import (
+        DEFAULT_MESH_FREQUENCY_ERROR,
+        Recommendation,
+        beam_recommendation,
+        fem_recommendation,
+    )
+
+    damping, design = context.config["damping"], context.config["design"]
+    posterior = context.results["damping_fit"].best.posterior()
+    draws = posterior.draws(damping["posterior_draws"], damping["seed"])
+    target = design["target_deflection_um"] * UM
+    fem_optima = context.results.get("fem_optima", {})
+    beam_optima = context.results["analytical_optima"]
+    damped, _ = context.results["damped_design"]
+    designs = {}
+    for hp, problem in design_problems(context.config).items():
+        if hp in fem_optima:
+            optimum = fem_optima[hp].space_mapping.optimum
+            (result,) = fem_model(context).results(optimum.plate)
+            ratio = optimum.deflection / beam_optima[hp].deflection
+            beam_voltage = float(damped.optima[hp].interval("required_voltage")[1])
+            designs[hp] = fem_recommendation(result, optimum.plate, problem, draws, target, ratio, beam_voltage)
+        else:
+            designs[hp] = beam_recommendation(damped.optima[hp].damped.plate, problem, draws, target)
+    original = None
+    if "fem_original" in context.results:
+        (problem,) = design_problems(context.config, [ORIGINAL_PLATE.ceramic_thickness / MM]).values()
+        original = fem_recommendation(context.results["fem_original"], ORIGINAL_PLATE, problem, draws, target)
+    default_mesh = fem_settings(context.config) == FemSettings()
+    return Recommendation(
+        designs=designs,
+        original=original,
+        law=posterior.law_name,
+        draws=damping["posterior_draws"],
+        mesh_frequency_error=DEFAULT_MESH_FREQUENCY_ERROR if default_mesh else None,
+    )
 
 
 def analytical_maps(context: RunContext):
@@ -284,13 +335,29 @@ def maps_figures(context: RunContext, maps) -> None:
         save_figure(map_figure(design_map), context.figure_path(f"map_{design_map.model}_hp{hp / MM:g}mm.png"))
 
 
+def sweep_widths(fem: dict, plate_width: float) -> np.ndarray:
+    """Widths of the sweep [m]: the coarse range, the fine range around the plate's own width
+    (``fine_width_min_mm`` to ``fine_width_max_mm`` every ``fine_width_step_mm``), and ``plate_width``."""
+    step = fem["fine_width_step_mm"]
+    if step <= 0:
+        raise TactileError(f"fem.fine_width_step_mm must be positive, got {step!r}")
+    fine_points = int(np.floor((fem["fine_width_max_mm"] - fem["fine_width_min_mm"]) / step + 1e-9)) + 1
+    widths_mm = np.concatenate(
+        [
+            np.linspace(fem["width_min_mm"], fem["width_max_mm"], fem["width_points"]),
+            fem["fine_width_min_mm"] + step * np.arange(max(fine_points, 0)),
+            [plate_width / MM],
+        ]
+    )
+    return np.unique(np.round(widths_mm, 9)) * MM
+
+
 def fem_width_sweep(context: RunContext):
-    """w(b) and f(b) of the original plate with the FEM."""
+    """w(b) and f(b) of the original plate with the FEM, coarse and finely around its width."""
     from workflow.models.plate import ORIGINAL_PLATE
     from workflow.optimise.maps import width_sweep
 
-    fem = context.config["fem"]
-    widths = np.linspace(fem["width_min_mm"], fem["width_max_mm"], fem["width_points"]) * MM
+    widths = sweep_widths(context.config["fem"], ORIGINAL_PLATE.width)
     return width_sweep(fem_model(context), ORIGINAL_PLATE, widths)
 
 
@@ -308,6 +375,7 @@ STEPS: List[Step] = [
     Step("FEM of the original plate", "fem_original", fem_original, fem_original_figures, cacheable=False),
     Step("FEM responses of the original plate", "fem_responses", fem_responses, fem_responses_figures),
     Step("FEM optimum per h_p (space mapping)", "fem_optima", fem_optima, fem_optima_figures),
+    Step("recommended design per h_p", "recommended_design", recommended_design, cacheable=False),
     Step("analytical maps", "analytical_maps", analytical_maps, maps_figures, cacheable=False),
     Step("FEM maps", "fem_maps", fem_maps, maps_figures),
     Step("FEM width sweep of the original plate", "width_sweep", fem_width_sweep, width_sweep_figures),
