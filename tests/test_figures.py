@@ -13,7 +13,7 @@ from workflow.optimise.damped import damped_maps
 from workflow.optimise.fem_optimum import FemOptimum
 from workflow.optimise.maps import DesignMap, WidthSweep
 from workflow.optimise.problem import DesignProblem, Optimum
-from workflow.optimise.space_mapping import SpaceMappingStep
+from workflow.optimise.space_mapping.from_responses import ExtractedStep
 from workflow.pipeline.figures.damping import corner_figure, design_map_figure, q_of_v_figure, trace_figure
 from workflow.pipeline.figures.maps import map_figure, width_sweep_figure
 from workflow.pipeline.figures.space_mapping import trajectory_figure
@@ -104,7 +104,7 @@ def test_trajectory_numbers_sit_next_to_their_own_points():
     problem = DesignProblem(2e-3)
     points = [(29.041, 1.425, 0.8945, 23228.5, 0.15), (30.635, 2.024, 1.1043, 24541.1, 0.04),
               (31.433, 2.324, 1.0790, 24977.7, 0.03), (31.183, 2.260, 1.0785, 25002.2, 0.03)]
-    steps = tuple(SpaceMappingStep(np.array([lam, h_i]) * MM, w * UM, f, t, lam * MM, w * UM) for lam, h_i, w, f, t in points)
+    steps = tuple(ExtractedStep(np.array([lam, h_i]) * MM, w * UM, f, t, lam * MM, w * UM) for lam, h_i, w, f, t in points)
     answer = Optimum(problem.plate(31.183 * MM, 2.260 * MM), 1.0785 * UM, 25002.2, 4, True, "test")
     figure = trajectory_figure({problem.ceramic_thickness: (FemOptimum(answer, "space-mapping", 4, 0, steps), None)}, 25 * KHZ)
     figure.canvas.draw()

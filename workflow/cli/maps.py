@@ -93,7 +93,7 @@ def run(args) -> dict:
         from workflow.pipeline.figures.maps import width_sweep_figure
 
         sweep = width_sweep(model)
-        figures.append(_save(width_sweep_figure(sweep), args.out / "width_sweep_fem.png"))
+        figures.append(_save(width_sweep_figure(sweep, design_width=args.b_mm * MM), args.out / "width_sweep_fem.png"))
         record["width_sweep"] = {
             "b_mm": (sweep.width / MM).tolist(),
             "w_dyn_um": (sweep.deflection / UM).tolist(),
@@ -166,7 +166,7 @@ def _damped_record(args, problem, model, points: int, posterior) -> dict:
         maps = fem_damped_maps(posterior, problem, model, points, draws, optimum)
     stem = f"map_{args.model}_qv_hp{args.hp_mm:g}mm"
     figures = [
-        _save(design_map_figure(maps, quantity), args.out / f"{stem}_{quantity}.png") for quantity in ("deflection", "voltage")
+        _save(design_map_figure(maps, quantity, design_voltage=args.voltage), args.out / f"{stem}_{quantity}.png") for quantity in ("deflection", "voltage")
     ]
     p05, _, p95 = maps.required_voltage_interval
     return {

@@ -148,9 +148,14 @@ def damped_design_figures(context: RunContext, result) -> None:
     from workflow.pipeline.figures.damping import design_map_figure
 
     _, maps = result
+    marks = {
+        "design_voltage": context.config["design"]["voltage_v"],
+        "voltage_limit": context.config["simulator"]["ceramic_voltage_limit_v"],
+    }
     for hp, hp_maps in maps.items():
         for quantity in ("deflection", "voltage"):
-            save_figure(design_map_figure(hp_maps, quantity), context.figure_path(f"qv_{quantity}_hp{hp / MM:g}mm.png"))
+            figure = design_map_figure(hp_maps, quantity, **marks)
+            save_figure(figure, context.figure_path(f"qv_{quantity}_hp{hp / MM:g}mm.png"))
 
 
 def save_figure(figure, path: Path) -> None:
@@ -364,7 +369,8 @@ def fem_width_sweep(context: RunContext):
 def width_sweep_figures(context: RunContext, sweep) -> None:
     from workflow.pipeline.figures.maps import width_sweep_figure
 
-    save_figure(width_sweep_figure(sweep), context.figure_path("width_sweep_fem.png"))
+    design_width = context.config["design"]["width_mm"] * MM
+    save_figure(width_sweep_figure(sweep, design_width=design_width), context.figure_path("width_sweep_fem.png"))
 
 
 STEPS: List[Step] = [
