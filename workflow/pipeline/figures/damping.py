@@ -285,7 +285,7 @@ def design_map_figure(maps, quantity: str = "deflection", design_voltage: float 
     references = []
     if quantity == "deflection":
         contour = ax.contourf(x, y, maps.deflection.T / UM, levels=20, cmap="viridis")
-        figure.colorbar(contour, ax=ax, label="deflection with Q(v) [um]")
+        figure.colorbar(contour, ax=ax, label="deflection with Q(v) [µm]")
     else:  # spans orders of magnitude: logarithmic levels, ticks in plain volts
         values = maps.required_voltage
         levels = np.geomspace(np.min(values), np.max(values), 21)

@@ -42,7 +42,7 @@ def modes_figure(result: FemResult):
     bar = figure.colorbar(points, ax=ax, label="transverse indicator (0 = longitudinal)")
     bar.ax.axhline(TRANSVERSE_THRESHOLD, color="k", lw=1.5)
     bar.ax.text(0.5, TRANSVERSE_THRESHOLD, " mixed above", rotation=90, ha="center", va="bottom", fontsize=7)
-    return _finish(figure, ax, "eigenfrequency [kHz]", "deflection at resonance [um]", "FEM modes near the beam resonance")
+    return _finish(figure, ax, "eigenfrequency [kHz]", "deflection at resonance [µm]", "FEM modes near the beam resonance")
 
 
 def frequency_response_figure(response: FrequencyResponse):
@@ -54,7 +54,7 @@ def frequency_response_figure(response: FrequencyResponse):
     for number, frequency in enumerate(others):
         ax.axvline(frequency / KHZ, color="0.6", ls=":", lw=1, label="other modes" if number == 0 else None)
     ax.axvline(response.working_frequency / KHZ, color="k", ls="--", lw=1, label="working mode")
-    return _finish(figure, ax, "drive frequency [kHz]", "mean |w| over the antinode probes [um]", "frequency response")
+    return _finish(figure, ax, "drive frequency [kHz]", "mean |w| over the antinode probes [µm]", "frequency response")
 
 
 def transient_figure(response: TransientResponse):
@@ -68,4 +68,4 @@ def transient_figure(response: TransientResponse):
     ax.axvline(response.expected_time_constant / MS, color="r", ls=":",
                label=f"Q/(pi f_r) = {response.expected_time_constant / MS:.3f} ms (expected tau)")
     title = f"switch-on at f_r = {response.frequency / KHZ:.3f} kHz"
-    return _finish(figure, ax, "time [ms]", "deflection [um]", title)
+    return _finish(figure, ax, "time [ms]", "deflection [µm]", title)

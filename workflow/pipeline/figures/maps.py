@@ -24,7 +24,7 @@ def map_figure(design_map: DesignMap):
     figure, axes = plt.subplots(1, 2, figsize=(11, 5.2), layout="constrained")
     lam, h_i = design_map.wavelength / MM, design_map.resonator_thickness / MM
     panels = (
-        (design_map.deflection / UM, "deflection w_dyn [um]", "viridis"),
+        (design_map.deflection / UM, "deflection w_dyn [µm]", "viridis"),
         (design_map.frequency / KHZ, "resonance f_r [kHz]", "magma"),
     )
     problem = design_map.problem
@@ -69,7 +69,7 @@ def width_sweep_figure(sweep: WidthSweep, design_width: float = None):
     mixed = sweep.transverse
     for b, modes in zip(width, sweep.modes):
         bottom.plot(np.full(len(modes), b), [m.frequency / KHZ for m in modes], "_", color="0.55", ms=4, mew=1.2)
-    for ax, values, label in ((top, sweep.deflection / UM, "w_dyn [um]"), (bottom, sweep.frequency / KHZ, "f_r [kHz]")):
+    for ax, values, label in ((top, sweep.deflection / UM, "w_dyn [µm]"), (bottom, sweep.frequency / KHZ, "f_r [kHz]")):
         ax.plot(width, values, "o-", color="C0", ms=4, lw=1.2)
         ax.plot(width[mixed], values[mixed], "o", ms=6, color="tab:red", zorder=3)
         ax.axvline(design_width / MM, color="k", ls="--", lw=1)
@@ -88,7 +88,7 @@ def width_sweep_figure(sweep: WidthSweep, design_width: float = None):
     bottom.set_xlabel("width b [mm]")
     plate = sweep.plate
     figure.suptitle(
-        f"FEM width sweep, {len(width)} widths: lambda {plate.wavelength / MM:g} mm, h_i {plate.resonator_thickness / MM:g} mm, "
+        f"FEM width sweep, {len(width)} widths: λ {plate.wavelength / MM:g} mm, h_i {plate.resonator_thickness / MM:g} mm, "
         f"h_p {plate.ceramic_thickness / MM:g} mm"
     )
     return figure

@@ -87,7 +87,7 @@ def mark_design_limits(ax, wavelength, thickness, frequency, min_frequency: floa
     if avoid:
         handles += ax.plot(*avoid[0], "w*", ms=15, mec="k", mew=1.2, ls="none", label="optimum")
     label_contour(ax, line, f"{min_frequency / KHZ:g} kHz", avoid)
-    ax.set_xlabel("wavelength lambda [mm]")
+    ax.set_xlabel("wavelength λ [mm]")
     ax.set_ylabel("resonator thickness h_i [mm]")
     return handles
 

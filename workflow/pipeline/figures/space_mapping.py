@@ -84,7 +84,7 @@ def trajectory_figure(searches: dict, min_frequency: float):
             top.plot(direct.optimum.plate.resonator_thickness / MM, direct.optimum.deflection / UM, "kx", ms=10)
         bottom.axhline(0, color="k", lw=0.8)
         top.set_title(f"h_p = {ceramic_thickness / MM:g} mm: {mapped.fine_evaluations} FEM evaluations")
-        top.set_ylabel("w_dyn [um]")
+        top.set_ylabel("w_dyn [µm]")
         bottom.set_ylabel(f"f_r / {f_min} - 1 [%]")
         bottom.set_xlabel("resonator thickness h_i [mm]")
         for ax in (top, bottom):
