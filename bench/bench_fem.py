@@ -1,9 +1,9 @@
 """Benchmark of the FEM cost function; prints one JSON object on the last line.
 
-The fast path (:func:`workflow.fem.evaluate_fem`: exact box integrals scattered in one
+The fast path (:func:`workflow.models.fem.evaluate_fem`: exact box integrals scattered in one
 COO assembly, one real factorisation shared by the shift-invert eigen solve and the
 modal harmonic responses) is timed against the plain reference path
-(:func:`workflow.fem.reference.evaluate_fem_reference`: scikit-fem generic assembly with its
+(:func:`workflow.models.fem.reference.evaluate_fem_reference`: scikit-fem generic assembly with its
 default quadrature, ARPACK's own factorisation, one complex direct solve per mode) on the
 same mesh in the same run, so the ratio is meaningful on a noisy machine.
 

@@ -2,7 +2,7 @@
 
 UTF-8 CSV.  Optional leading metadata lines ``# key: value`` (the first may be a title
 line), then one header row and the data rows.  Readers live in
-:mod:`workflow.damping.logs`; the writer in :mod:`instruments.logwriter`.
+:mod:`workflow.damping.logs`; the writer in :mod:`instruments.procedures.logwriter`.
 """
 
 FORMAT_VERSION = 1

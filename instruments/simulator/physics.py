@@ -96,7 +96,7 @@ def default_law(
 
 
 def plate_response(plate: Plate = ORIGINAL_PLATE, law=None, drift_rate: float = 0.0) -> PlateResponse:
-    """The simulated response of ``plate``: f_r and w_s / V from the beam model (:mod:`workflow.analytical`).
+    """The simulated response of ``plate``: f_r and w_s / V from the beam model (:mod:`workflow.models.analytical`).
 
     The quasi-static gain is the calibrated beam model's deflection per volt per unit Q,
     so that Q = 54 at 15 V reproduces the beam model's deflection.

@@ -125,7 +125,7 @@ def cached_map(
     progress: bool = True,
     description: str = "evaluations",
 ) -> List:
-    """:func:`~workflow.parallel.map_evaluations` that computes only what the cache lacks.
+    """:func:`~workflow.execution.parallel.map_evaluations` that computes only what the cache lacks.
 
     Parameters
     ----------
@@ -137,7 +137,7 @@ def cached_map(
     cache : EvaluationCache or None
         None evaluates everything.
     scheduler, progress, description
-        As for :func:`~workflow.parallel.map_evaluations`.
+        As for :func:`~workflow.execution.parallel.map_evaluations`.
 
     Returns
     -------

@@ -6,7 +6,7 @@ solves w = Q(2 pi f_r w) k V (the iterative harmonic solve, vectorised over geom
 and posterior draws).
 
 Calibration choice (beam model): the fitted Q(v) is the plate's physical Q, as the FEM
-and the bench use it.  The beam model's calibration :data:`~workflow.analytical.BEAM_CALIBRATION`
+and the bench use it.  The beam model's calibration :data:`~workflow.models.analytical.BEAM_CALIBRATION`
 corrects the beam's deflection per unit Q (a model error, constant across geometries);
 it is applied to k, never to Q.  The velocity that sets Q is the velocity of the
 calibrated deflection, so the beam and the FEM see Q(v) at the same physical velocity.
@@ -56,7 +56,7 @@ def damped_deflection(plate: Plate, voltage, law):
 def required_voltage(plate: Plate, law, target: float = materials.TARGET_DEFLECTION):
     """Beam-model drive amplitude that gives the deflection ``target`` with Q(v) [V peak].
 
-    V* = w* / (Q(2 pi f_r w*) k), k = :func:`~workflow.analytical.deflection_per_volt_per_q`.
+    V* = w* / (Q(2 pi f_r w*) k), k = :func:`~workflow.models.analytical.deflection_per_volt_per_q`.
     """
     frequency = analytical.resonance_frequency(plate)
     return target / (law.quality_factor(2 * np.pi * frequency * target) * analytical.deflection_per_volt_per_q(plate))
@@ -67,7 +67,7 @@ def fem_damped_deflection(result, law):
 
     Parameters
     ----------
-    result : workflow.fem.FemResult
+    result : workflow.models.fem.FemResult
         Its ``deflection_at_q(q)`` gives the best mode's deflection at the result's
         voltage for other Q without a new solve.
     law : Q(v) law
@@ -84,12 +84,12 @@ def fem_required_voltage(result, law, target: float = materials.TARGET_DEFLECTIO
 
 @dataclass
 class DampedFemModel:
-    """The FEM with Q(v) as a :data:`~workflow.optimize.PlateModel`.
+    """The FEM with Q(v) as a :data:`~workflow.optimise.problem.PlateModel`.
 
     Attributes
     ----------
     law : Q(v) law
-    fem_model : workflow.fem_evaluations.FemModel
+    fem_model : workflow.optimise.fem_model.FemModel
         Evaluates (and caches) the FEM at its own voltage and Q; the Q only picks the
         best mode, the deflection is then solved with Q(v).
     voltage : float
@@ -137,7 +137,7 @@ class _ScaledResult:
 
 
 def damped_model(law, voltage: float = materials.DESIGN_VOLTAGE, model: str = "analytical", fem_model=None) -> PlateModel:
-    """A plate model with Q(v), usable by :func:`~workflow.optimize.maximise_deflection`.
+    """A plate model with Q(v), usable by :func:`~workflow.optimise.problem.maximise_deflection`.
 
     Parameters
     ----------
@@ -146,7 +146,7 @@ def damped_model(law, voltage: float = materials.DESIGN_VOLTAGE, model: str = "a
     voltage : float
         Drive amplitude [V peak].
     model : {"analytical", "fem"}
-    fem_model : workflow.fem_evaluations.FemModel, optional
+    fem_model : workflow.optimise.fem_model.FemModel, optional
         For ``model="fem"``; default a new uncached one at ``voltage``.
     """
     if model == "analytical":
@@ -196,7 +196,7 @@ class DampedOptimum:
     ----------
     problem : DesignProblem
     constant_q : Optimum
-        With the plate's constant Q (:data:`~workflow.materials.PLATE_Q`).
+        With the plate's constant Q (:data:`~workflow.models.materials.PLATE_Q`).
     damped : Optimum
         With the posterior-median Q(v).
     required_voltage : float
@@ -266,7 +266,7 @@ def design_with_damping(
     target : float
         Deflection the required voltage aims at [m].
     scheduler : None, "synchronous", str or distributed.Client
-        Where the per-draw optimisations run (:func:`workflow.parallel.map_evaluations`).
+        Where the per-draw optimisations run (:func:`workflow.execution.parallel.map_evaluations`).
     progress : bool
     """
     from workflow.execution.parallel import map_evaluations

@@ -1,12 +1,12 @@
 """Many FEM evaluations: cached on disk by content, run in parallel, usable as a plate model.
 
-:class:`FemModel` turns :func:`workflow.fem.evaluate_fem` into a
-:data:`~workflow.optimize.PlateModel` (a batch of plates in, deflection and frequency of
+:class:`FemModel` turns :func:`workflow.models.fem.evaluate_fem` into a
+:data:`~workflow.optimise.problem.PlateModel` (a batch of plates in, deflection and frequency of
 each plate's best mode out), so the optimiser, space mapping and the maps all drive the
 FEM the same way.  Every geometry is one :class:`FemTask`; tasks run through
-:func:`~workflow.evaluation_cache.cached_map`, whose key holds the model name, the plate's
+:func:`~workflow.execution.cache.cached_map`, whose key holds the model name, the plate's
 fields, Q, the voltage, the FEM settings and a hash of the FEM's source code.
-:meth:`FemModel.gradients` adds the design sensitivities of :mod:`workflow.fem.sensitivity`
+:meth:`FemModel.gradients` adds the design sensitivities of :mod:`workflow.models.fem.sensitivity`
 (results with tangents are cached under their own model name).
 """
 
@@ -30,7 +30,7 @@ class FemTask:
     """One FEM evaluation: a scalar plate, Q [-], voltage [V], the settings and whether to add the tangents.
 
     With ``tangents`` the result also carries the derivatives of its probe model with respect
-    to lambda and h_i (:func:`workflow.fem.sensitivity.evaluate_fem_with_tangents`).
+    to lambda and h_i (:func:`workflow.models.fem.sensitivity.evaluate_fem_with_tangents`).
     """
 
     plate: Plate
@@ -87,7 +87,7 @@ class FemModel:
     cache : EvaluationCache or None
         None recomputes everything.
     scheduler : None, str or distributed.Client
-        Where batches run (see :func:`~workflow.parallel.map_evaluations`).
+        Where batches run (see :func:`~workflow.execution.parallel.map_evaluations`).
     progress : bool
         Show each batch's progress on stderr (a bar on a terminal, plain lines otherwise).
     evaluations : int

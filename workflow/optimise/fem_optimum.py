@@ -66,7 +66,7 @@ def optimise_fem(
     ----------
     problem : DesignProblem
     fem_model : PlateModel
-        Usually a :class:`~workflow.fem_evaluations.FemModel` (its ``q`` is used when ``q`` is None).
+        Usually a :class:`~workflow.optimise.fem_model.FemModel` (its ``q`` is used when ``q`` is None).
     method : {"nlopt", "space-mapping"}
     q : float, optional
         Quality factor of the coarse (beam) model [-]; ignored when ``coarse_model`` is given.

@@ -2,7 +2,7 @@
 
 A map evaluates one model on a grid of the whole Table 1 box (so the 0.5 mm practical limit
 shows): the beam model in one vectorised call, the FEM through
-:class:`~workflow.fem_evaluations.FemModel` (disk cache, local cores or a Dask cluster).
+:class:`~workflow.optimise.fem_model.FemModel` (disk cache, local cores or a Dask cluster).
 """
 
 from dataclasses import dataclass

@@ -29,7 +29,7 @@ def default_config() -> dict:
 
 
 def fem_defaults() -> dict:
-    """The mesh keys of [fem] from :class:`workflow.fem.FemSettings`."""
+    """The mesh keys of [fem] from :class:`workflow.models.fem.FemSettings`."""
     from workflow.models.fem import FemSettings
 
     return FemSettings().as_dict()
@@ -67,7 +67,7 @@ def simulator_defaults() -> dict:
 
 
 def design_defaults() -> dict:
-    """The [design] section from Table 1 (:mod:`workflow.materials`), in the units of the file."""
+    """The [design] section from Table 1 (:mod:`workflow.models.materials`), in the units of the file."""
     mm = [t / MM for t in materials.CERAMIC_THICKNESSES]
     section = {
         "ceramic_thicknesses_mm": mm,

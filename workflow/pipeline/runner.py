@@ -3,7 +3,7 @@
 Each :class:`Step` computes ``compute(context) -> result`` from a :class:`RunContext`;
 results are kept by key for the steps after it and for the report.  A step that fails
 stops the run with a :class:`StepError` naming the step and the reason.  The steps
-themselves are in :mod:`workflow.steps`.
+themselves are in :mod:`workflow.pipeline.steps`.
 """
 
 import hashlib

@@ -58,9 +58,9 @@ class FemResult:
     q : float or None
         Quality factor the modes were driven with [-] (None in results older than this field).
     tangents : dict or None
-        Design parameter name (a :class:`~workflow.plate.Plate` field) -> derivative of
+        Design parameter name (a :class:`~workflow.models.plate.Plate` field) -> derivative of
         ``probe_model`` with respect to it (a :class:`ProbeModalModel` whose fields hold the
-        derivatives, per metre), from :func:`workflow.fem.sensitivity.evaluate_fem_with_tangents`;
+        derivatives, per metre), from :func:`workflow.models.fem.sensitivity.evaluate_fem_with_tangents`;
         None when not computed.
     """
 

@@ -66,7 +66,7 @@ class ProbeModalModel:
         ----------
         tangent : ProbeModalModel
             Derivative of each field with respect to a design parameter p (units of the field per
-            unit of p; see :mod:`workflow.fem.sensitivity`).
+            unit of p; see :mod:`workflow.models.fem.sensitivity`).
         step : float
             Change of p [unit of p].
         """

@@ -16,9 +16,9 @@ K phi = lam M phi:
   Krylov space of (K - sigma M)^-1 M on that complement (see :func:`complement_solve`);
 * modal forces d(phi^T F), probe shapes d(P phi), and the shifted residual
   P (K - sigma M)^-1 (F - M Phi Phi^T F), differentiated with the shift sigma(p) of the
-  analytical resonance that :func:`~workflow.fem.evaluate.evaluate_fem` uses.
+  analytical resonance that :func:`~workflow.models.fem.evaluate.evaluate_fem` uses.
 
-The derivatives are tangent :class:`~workflow.fem.harmonic.ProbeModalModel` objects (fields hold
+The derivatives are tangent :class:`~workflow.models.fem.harmonic.ProbeModalModel` objects (fields hold
 derivatives per metre), so any function of the probe model or of a :class:`FemResult` is
 differentiated by a central difference along them in the reduced space (:func:`gradient`),
 with the best mode's index held fixed (the one-sided derivative of the max).
@@ -49,7 +49,7 @@ from workflow.models.fem.settings import DEFAULT_SETTINGS, FemSettings
 from workflow.models.plate import Plate
 
 DESIGN_PARAMETERS = ("wavelength", "resonator_thickness")
-"""The design parameters differentiated by default, as :class:`~workflow.plate.Plate` fields [m]."""
+"""The design parameters differentiated by default, as :class:`~workflow.models.plate.Plate` fields [m]."""
 ASSEMBLY_STEP = 1e-5
 """Relative step of the central differences of the assembled system [-].
 
@@ -107,7 +107,7 @@ def check_same_topology(mesh: BrickMesh, other: BrickMesh) -> None:
 
 
 def _shift(plate: Plate) -> float:
-    """The shift sigma = (2 pi f_beam)^2 of :func:`~workflow.fem.evaluate.working_modes` [rad^2/s^2]."""
+    """The shift sigma = (2 pi f_beam)^2 of :func:`~workflow.models.fem.evaluate.working_modes` [rad^2/s^2]."""
     return (2 * np.pi * float(analytical.resonance_frequency(plate))) ** 2
 
 
@@ -126,7 +126,7 @@ def system_tangent(
     plate : Plate
         Scalar geometry [m].
     parameter : str
-        The :class:`~workflow.plate.Plate` field differentiated.
+        The :class:`~workflow.models.plate.Plate` field differentiated.
     voltage : float
         Drive amplitude [V].
     settings : FemSettings
@@ -278,7 +278,7 @@ def probe_model_tangents(
     Returns
     -------
     list of ProbeModalModel
-        Per tangent, the derivative of every field of :func:`~workflow.fem.harmonic.probe_modal_model` [per m].
+        Per tangent, the derivative of every field of :func:`~workflow.models.fem.harmonic.probe_modal_model` [per m].
     """
     with threadpool_limits(limits=1, user_api="blas"):  # threaded BLAS makes SuperLU's multi-column solves ~20x slower
         return _probe_model_tangents(system, modes, probes, tangents, n_blocks)
@@ -334,7 +334,7 @@ def evaluate_fem_with_tangents(
     parameters: Iterable[str] = DESIGN_PARAMETERS,
     n_blocks: int = KRYLOV_BLOCKS,
 ) -> FemResult:
-    """:func:`~workflow.fem.evaluate_fem` and the derivatives of its probe model, from one eigen-solve.
+    """:func:`~workflow.models.fem.evaluate_fem` and the derivatives of its probe model, from one eigen-solve.
 
     Parameters
     ----------

@@ -1,7 +1,7 @@
 """Figures of the FEM responses.  Each function takes result objects and returns a Figure.
 
-They take :class:`workflow.fem.FemResult` and the response objects of
-:mod:`workflow.fem.responses`; saving is the caller's business.
+They take :class:`workflow.models.fem.FemResult` and the response objects of
+:mod:`workflow.models.fem.responses`; saving is the caller's business.
 """
 
 import matplotlib
