@@ -1,7 +1,6 @@
 """``tactile evaluate --model fem``: JSON contract, human output and refusal of bad geometry."""
 
 import json
-
 import re
 
 import pytest
