@@ -336,6 +336,38 @@ def resonance_search(station: Station, path, plan: ResonancePlan = ResonancePlan
     return ProcedureResult(**counts, summary=summary)
 
 
+def logged_plan_value(path: Path, key: str) -> float | None:
+    """The ``plan_<key>`` metadata of an existing log (what a resumed procedure was planned with), or None."""
+    from instruments.procedures.logwriter import read_log
+
+    if not Path(path).exists():
+        return None
+    metadata, _, _ = read_log(Path(path))
+    value = metadata.get(f"plan_{key}")
+    return float(value) if value is not None else None
+
+
+def resonance_log_path(path: Path) -> Path:
+    """Where the resonance search that centres a procedure logged at ``path`` is logged: ``<stem>-resonance.csv``."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}-resonance{path.suffix}")
+
+
+def working_frequency(station: Station, path: Path, key: str, metadata: dict | None = None,
+                      restart: bool = False) -> tuple[float, ProcedureResult | None]:
+    """The frequency a procedure logged at ``path`` is centred on [Hz], and the resonance search behind it.
+
+    A resumed log keeps the frequency it was planned with (its ``plan_<key>`` metadata); otherwise a
+    resonance search (default plan) is run and logged beside it (:func:`resonance_log_path`), itself
+    resumable.  Returns (frequency, the search's result or None when the log's plan was used).
+    """
+    planned = None if restart else logged_plan_value(path, key)
+    if planned is not None:
+        return planned, None
+    found = resonance_search(station, resonance_log_path(path), ResonancePlan(), metadata=metadata, restart=restart)
+    return found.summary["resonance_frequency_hz"], found
+
+
 @dataclass(frozen=True)
 class CampaignPlan:
     """Q(v) campaign: one sweep per voltage (sweep id = index) over centre +- span/2.

@@ -119,25 +119,14 @@ def _open_station(args):
     return open_station(*ports, PowerAmplifier(args.amplifier_gain), args.max_voltage, **options), {"simulated": "no"}
 
 
-def _planned(path: Path, key: str):
-    """A ``plan_*`` value from an existing log, or None."""
-    from instruments.procedures.logwriter import read_log
+def _centre(args, station, metadata, out: Path, key: str) -> float:
+    """The frequency a campaign or voltage sweep is centred on (see ``working_frequency``)."""
+    from instruments.procedures.sweeps import working_frequency
 
-    if not path.exists():
-        return None
-    metadata, _, _ = read_log(path)
-    value = metadata.get(key)
-    return float(value) if value is not None else None
-
-
-def _resonance_of(args, station, metadata, out: Path) -> float:
-    from instruments.procedures.sweeps import ResonancePlan, resonance_search
-
-    path = out.with_name(f"{out.stem}-resonance{out.suffix}")
-    result = resonance_search(station, path, ResonancePlan(), metadata=metadata, restart=args.restart)
-    if not args.json:
-        print(f"resonance search: {result.summary['resonance_frequency_hz']:.1f} Hz; log: {path}")
-    return result.summary["resonance_frequency_hz"]
+    frequency, search = working_frequency(station, out, key, metadata, args.restart)
+    if search is not None and not args.json:
+        print(f"resonance search: {frequency:.1f} Hz; log: {search.path}")
+    return frequency
 
 
 def _check_plan_flags(args) -> None:
@@ -164,13 +153,11 @@ def run(args):
         plan = procedures.ResonancePlan(args.start_hz, args.stop_hz, args.coarse_points, args.fine_points, args.voltage)
         result = procedures.resonance_search(station, out, plan, metadata, args.restart)
     elif args.procedure == "campaign":
-        centre = args.center_hz or (None if args.restart else _planned(out, "plan_center_frequency"))
-        centre = centre or _resonance_of(args, station, metadata, out)
+        centre = args.center_hz or _centre(args, station, metadata, out, "center_frequency")
         plan = procedures.CampaignPlan(centre, args.span_hz, args.points, args.voltages)
         result = procedures.q_campaign(station, out, plan, metadata, args.restart)
     else:
-        frequency = args.frequency_hz or (None if args.restart else _planned(out, "plan_frequency"))
-        frequency = frequency or _resonance_of(args, station, metadata, out)
+        frequency = args.frequency_hz or _centre(args, station, metadata, out, "frequency")
         plan = procedures.VoltageSweepPlan(frequency, args.voltages)
         result = procedures.voltage_sweep(station, out, plan, metadata, args.restart)
     summary = {
