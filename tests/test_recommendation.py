@@ -115,6 +115,9 @@ def test_a_margin_within_the_mesh_error_is_flagged_only_for_the_fem():
     assert f"{100 * DEFAULT_MESH_FREQUENCY_ERROR:.2f} % above the mesh-converged value" in text
     assert "the margins of h_p = 1 mm are within it" in text
     assert "not computed (beam model)" in text and "| beam model |" in text
+    # the deflection goal is met, the frequency is not promised
+    assert "deflection yes; 25 kHz **not assured** (mesh error)" in text
+    assert "**Deflection met with h_p = 1 mm, but 25 kHz is not assured**" in text and "Met with" not in text
 
 
 def test_the_beam_recommendation_of_the_original_plate_needs_more_than_15_v_at_q_54():
@@ -141,5 +144,5 @@ def test_a_design_that_meets_the_goal_only_with_the_fem_is_flagged():
         for hp, beam in ((1.0, 9.4), (2.0, 18.7))
     }
     text = recommendation_section(Recommendation(designs, None, "constant", 3))
-    assert "**h_p = 2 mm meets it only with the FEM: the beam model needs 18.7 V at its own optimum.**" in text
+    assert "**h_p = 2 mm reaches the deflection only with the FEM: the beam model needs 18.7 V at its own optimum.**" in text
     assert "h_p = 1 mm meets it only" not in text

@@ -7,8 +7,6 @@ self-consistently at every grid point, and a map of the voltage for the target d
 
 from pathlib import Path
 
-import numpy as np
-
 from workflow.cli.options import (
     add_ceramic_option,
     add_damping_option,
@@ -22,7 +20,7 @@ from workflow.cli.options import (
 )
 from workflow.errors import TactileError
 from workflow.execution.cache import EvaluationCache
-from workflow.optimise.damped import damped_fem_optimum, damped_maps, damped_optimum, fem_damped_maps
+from workflow.optimise.damped import damped_fem_optimum, damped_maps, damped_optimum, fem_damped_maps, map_draws
 from workflow.optimise.fem_optimum import optimise_fem
 from workflow.optimise.maps import design_map, width_sweep
 from workflow.optimise.problem import analytical_model, optimise_analytical
@@ -33,10 +31,6 @@ DEFAULT_GRID = {"analytical": 81, "fem": 12}
 """Grid points per axis when --grid is not given."""
 MAX_GRID = 400
 """Largest accepted --grid."""
-DAMPING_DRAW_BUDGET = 2_000_000
-"""With --damping: grid points x posterior draws for the required-voltage interval (memory)."""
-MAX_DAMPING_DRAWS = 100
-"""With --damping: most posterior draws for the required-voltage interval."""
 
 
 def register(subparsers) -> None:
@@ -61,7 +55,12 @@ def register(subparsers) -> None:
         help=f"points per axis (default: {DEFAULT_GRID['analytical']} analytical, {DEFAULT_GRID['fem']} FEM)",
     )
     parser.add_argument("--scheduler", metavar="ADDRESS", help="tcp://host:port of a Dask scheduler (default: local cores)")
-    parser.add_argument("--width-sweep", action="store_true", help="FEM only: also sweep the original plate's width 30-100 mm")
+    parser.add_argument(
+        "--width-sweep",
+        action="store_true",
+        help="FEM only: also sweep the original plate's width, 30-100 mm and every 1 mm over 45-56 mm "
+        "(the widths of tactile run)",
+    )
     parser.add_argument("--out", type=Path, default=Path("reports"), help="folder for the PNG figures (default: reports/)")
     add_json_flag(parser)
     parser.set_defaults(handler=run)
@@ -90,9 +89,12 @@ def run(args) -> dict:
         record = _damped_record(args, problem, model, points, posterior)
     figures = record["figures"]
     if args.width_sweep:
+        from workflow.models.plate import ORIGINAL_PLATE
+        from workflow.pipeline.config import default_config
         from workflow.pipeline.figures.maps import width_sweep_figure
+        from workflow.pipeline.steps import sweep_widths
 
-        sweep = width_sweep(model)
+        sweep = width_sweep(model, ORIGINAL_PLATE, sweep_widths(default_config()["fem"], ORIGINAL_PLATE.width))
         figures.append(_save(width_sweep_figure(sweep, design_width=args.b_mm * MM), args.out / "width_sweep_fem.png"))
         record["width_sweep"] = {
             "b_mm": (sweep.width / MM).tolist(),
@@ -155,7 +157,7 @@ def _damped_record(args, problem, model, points: int, posterior) -> dict:
     """Maps and optimum with the posterior-median Q(v), and the required-voltage map."""
     from workflow.pipeline.figures.damping import design_map_figure
 
-    draws = int(np.clip(DAMPING_DRAW_BUDGET // points**2, 1, MAX_DAMPING_DRAWS))
+    draws = map_draws(points)
     if args.model == "analytical":
         optimum = damped_optimum(posterior.median_law(), problem)
         keys = damped_optimum_record(posterior, optimum)

@@ -34,6 +34,10 @@ from workflow.optimise.problem import DesignProblem, Optimum, PlateModel, maximi
 
 QUANTILES = (0.05, 0.5, 0.95)
 """Credible-interval quantiles reported for propagated quantities."""
+MAP_DRAW_BUDGET = 2_000_000
+"""Grid points x posterior draws of a required-voltage map's interval (bounds the memory)."""
+MAX_MAP_DRAWS = 100
+"""Most posterior draws behind a required-voltage map's interval."""
 
 
 def damped_deflection(plate: Plate, voltage, law):
@@ -475,3 +479,8 @@ def fem_damped_maps(posterior: DampingPosterior, problem: DesignProblem, fem_mod
         optimum=optimum,
         law_label=f"FEM, {posterior.law_name} Q(v), median: {parameters}",
     )
+
+
+def map_draws(points: int) -> int:
+    """Posterior draws for the required-voltage interval of a points x points map (within the budget)."""
+    return int(np.clip(MAP_DRAW_BUDGET // points**2, 1, MAX_MAP_DRAWS))

@@ -88,6 +88,11 @@ class RecommendedDesign:
         return self.frequency - self.problem.min_frequency
 
     @property
+    def working_velocity(self) -> float:
+        """Antinode velocity amplitude at the design voltage with Q(v), v = 2 pi f_r w (median) [m/s]."""
+        return 2 * np.pi * self.frequency * self.deflection[1]
+
+    @property
     def transverse_distance(self) -> Optional[float]:
         """Nearest transverse-mixing mode's frequency minus the working one [Hz], or None."""
         return None if self.nearest_transverse is None else self.nearest_transverse.frequency - self.frequency

@@ -50,7 +50,37 @@ def _title(context: RunContext) -> str:
 
 
 def _recommended_design(context: RunContext, recommendation) -> str:
-    return recommendation_section(recommendation)
+    section = recommendation_section(recommendation)
+    fit = context.results.get("damping_fit")
+    if not section or fit is None:
+        return section
+    return section + "\n\n" + _basis(recommendation, fit.log.velocity, simulated=not context.logs)
+
+
+def _basis(recommendation, measured_velocity, simulated: bool) -> str:
+    """What the recommended numbers rest on: where Q(v) comes from, the velocities it was fitted
+    over against the designs' own, and what the intervals leave out."""
+    low, high = float(np.min(measured_velocity)), float(np.max(measured_velocity))
+    designs = list(recommendation.designs.items())
+    speeds = ", ".join(f"{d.working_velocity:.2f} m/s (h_p = {hp / MM:g} mm)" for hp, d in designs)
+    outside = [f"{hp / MM:g}" for hp, d in designs if not low <= d.working_velocity <= high]
+    origin = (
+        "a **simulated** campaign (the bench simulator's own Q(v) law, not a measured plate): before building, "
+        "measure your plate and rerun with `--logs`"
+        if simulated
+        else "the logs given with `--logs`"
+    )
+    text = [
+        f"What these numbers rest on: Q(v) is fitted to {origin}. It was fitted over measured velocities "
+        f"{low:.3f}–{high:.3f} m/s; the designs work at {speeds}."
+    ]
+    if outside:
+        text.append(f"For h_p = {', '.join(outside)} mm Q(v) is extrapolated beyond the measured velocities.")
+    text.append(
+        "The same Q(v) is assumed for every geometry (it is measured on one plate), and the intervals cover the "
+        "posterior of Q(v) only: not the choice of law, nor the FEM mesh's error."
+    )
+    return " ".join(text)
 
 
 def recommendation_section(recommendation) -> str:
@@ -110,19 +140,21 @@ def _verdict(recommendation) -> str:
     problem, target = first.problem, first.target / UM
     text = [f"Goal: {target:g} µm at ≤ {problem.voltage:g} V with the resonance at or above {problem.min_frequency / KHZ:g} kHz."]
     met = [hp for hp, d in recommendation.designs.items() if d.meets_goal]
+    uncertain = [hp for hp in met if recommendation.margin_within_mesh_error(recommendation.designs[hp])]
+    assured = [hp for hp in met if hp not in uncertain]
+    if assured:
+        text.append(f"Met with h_p = {_thicknesses(assured)} mm.")
+    if uncertain:
+        text.append(
+            f"**Deflection met with h_p = {_thicknesses(uncertain)} mm, but {problem.min_frequency / KHZ:g} kHz is not "
+            "assured**: the margin is smaller than the FEM mesh's frequency error (see FEM accuracy below)."
+        )
     if met:
-        text.append(f"Met with h_p = {_thicknesses(met)} mm.")
-        uncertain = [hp for hp in met if recommendation.margin_within_mesh_error(recommendation.designs[hp])]
-        if uncertain:
-            text.append(
-                f"The margin to {problem.min_frequency / KHZ:g} kHz of h_p = {_thicknesses(uncertain)} mm is within the "
-                "FEM mesh's frequency error (see FEM accuracy below)."
-            )
         for hp in met:
             beam_voltage = recommendation.designs[hp].beam_required_voltage
             if beam_voltage is not None and beam_voltage > problem.voltage:
                 text.append(
-                    f"**h_p = {hp / MM:g} mm meets it only with the FEM: the beam model needs {beam_voltage:.1f} V at "
+                    f"**h_p = {hp / MM:g} mm reaches the deflection only with the FEM: the beam model needs {beam_voltage:.1f} V at "
                     "its own optimum.**"
                 )
     for hp, d in recommendation.designs.items():
@@ -179,8 +211,17 @@ def _recommendation_row(label: str, source: str, design, recommendation) -> tupl
         margin,
         indicator,
         nearest,
-        "yes" if design.meets_goal else f"**NO**: {_shortfall(design)}",
+        _goal_cell(design, recommendation),
     )
+
+
+def _goal_cell(design, recommendation) -> str:
+    """The "goal met" cell: yes, no with the reason, or met but with a frequency margin the mesh cannot resolve."""
+    if not design.meets_goal:
+        return f"**NO**: {_shortfall(design)}"
+    if recommendation.margin_within_mesh_error(design):
+        return f"deflection yes; {design.problem.min_frequency / KHZ:g} kHz **not assured** (mesh error)"
+    return "yes"
 
 
 def _mesh_accuracy(fem, recommendation) -> str:
@@ -217,13 +258,12 @@ def _beam_and_fem(designs) -> str:
     indicators = " / ".join(f"{d.working_indicator:.2f}" for d in fem.values())
     thicknesses = " / ".join(f"{hp / MM:g}" for hp in fem)
     return (
-        f"At the optima with constant Q the FEM deflects {ratios} as much as the beam model (h_p = {thicknesses} mm): "
-        f"the beam model's amplification is scaled (×{BEAM_CALIBRATION:.3f}, docs/model.md) to the paper's analytical "
-        "deflection of the original plate, which is close to the FEM of that plate only because its working mode at "
-        "b = 49 mm is mixed with a transverse mode and deflects less than at the clean widths of the width sweep, "
-        f"while on the optima's working modes (transverse indicators {indicators}) a plate restrained across its "
-        "width bends more than a beam (docs/fem.md, comparison with beam theory). Design with the FEM, which resolves "
-        "the plate and its modes; the beam model guides the FEM's search and underestimates the deflection of clean modes."
+        f"At the optima with constant Q the FEM deflects {ratios} as much as the beam model (h_p = {thicknesses} mm), "
+        f"because the beam model is scaled (×{BEAM_CALIBRATION:.3f}, docs/model.md) to the paper's deflection of the "
+        "original plate, whose working mode at b = 49 mm is mixed with a transverse mode and deflects less, while the "
+        f"optima's working modes are clean (transverse indicators {indicators}) and a plate held across its width "
+        "bends more than a beam (docs/fem.md). Design with the FEM, which resolves the plate and its modes; "
+        "the beam model guides the FEM's search and underestimates the deflection of clean modes."
     )
 
 
@@ -338,8 +378,8 @@ def _damped_design(context: RunContext, result) -> str:
         figure(context, name, caption)
         for hp in design.optima
         for name, caption in (
-            (f"qv_deflection_hp{hp / MM:g}mm.png", f"deflection with Q(v) at the design voltage, h_p = {hp / MM:g} mm"),
-            (f"qv_voltage_hp{hp / MM:g}mm.png", f"voltage needed for {summary['target_um']:g} µm with Q(v), h_p = {hp / MM:g} mm"),
+            (f"qv_deflection_hp{hp / MM:g}mm.png", f"beam model: deflection with Q(v) at the design voltage, h_p = {hp / MM:g} mm"),
+            (f"qv_voltage_hp{hp / MM:g}mm.png", f"beam model: voltage needed for {summary['target_um']:g} µm with Q(v), h_p = {hp / MM:g} mm"),
         )
         if name in context.figures
     ]
@@ -447,7 +487,7 @@ def _fem_optima(context: RunContext, optima) -> str:
                 "method",
                 "λ [mm]",
                 "h_i [mm]",
-                "w_dyn [µm]",
+                f"w_dyn at Q = {context.config['design']['q']:g} [µm]",
                 "f_r [kHz]",
                 "on 25 kHz line",
                 "FEM evaluations",
@@ -559,7 +599,12 @@ def _timings(context: RunContext) -> str:
     total = sum(t.seconds for t in context.timings)
     cached = sum(t.cached for t in context.timings)
     note = f" {cached} step(s) came from the cache of an earlier run; a first run takes longer." if cached else ""
-    return "## Run time\n\n" + table(["step", "seconds", "from cache"], rows) + f"\n\nTotal: {total:.1f} s.{note}"
+    return (
+        "## Run time\n\n"
+        + table(["step", "seconds", "step result from cache"], rows)
+        + f"\n\nTotal: {total:.1f} s.{note} Steps computed afresh may still read single FEM evaluations from the "
+        "FEM cache, which makes them fast on a rerun."
+    )
 
 
 def _configuration(context: RunContext) -> str:

@@ -27,7 +27,7 @@ from workflow.units import KHZ, MM, PM_PER_V, UM  # noqa: E402
 
 PERCENT = 1e-2
 """One per cent [-] (axis unit)."""
-DISPLAY_UNITS = {"gain": ("pm/V", PM_PER_V), "sigma_rel": ("%", PERCENT), "sigma_abs": ("um/s", UM)}
+DISPLAY_UNITS = {"gain": ("pm/V", PM_PER_V), "sigma_rel": ("%", PERCENT), "sigma_abs": ("µm/s", UM)}
 """Parameter -> (unit on the axis, its size in SI) where the SI value would need an exponent."""
 LOG_AXES = ("sigma_abs",)
 """Parameters drawn on a logarithmic axis: their posterior spans decades (down to the prior's floor)."""
