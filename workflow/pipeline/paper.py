@@ -40,7 +40,13 @@ FIGURES = {
     for figure in (
         PaperFigure("analytical_w", "original plate, beam model, Q = 54, 15 V: deflection", 1.070, "µm"),
         PaperFigure("analytical_f", "original plate, beam model: resonance", 32.13, "kHz"),
-        PaperFigure("literal_w", "original plate, beam formula taken literally with Q = 54", 2.89, "µm"),
+        PaperFigure(
+            "literal_w",
+            "original plate, the paper's beam formula taken literally with Q = 54 "
+            "(an independent hand evaluation, not a figure printed in the paper)",
+            2.89,
+            "µm",
+        ),
         PaperFigure("fem_f", "original plate, FEM, Q = 54, 15 V: resonance", 31.17, "kHz"),
         PaperFigure("fem_w", "original plate, FEM, Q = 54, 15 V: deflection", 1.151, "µm"),
         PaperFigure("fem_nlopt_evaluations", "direct FEM optimisation (gradient method): FEM evaluations", 48, ""),
