@@ -94,6 +94,23 @@ def test_console_script_error_has_no_traceback():
     assert result.stderr.count("\n") == 1 and "Traceback" not in result.stderr
 
 
+def test_an_unexpected_error_is_one_line_pointing_to_debug(capsys, monkeypatch):
+    """A bug inside a command: one line, exit 3, no traceback; --debug shows the traceback."""
+    from workflow.models import analytical
+
+    def broken(*args, **kwargs):
+        raise ZeroDivisionError("division by zero\n  somewhere deep")
+
+    monkeypatch.setattr(analytical, "dynamic_deflection", broken)
+    argv = ["evaluate", "--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "1"]
+    assert main(argv) == 3
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert "internal error: ZeroDivisionError: division by zero somewhere deep" in err and "tactile --debug evaluate" in err
+    with pytest.raises(ZeroDivisionError):
+        main(["--debug", *argv])
+
+
 def test_the_fem_optimum_uses_space_mapping_by_default():
     args = build_parser().parse_args(["optimize", "--model", "fem"])
     assert args.method == "space-mapping"

@@ -3,7 +3,9 @@
 Each command lives in its own module with ``register(subparsers)`` that adds its parser
 and sets ``handler``.  A handler returns a JSON-able dict (printed on the last line of
 stdout with ``--json``) or ``None``.  Errors a user can act on are :class:`TactileError`
-(or argparse usage errors): one line on stderr, exit status 2, no traceback.
+(or argparse usage errors): one line on stderr, exit status 2, no traceback.  Any other
+exception is a bug: one line naming it and pointing to ``tactile --debug``, exit status 3;
+with ``--debug`` the traceback is shown.  Exit statuses: :data:`EXIT_CODES`.
 """
 
 import argparse
@@ -17,8 +19,17 @@ COMMANDS = ("evaluate", "optimize", "maps", "fit_damping", "simulate", "measure"
 """Modules of :mod:`workflow.cli`, one per command, in the order ``--help`` lists them."""
 
 EXIT_USAGE = 2
+EXIT_INTERNAL = 3
 EXIT_INTERRUPTED = 130
 EXIT_BROKEN_PIPE = 141
+EXIT_CODES = {
+    0: "success",
+    EXIT_USAGE: "a usage error or an error the user can act on (bad option, input file, geometry, instrument)",
+    EXIT_INTERNAL: "an unexpected internal error (a bug; rerun with --debug for the traceback)",
+    EXIT_INTERRUPTED: "interrupted (Ctrl-C)",
+    EXIT_BROKEN_PIPE: "the reader of stdout went away (e.g. | head)",
+}
+"""Exit status -> meaning (docs/cli.md lists the same)."""
 
 
 class _Parser(argparse.ArgumentParser):
@@ -37,6 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
     from workflow import __version__
 
     parser.add_argument("--version", action="version", version=f"tactile {__version__}")
+    parser.add_argument("--debug", action="store_true", help="show the Python traceback of an unexpected error")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     subparsers.required = True
     for name in COMMANDS:
@@ -63,6 +75,10 @@ def main(argv=None) -> int:
         return EXIT_INTERRUPTED
     except BrokenPipeError:
         return _closed_stdout()
+    except Exception as error:
+        if args.debug:
+            raise
+        return _internal_error(args, error)
     try:
         if getattr(args, "json", False) and result is not None:
             print(json_line(result))
@@ -70,6 +86,18 @@ def main(argv=None) -> int:
     except BrokenPipeError:
         return _closed_stdout()
     return 0
+
+
+def _internal_error(args, error: Exception) -> int:
+    """One line for an unexpected exception (a bug), with the way to see its traceback."""
+    command = args.command.replace("_", "-")
+    message = " ".join(str(error).split()) or "no message"
+    print(
+        f"tactile {command}: internal error: {type(error).__name__}: {message[:300]} "
+        f"(a bug: rerun as 'tactile --debug {command} ...' to see the traceback, and report it)",
+        file=sys.stderr,
+    )
+    return EXIT_INTERNAL
 
 
 def _closed_stdout() -> int:
