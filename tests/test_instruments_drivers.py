@@ -86,7 +86,7 @@ def test_generator_driver_refuses_above_its_limit_without_sending_the_amplitude(
 
 
 def test_generator_driver_refuses_an_offset_that_pushes_the_peak_over_the_limit():
-    port = ReplayPort([("VOLT?", b"+5.00000000000000E+00\n")])
+    port = ReplayPort([("VOLT:UNIT VPP;:VOLT?", b"+5.00000000000000E+00\n")])
     with pytest.raises(SafetyLimitError):
         FunctionGenerator(port, max_peak_voltage=3.0).offset = 0.6
     assert port.done()

@@ -32,6 +32,10 @@ class LineInstrument:
 
     def write(self, command: str) -> None:
         """Send one command line."""
+        self._send(command)
+
+    def _send(self, command: str) -> None:
+        """The transport under :meth:`write` (a driver may refuse commands in ``write``, not here)."""
         try:
             self.port.write(command.encode("ascii") + TERMINATOR)
         except (serial.SerialException, OSError) as error:
@@ -88,7 +92,7 @@ def measurement(get_command: str, doc: str, parse=str):
     return property(getter, doc=doc)
 
 
-def control(get_command: str, set_command: str, doc: str, parse=str, format=str, check=None):
+def control(get_command: str, set_command: str, doc: str, parse=str, format=str):
     """A read/write property.
 
     Parameters
@@ -101,13 +105,9 @@ def control(get_command: str, set_command: str, doc: str, parse=str, format=str,
         Reply text -> value.
     format : callable
         Value -> argument text.
-    check : callable or None
-        ``check(self, value)`` raising before anything is sent (limits).
     """
 
     def setter(self, value):
-        if check is not None:
-            check(self, value)
         self.set(set_command.format(format(value)))
 
     prop = measurement(get_command, doc, parse)

@@ -4,7 +4,8 @@ Each procedure plans its points, skips those already in its log (resume), measur
 rest one by one, appending and fsync'ing a row per point (:mod:`.logwriter`), and shows
 its progress on stderr (:class:`~workflow.progress.Progress`).  A timed-out or garbled exchange is retried a bounded number of
 times; then a clear :class:`InstrumentError` stops the run, with the log intact for a
-resume.  The generator output is switched off at the end, also after an error.
+resume.  The generator is left in its safe state (output off, lowest amplitude, no offset)
+at the end, also after an error or an exception raised by a signal (:meth:`Station.shutdown`).
 
 Voltages are peak volts across the ceramics; the station converts them through the
 amplifier gain and refuses anything above its safety limit before sending it.
@@ -19,7 +20,7 @@ import numpy as np
 
 from instruments.drivers.amplifier import PowerAmplifier
 from instruments.drivers.errors import CommunicationError, InstrumentError, SafetyLimitError
-from instruments.drivers.generator import FunctionGenerator
+from instruments.drivers.generator import FunctionGenerator, check_voltage_limit
 from instruments.drivers.vibrometer import VelocityReading, Vibrometer, full_scale
 from instruments.procedures.logwriter import LogWriter, point_key
 from workflow import logformat
@@ -53,7 +54,7 @@ class Station:
     vibrometer : Vibrometer
     amplifier : PowerAmplifier
     voltage_limit : float
-        Safety limit on the peak voltage across the ceramics [V].
+        Safety limit on the peak voltage across the ceramics [V]: finite and > 0 (ValueError otherwise).
     retries : int
         Retries of a point after a timeout or garbled reply.
     settle_time : float
@@ -76,7 +77,7 @@ class Station:
         self.generator = generator
         self.vibrometer = vibrometer
         self.amplifier = amplifier
-        self.voltage_limit = voltage_limit
+        self.voltage_limit = check_voltage_limit(voltage_limit)
         self.retries = retries
         self.settle_time = settle_time
         self.clock = clock
@@ -168,13 +169,24 @@ class Station:
 
         return self.retry(drive_and_read, f"measuring at {point.frequency:.3f} Hz, {point.voltage:g} V")
 
-    def shutdown(self) -> None:
-        """Output off (best effort: a lost connection cannot be helped here)."""
-        try:
-            self.retry(lambda: setattr(self.generator, "output", False), "switching the output off")
-        except InstrumentError:
-            pass
+    def shutdown(self) -> str | None:
+        """Leave the generator safe: output off, lowest amplitude, no offset, confirmed by ``OUTP?``.
+
+        Never raises (it runs after errors): returns None once ``OUTP?`` answers 0, else why
+        the output could not be confirmed off (e.g. a lost connection).
+        """
         self._voltage = None
+
+        def switch_off():
+            self.generator.switch_off()
+            if self.generator.output:
+                raise InstrumentError(f"{self.generator.name} still reports its output on after OUTP 0")
+
+        try:
+            self.retry(switch_off, "switching the output off")
+        except InstrumentError as error:
+            return str(error)
+        return None
 
 
 @dataclass(frozen=True)

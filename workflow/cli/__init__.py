@@ -12,6 +12,7 @@ import argparse
 import importlib
 import sys
 
+from workflow.cli.signals import Stopped
 from workflow.errors import TactileError
 from workflow.serialise import json_line
 
@@ -20,14 +21,18 @@ COMMANDS = ("evaluate", "optimize", "maps", "fit_damping", "simulate", "measure"
 
 EXIT_USAGE = 2
 EXIT_INTERNAL = 3
+EXIT_HANGUP = 129
 EXIT_INTERRUPTED = 130
 EXIT_BROKEN_PIPE = 141
+EXIT_TERMINATED = 143
 EXIT_CODES = {
     0: "success",
     EXIT_USAGE: "a usage error or an error the user can act on (bad option, input file, geometry, instrument)",
     EXIT_INTERNAL: "an unexpected internal error (a bug; rerun with --debug for the traceback)",
-    EXIT_INTERRUPTED: "interrupted (Ctrl-C)",
+    EXIT_HANGUP: "stopped by SIGHUP (128 + 1)",
+    EXIT_INTERRUPTED: "interrupted (Ctrl-C, SIGINT: 128 + 2)",
     EXIT_BROKEN_PIPE: "the reader of stdout went away (e.g. | head)",
+    EXIT_TERMINATED: "stopped by SIGTERM (128 + 15)",
 }
 """Exit status -> meaning (docs/cli.md lists the same)."""
 
@@ -73,6 +78,10 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print(f"tactile {args.command.replace('_', '-')}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except Stopped as stop:
+        outcome = f"; {stop.outcome}" if stop.outcome else ""
+        print(f"tactile {args.command.replace('_', '-')}: stopped by {stop.name}{outcome}", file=sys.stderr)
+        return stop.exit_status
     except BrokenPipeError:
         return _closed_stdout()
     except Exception as error:

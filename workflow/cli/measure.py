@@ -2,14 +2,18 @@
 
 Logs go under ``measurements/`` in the working directory by default (ignored by git, so a
 measurement never lands among the repository's tracked files); running the same command
-again resumes its log.
+again resumes its log.  Whatever ends the run (its end, an error, SIGINT, SIGTERM, SIGHUP)
+the generator is left with its output off at its lowest amplitude (docs/safety.md).
 """
 
 import argparse
+import math
+import sys
 from pathlib import Path
 
 from instruments.drivers.amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT, DEFAULT_GAIN
 from workflow.cli.options import add_bench_arguments, add_json_flag, bench_settings
+from workflow.cli.signals import Stopped, StopSignals
 from workflow.errors import TactileError
 
 DEFAULT_DATA_DIR = Path("measurements")
@@ -94,8 +98,9 @@ def _open_station(args):
     from instruments.procedures.sweeps import open_station
     from instruments.simulator import register_url_handler
 
-    if not args.max_voltage > 0:
-        raise TactileError(f"--max-voltage must be positive, got {args.max_voltage:g}")
+    if not (math.isfinite(args.max_voltage) and args.max_voltage > 0):
+        raise TactileError(f"--max-voltage must be a finite number of volts > 0 (peak across the ceramics; default "
+                           f"{DEFAULT_CERAMIC_VOLTAGE_LIMIT:g}), got {args.max_voltage:g}")
     if not args.amplifier_gain > 0:
         raise TactileError(f"--amplifier-gain must be positive, got {args.amplifier_gain:g}")
     if args.retries < 0:
@@ -144,22 +149,18 @@ def _check_plan_flags(args) -> None:
 
 
 def run(args):
-    from instruments.procedures import sweeps as procedures
-
     _check_plan_flags(args)
     out = args.out or DEFAULT_DATA_DIR / f"{args.procedure}.csv"
-    station, metadata = _open_station(args)
-    if args.procedure == "resonance":
-        plan = procedures.ResonancePlan(args.start_hz, args.stop_hz, args.coarse_points, args.fine_points, args.voltage)
-        result = procedures.resonance_search(station, out, plan, metadata, args.restart)
-    elif args.procedure == "campaign":
-        centre = args.center_hz or _centre(args, station, metadata, out, "center_frequency")
-        plan = procedures.CampaignPlan(centre, args.span_hz, args.points, args.voltages)
-        result = procedures.q_campaign(station, out, plan, metadata, args.restart)
-    else:
-        frequency = args.frequency_hz or _centre(args, station, metadata, out, "frequency")
-        plan = procedures.VoltageSweepPlan(frequency, args.voltages)
-        result = procedures.voltage_sweep(station, out, plan, metadata, args.restart)
+    with StopSignals() as signals:
+        station, metadata = _open_station(args)
+        try:
+            result = _measure(args, station, metadata, out)
+        except BaseException as error:
+            problem = _shut_down(station, signals)
+            if isinstance(error, Stopped):
+                error.outcome = problem or "generator output off (OUTP 0, lowest amplitude)"
+            raise
+        _shut_down(station, signals)
     summary = {
         "log": str(result.path),
         "procedure": result.procedure,
@@ -174,6 +175,36 @@ def run(args):
               f"({result.planned} planned); log: {result.path}")
         _print_summary(result.procedure, result.summary)
     return summary
+
+
+def _measure(args, station, metadata: dict, out: Path):
+    """Run the chosen procedure; its :class:`ProcedureResult`."""
+    from instruments.procedures import sweeps as procedures
+
+    if args.procedure == "resonance":
+        plan = procedures.ResonancePlan(args.start_hz, args.stop_hz, args.coarse_points, args.fine_points, args.voltage)
+        return procedures.resonance_search(station, out, plan, metadata, args.restart)
+    if args.procedure == "campaign":
+        centre = args.center_hz or _centre(args, station, metadata, out, "center_frequency")
+        plan = procedures.CampaignPlan(centre, args.span_hz, args.points, args.voltages)
+        return procedures.q_campaign(station, out, plan, metadata, args.restart)
+    frequency = args.frequency_hz or _centre(args, station, metadata, out, "frequency")
+    plan = procedures.VoltageSweepPlan(frequency, args.voltages)
+    return procedures.voltage_sweep(station, out, plan, metadata, args.restart)
+
+
+def _shut_down(station, signals: StopSignals) -> str | None:
+    """Leave the generator safe, deferring stop signals meanwhile; a warning on stderr if it cannot be confirmed.
+
+    Returns None when ``OUTP?`` confirmed the output off, else the warning.
+    """
+    with signals.held():
+        problem = station.shutdown()
+    if problem is None:
+        return None
+    warning = f"cannot confirm the generator output is off ({problem}): switch it off at the instrument"
+    print(f"tactile measure: warning: {warning}", file=sys.stderr)
+    return warning
 
 
 def _print_summary(procedure: str, summary: dict) -> None:
