@@ -228,7 +228,7 @@ def test_real_generator_identifies():
         (["campaign", "--points", "2"], "--points must be at least 3"),
         (["resonance", "--start-hz", "40000", "--stop-hz", "30000"], "must be below --stop-hz"),
         (["voltage-sweep", "--frequency-hz", "-3"], "--frequency-hz must be positive"),
-        (["campaign", "--max-voltage", "0"], "--max-voltage must be positive"),
+        (["campaign", "--max-voltage", "0"], "--max-voltage must be a finite number of volts > 0"),
         (["campaign", "--drop-rate", "1.5"], "bad fault flag"),
         (["campaign", "--generator", "/dev/ttyUSB0"], "not both"),
     ],

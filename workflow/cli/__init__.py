@@ -12,7 +12,7 @@ import argparse
 import importlib
 import sys
 
-from workflow.cli.signals import Stopped
+from workflow.cli.options import Stopped
 from workflow.errors import TactileError
 from workflow.serialise import json_line
 

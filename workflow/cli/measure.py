@@ -13,7 +13,7 @@ from pathlib import Path
 
 from instruments.drivers.amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT, DEFAULT_GAIN
 from workflow.cli.options import add_bench_arguments, add_json_flag, bench_settings
-from workflow.cli.signals import Stopped, StopSignals
+from workflow.cli.options import Stopped, StopSignals
 from workflow.errors import TactileError
 
 DEFAULT_DATA_DIR = Path("measurements")
