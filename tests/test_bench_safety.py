@@ -231,6 +231,13 @@ def test_max_voltage_inf_nan_or_not_positive_is_one_line_naming_the_option(text,
     assert not (tmp_path / "r.csv").exists()
 
 
+@pytest.mark.parametrize("text", ["inf", "nan", "0"])
+def test_an_amplifier_gain_that_would_zero_or_void_the_generator_limit_is_refused(text, tmp_path, capsys):
+    status = main(["measure", "resonance", "--simulate", "--amplifier-gain", text, "--out", str(tmp_path / "r.csv")])
+    err = capsys.readouterr().err
+    assert status == 2 and "--amplifier-gain must be a finite number > 0" in err and len(err.strip().splitlines()) == 1
+
+
 def test_the_limit_cannot_be_raised_on_an_open_driver():
     generator, _ = generator_left_in()
     with pytest.raises(AttributeError):

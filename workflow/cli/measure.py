@@ -101,8 +101,8 @@ def _open_station(args):
     if not (math.isfinite(args.max_voltage) and args.max_voltage > 0):
         raise TactileError(f"--max-voltage must be a finite number of volts > 0 (peak across the ceramics; default "
                            f"{DEFAULT_CERAMIC_VOLTAGE_LIMIT:g}), got {args.max_voltage:g}")
-    if not args.amplifier_gain > 0:
-        raise TactileError(f"--amplifier-gain must be positive, got {args.amplifier_gain:g}")
+    if not (math.isfinite(args.amplifier_gain) and args.amplifier_gain > 0):
+        raise TactileError(f"--amplifier-gain must be a finite number > 0 [V/V], got {args.amplifier_gain:g}")
     if args.retries < 0:
         raise TactileError(f"--retries must be >= 0, got {args.retries}")
     options = {"retries": args.retries}
