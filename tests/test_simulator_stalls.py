@@ -142,9 +142,16 @@ def test_url_handler_output_queue_is_bounded_and_keeps_whole_replies():
     assert set(vibrometer.read(vibrometer.in_waiting).splitlines()) == {b"VD-09"}
     generator.write(b"SYST:ERR?\n")
     assert generator.readline() == b'-430,"Query DEADLOCKED"\n'
+
+
+@pytest.mark.timeout(20)
+def test_url_handler_skips_a_16_mb_line_written_in_4_kb_pieces_in_linear_time():
+    generator, _ = url_ports()
     start = time.monotonic()
     for _ in range(4096):
         generator.write(b"A" * 4096)
     generator.write(b"\n*IDN?\n")
     assert generator.readline() == IDN
     assert time.monotonic() - start < 5
+    generator.write(b"SYST:ERR?;:SYST:ERR?\n")
+    assert generator.readline() == b'-363,"Input buffer overrun";+0,"No error"\n'

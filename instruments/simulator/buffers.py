@@ -34,23 +34,22 @@ class InputBuffer:
         its remaining bytes are skipped up to the next newline.
         """
         lines, start = [], 0
-        while start <= len(data):
+        while True:
             end = data.find(b"\n", start)
-            piece = data[start:] if end < 0 else data[start:end]
+            stop = len(data) if end < 0 else end
             if not self._overrun:
-                if len(self._partial) + len(piece) > self.size:
+                if len(self._partial) + stop - start > self.size:
                     self._overrun = True
                     self._partial.clear()
                     lines.append(OVERRUN)
                 else:
-                    self._partial += piece
+                    self._partial += data[start:stop]
             if end < 0:
-                break
+                return lines
             if not self._overrun:
                 lines.append(bytes(self._partial))
             self.clear()
             start = end + 1
-        return lines
 
 
 class OutputQueue:
