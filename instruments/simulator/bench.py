@@ -11,6 +11,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from instruments.drivers.amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT, DEFAULT_GAIN, PowerAmplifier
+from instruments.simulator.buffers import OVERRUN, InputBuffer, OutputQueue
 from instruments.simulator.faults import Fault, FaultInjector, FaultSettings
 from instruments.simulator.generator import GeneratorDevice
 from instruments.simulator.physics import PlateResponse, plate_response
@@ -105,7 +106,9 @@ class Bench:
             settings.phase_noise,
         )
         self.faults = FaultInjector(settings.faults)
-        self._pending = {name: b"" for name in INSTRUMENTS}
+        self._input = {name: InputBuffer() for name in INSTRUMENTS}
+        self.output = {name: OutputQueue() for name in INSTRUMENTS}
+        """Replies waiting for each instrument's client."""
 
     def clock(self) -> float:
         """Bench time [s]."""
@@ -127,12 +130,16 @@ class Bench:
         velocity, phase = self.settings.response.velocity(self.generator.state.frequency, self.ceramic_voltage(), self.time)
         return float(velocity), float(phase)
 
-    def reset_input(self, instrument: str) -> None:
-        """Forget a partial command line (a port was reopened)."""
-        self._pending[instrument] = b""
+    def reset_port(self, instrument: str) -> None:
+        """Forget a partial command line and the queued replies (a port was reopened)."""
+        self._input[instrument].clear()
+        self.output[instrument].clear()
 
-    def receive(self, instrument: str, data: bytes) -> bytes:
-        """Feed bytes written to ``instrument``; the reply bytes its complete lines produce.
+    def receive(self, instrument: str, data: bytes) -> None:
+        """Feed bytes written to ``instrument``; the replies of its complete lines join ``output[instrument]``.
+
+        A reply that finds the output queue full is lost and reported by the instrument, like
+        a line that overruns the input buffer (:mod:`.buffers`).
 
         Raises
         ------
@@ -140,23 +147,27 @@ class Bench:
             When fault injection cuts the line; the command is not executed.
         """
         device = getattr(self, instrument)
-        buffer = self._pending[instrument] + data
-        *lines, self._pending[instrument] = buffer.split(b"\n")
-        out = b""
-        for raw in lines:
+        for raw in self._input[instrument].feed(data):
+            if raw is OVERRUN:
+                self._queue(instrument, device.input_overrun())
+                continue
             line = raw.decode("ascii", errors="replace").strip()
             if not line:
                 continue
             fault = self.faults.next_fault()
             if fault is Fault.DISCONNECT:
-                self._pending[instrument] = b""
+                self._input[instrument].clear()
                 raise SimulatedDisconnect(f"simulated {instrument} disconnected at command {self.faults.commands}")
             reply = device.handle_line(line)
-            if reply is None or fault is Fault.DROP:
-                continue
-            encoded = reply.encode("ascii") + b"\n"
-            out += self.faults.garble(encoded) if fault is Fault.GARBLE else encoded
-        return out
+            if fault is not Fault.DROP:
+                self._queue(instrument, reply, garble=fault is Fault.GARBLE)
+
+    def _queue(self, instrument: str, reply: str | None, garble: bool = False) -> None:
+        if reply is None:
+            return
+        encoded = reply.encode("ascii") + b"\n"
+        if not self.output[instrument].put(self.faults.garble(encoded) if garble else encoded):
+            getattr(self, instrument).reply_lost()
 
 
 _BENCHES: dict[str, Bench] = {}

@@ -2,7 +2,8 @@
 
 State changes that would exceed the output's peak-voltage limit (amplitude/2 + |offset|)
 are refused with ``-222,"Data out of range"`` in the error queue; the output keeps its
-previous value.
+previous value.  An over-long line (-363) and a reply lost to a full output queue (-430)
+are reported in the error queue too.
 """
 
 from dataclasses import dataclass, replace
@@ -141,6 +142,14 @@ class GeneratorDevice:
                     raise CommandError(-109, "Missing parameter")
                 return handler(argument if not query else None)
         raise CommandError(-113, "Undefined header")
+
+    def input_overrun(self) -> None:
+        """A command line overran the input buffer and was discarded: -363 in the error queue."""
+        self._push_error(str(CommandError(-363, "Input buffer overrun")))
+
+    def reply_lost(self) -> None:
+        """A reply found the output queue full (queries sent without reading): -430 in the error queue."""
+        self._push_error(str(CommandError(-430, "Query DEADLOCKED")))
 
     def _push_error(self, error: str) -> None:
         if len(self.errors) < MAX_ERRORS:

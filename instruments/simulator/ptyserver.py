@@ -1,15 +1,19 @@
 """Serve a simulated bench on pseudo-terminals, one per instrument, for any serial client.
 
 The server keeps both ends of each pty open, reads the master side, feeds the bytes to
-the bench and writes the replies back.  An injected disconnect cannot unplug a pty: the
-command is lost and its client sees a timeout.
+the bench and writes the replies back, never blocking on a port.  An injected disconnect
+cannot unplug a pty: the command is lost and its client sees a timeout.
 """
 
 import os
 import select
 import tty
+from functools import partial
 
 from instruments.simulator.bench import INSTRUMENTS, Bench, SimulatedDisconnect
+
+READ_SIZE = 1 << 16
+"""Most bytes read from one port per turn [bytes]; ports take turns."""
 
 
 class PtyPair:
@@ -31,18 +35,28 @@ def open_ptys() -> dict[str, PtyPair]:
 
 
 def serve(bench: Bench, ptys: dict[str, PtyPair], poll: float = 0.2, should_stop=lambda: False) -> None:
-    """Answer commands on ``ptys`` until ``should_stop()`` or an interrupt."""
+    """Answer commands on ``ptys`` until ``should_stop()`` or an interrupt.
+
+    Reads and writes never block, so each port is served on its own: a client that sends
+    without reading only fills its instrument's output queue (see :mod:`.buffers`).
+    """
     by_fd = {pair.master: name for name, pair in ptys.items()}
+    for fd in by_fd:
+        os.set_blocking(fd, False)
     while not should_stop():
-        readable, _, _ = select.select(list(by_fd), [], [], poll)
+        waiting = [fd for fd, name in by_fd.items() if bench.output[name]]
+        readable, writable, _ = select.select(list(by_fd), waiting, [], poll)
         for fd in readable:
             try:
-                data = os.read(fd, 4096)
+                data = os.read(fd, READ_SIZE)
             except OSError:
                 continue
             try:
-                reply = bench.receive(by_fd[fd], data)
+                bench.receive(by_fd[fd], data)
             except SimulatedDisconnect:
                 continue
-            if reply:
-                os.write(fd, reply)
+        for fd in writable:
+            try:
+                bench.output[by_fd[fd]].send(partial(os.write, fd))
+            except BlockingIOError:
+                continue

@@ -2,8 +2,8 @@
 
 ``BENCH`` names a bench registered with :func:`.bench.register_bench` (``default`` is
 created on first use); ``INSTRUMENT`` is ``generator`` or ``vibrometer``.  Writes are
-executed at once and their replies queued; reads never wait: a dropped reply reads as
-nothing, i.e. an immediate timeout.  pyserial finds this class through the module
+executed at once and their replies queued in the instrument's bounded output queue; reads
+never wait: a dropped reply reads as nothing, i.e. an immediate timeout.  pyserial finds this class through the module
 ``protocol_tactile-sim`` of this package once :func:`register_url_handler` ran.
 """
 
@@ -46,8 +46,8 @@ class SimulatedSerial(SerialBase):
         except KeyError as error:
             raise SerialException(str(error.args[0])) from None
         self._instrument = instrument
-        self._bench.reset_input(instrument)
-        self._received = bytearray()
+        self._output = self._bench.output[instrument]
+        self._bench.reset_port(instrument)
         self._dead = False
         self.is_open = True
 
@@ -66,19 +66,17 @@ class SimulatedSerial(SerialBase):
     @property
     def in_waiting(self):
         self._check()
-        return len(self._received)
+        return len(self._output)
 
     def read(self, size=1):
         self._check()
-        data = bytes(self._received[:size])
-        del self._received[:size]
-        return data
+        return self._output.take(size)
 
     def write(self, data):
         self._check()
         data = bytes(data)
         try:
-            self._received += self._bench.receive(self._instrument, data)
+            self._bench.receive(self._instrument, data)
         except SimulatedDisconnect as error:
             self._dead = True
             raise SerialException(str(error)) from None
@@ -86,7 +84,7 @@ class SimulatedSerial(SerialBase):
 
     def reset_input_buffer(self):
         self._check()
-        self._received.clear()
+        self._output.clear()
 
     def reset_output_buffer(self):
         self._check()

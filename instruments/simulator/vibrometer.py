@@ -66,6 +66,13 @@ class VibrometerDevice:
             return format_range(self.decoder_range)
         return "Error,1,Unknown command"
 
+    def input_overrun(self) -> str:
+        """The reply to a command line that overran the input buffer and was discarded."""
+        return "Error,3,Input buffer overrun"
+
+    def reply_lost(self) -> None:
+        """A reply found the output queue full: the controller has no error queue, the reply is just lost."""
+
     def _readout(self) -> str:
         amplitude, phase = self.signal()
         limit = full_scale(self.decoder_range)
