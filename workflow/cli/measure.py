@@ -145,21 +145,12 @@ def _check_plan_flags(args) -> None:
 
 def run(args):
     from instruments.procedures import sweeps as procedures
+    from instruments.procedures.logwriter import exclusive
 
     _check_plan_flags(args)
     out = args.out or DEFAULT_DATA_DIR / f"{args.procedure}.csv"
-    station, metadata = _open_station(args)
-    if args.procedure == "resonance":
-        plan = procedures.ResonancePlan(args.start_hz, args.stop_hz, args.coarse_points, args.fine_points, args.voltage)
-        result = procedures.resonance_search(station, out, plan, metadata, args.restart)
-    elif args.procedure == "campaign":
-        centre = args.center_hz or _centre(args, station, metadata, out, "center_frequency")
-        plan = procedures.CampaignPlan(centre, args.span_hz, args.points, args.voltages)
-        result = procedures.q_campaign(station, out, plan, metadata, args.restart)
-    else:
-        frequency = args.frequency_hz or _centre(args, station, metadata, out, "frequency")
-        plan = procedures.VoltageSweepPlan(frequency, args.voltages)
-        result = procedures.voltage_sweep(station, out, plan, metadata, args.restart)
+    with exclusive(out):
+        result = _measure(args, procedures, out)
     summary = {
         "log": str(result.path),
         "procedure": result.procedure,
@@ -174,6 +165,21 @@ def run(args):
               f"({result.planned} planned); log: {result.path}")
         _print_summary(result.procedure, result.summary)
     return summary
+
+
+def _measure(args, procedures, out: Path):
+    """Run the procedure of ``args`` logged at ``out`` (held by this process)."""
+    station, metadata = _open_station(args)
+    if args.procedure == "resonance":
+        plan = procedures.ResonancePlan(args.start_hz, args.stop_hz, args.coarse_points, args.fine_points, args.voltage)
+        return procedures.resonance_search(station, out, plan, metadata, args.restart)
+    if args.procedure == "campaign":
+        centre = args.center_hz or _centre(args, station, metadata, out, "center_frequency")
+        plan = procedures.CampaignPlan(centre, args.span_hz, args.points, args.voltages)
+        return procedures.q_campaign(station, out, plan, metadata, args.restart)
+    frequency = args.frequency_hz or _centre(args, station, metadata, out, "frequency")
+    plan = procedures.VoltageSweepPlan(frequency, args.voltages)
+    return procedures.voltage_sweep(station, out, plan, metadata, args.restart)
 
 
 def _print_summary(procedure: str, summary: dict) -> None:
