@@ -11,7 +11,7 @@ import pytest
 from instruments.drivers.errors import InstrumentError
 from instruments.procedures.logwriter import LogWriter, read_log
 from instruments.procedures.simulated import simulated_station
-from instruments.procedures.sweeps import CampaignPlan, q_campaign, voltage_sweep, VoltageSweepPlan
+from instruments.procedures.sweeps import CampaignPlan, PlannedPoint, VoltageSweepPlan, _measure_points, q_campaign
 from instruments.simulator import default_bench_settings
 from workflow import logformat
 from workflow.cli import main
@@ -132,12 +132,15 @@ def test_a_read_only_log_is_one_line_and_unchanged(tmp_path, capsys):
 # item 5: a refused setting is never logged as measured
 
 def test_a_frequency_the_generator_refuses_stops_the_run_before_logging_it(tmp_path):
-    path = tmp_path / "v.csv"
+    """Points past the generator's 20 MHz (a fine sweep may cross the edge of a valid coarse plan)."""
+    path = tmp_path / "r.csv"
     station, bench = simulated_station(default_bench_settings(), settle_time=0.0)
-    with pytest.raises(InstrumentError, match=r"30000000 Hz.*-222,Data out of range"):
-        voltage_sweep(station, path, VoltageSweepPlan(30e6, (1.0,)), fsync=False)
-    assert row_keys(path) == []
-    assert bench.ceramic_voltage() == 0.0
+    station.prepare()
+    points = [PlannedPoint(0, f, 1.0) for f in (19_999_900.0, 20_000_100.0, 20_000_300.0)]
+    with LogWriter(path, {"procedure": "resonance"}, fsync=False) as log:
+        with pytest.raises(InstrumentError, match=r"-222,Data out of range after setting 20000100 Hz; that point is not logged"):
+            _measure_points(station, log, points, "resonance")
+    assert row_keys(path) == [("0", "19999900", "1")]
 
 
 def test_plans_outside_the_generator_frequency_range_are_refused_up_front(tmp_path, capsys):
@@ -157,7 +160,7 @@ def test_plans_outside_the_generator_frequency_range_are_refused_up_front(tmp_pa
         (["resonance", "--coarse-points", "1000000000"], "--coarse-points 1000000000 exceeds the limit"),
         (["resonance", "--fine-points", "20000"], "--fine-points 20000 exceeds the limit"),
         (["campaign", "--points", "9000", "--voltages", ",".join(["5"] * 30)], "270000 points exceed the limit of 100000"),
-        (["voltage-sweep", "--frequency-hz", "32000", "--voltages", ",".join(["5"] * 20000)], "--voltages"),
+        (["voltage-sweep", "--frequency-hz", "32000", "--voltages", ",".join(["5"] * 200000)], "--voltages: 200000 points exceed the limit of 100000"),
     ],
 )
 def test_cli_refuses_oversized_plans_up_front(tmp_path, capsys, argv, message):
@@ -169,8 +172,8 @@ def test_cli_refuses_oversized_plans_up_front(tmp_path, capsys, argv, message):
 @pytest.mark.parametrize(
     "campaign, message",
     [
-        ({"points_per_sweep": 1000000000}, "campaign.points_per_sweep = 1000000000 exceeds the limit of 10000"),
-        ({"points_per_sweep": 2}, "campaign.points_per_sweep = 2 is below 3"),
+        ({"points_per_sweep": 1000000000}, "campaign.points_per_sweep 1000000000 exceeds the limit of 10000"),
+        ({"points_per_sweep": 2}, "campaign.points_per_sweep must be at least 3"),
         ({"points_per_sweep": 9000, "voltages_v": [5.0] * 30}, "270000 points exceed the limit of 100000"),
     ],
 )
@@ -179,6 +182,8 @@ def test_config_refuses_oversized_campaigns(campaign, message):
         merge(default_config(), {"campaign": campaign}, source="run.toml")
 
 
-def test_plans_refuse_oversized_sizes_from_python():
-    with pytest.raises(TactileError, match="exceeds the limit"):
+def test_plans_refuse_oversized_sizes_and_frequencies_from_python():
+    with pytest.raises(TactileError, match="points_per_sweep 1000000000 exceeds the limit"):
         CampaignPlan(32e3, points_per_sweep=10**9)
+    with pytest.raises(TactileError, match="30000000 Hz is outside the generator's range"):
+        VoltageSweepPlan(30e6)

@@ -130,15 +130,20 @@ def _centre(args, station, metadata, out: Path, key: str) -> float:
 
 
 def _check_plan_flags(args) -> None:
+    from instruments.procedures.sweeps import check_sizes
+
     positive = {flag: getattr(args, flag.lstrip("-").replace("-", "_"), None)
                 for flag in ("--start-hz", "--stop-hz", "--voltage", "--span-hz", "--center-hz", "--frequency-hz")}
     for flag, value in positive.items():
         if value is not None and not value > 0:
             raise TactileError(f"{flag} must be positive, got {value:g}")
-    for flag in ("--coarse-points", "--fine-points", "--points"):
-        value = getattr(args, flag.lstrip("-").replace("-", "_"), None)
-        if value is not None and value < 3:
-            raise TactileError(f"{flag} must be at least 3 (a peak needs neighbours), got {value}")
+    if args.procedure == "resonance":
+        sweeps = {"--coarse-points": args.coarse_points, "--fine-points": args.fine_points}
+        check_sizes(sweeps, sum(sweeps.values()), "--coarse-points + --fine-points")
+    elif args.procedure == "campaign":
+        check_sizes({"--points": args.points}, args.points * len(args.voltages), "--points x --voltages")
+    else:
+        check_sizes({}, len(args.voltages), "--voltages")
     if args.procedure == "resonance" and not args.start_hz < args.stop_hz:
         raise TactileError(f"--start-hz {args.start_hz:g} must be below --stop-hz {args.stop_hz:g}")
 
