@@ -116,7 +116,8 @@ def exclusive(path):
             held[1] -= 1
             if not held[1]:
                 del _HELD[key]
-                os.unlink(lock_path(path))
+                with contextlib.suppress(FileNotFoundError):
+                    os.unlink(lock_path(path))
                 os.close(held[0])
 
 

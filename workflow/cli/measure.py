@@ -150,13 +150,13 @@ def _check_plan_flags(args) -> None:
 
 
 def run(args):
-    from instruments.procedures import sweeps as procedures
     from instruments.procedures.logwriter import exclusive
 
     _check_plan_flags(args)
     out = args.out or DEFAULT_DATA_DIR / f"{args.procedure}.csv"
     with exclusive(out):
-        result = _measure(args, procedures, out)
+        station, metadata = _open_station(args)
+        result = _measure(args, station, metadata, out)
     summary = {
         "log": str(result.path),
         "procedure": result.procedure,
@@ -173,9 +173,10 @@ def run(args):
     return summary
 
 
-def _measure(args, procedures, out: Path):
-    """Run the procedure of ``args`` logged at ``out`` (held by this process)."""
-    station, metadata = _open_station(args)
+def _measure(args, station, metadata: dict, out: Path):
+    """Run the chosen procedure; its :class:`ProcedureResult`."""
+    from instruments.procedures import sweeps as procedures
+
     if args.procedure == "resonance":
         plan = procedures.ResonancePlan(args.start_hz, args.stop_hz, args.coarse_points, args.fine_points, args.voltage)
         return procedures.resonance_search(station, out, plan, metadata, args.restart)
