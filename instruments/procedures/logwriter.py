@@ -7,11 +7,21 @@ unterminated final line (a row being written): resuming truncates that line alon
 every complete row is kept and the file stays a valid log.  A log is only resumed by
 the same procedure with the same plan (the ``plan_*`` metadata); anything else is an
 error, not a guess.
+
+A log has one writer: :func:`exclusive` holds an ``fcntl.flock`` on ``<log>.lock`` (which
+holds the writer's pid, for the message a second writer gets) for as long as the log is
+written.  The kernel releases the lock when its process dies, so a lock file left by a
+killed process is taken over.  A file this module did not write (no title line) is never
+appended to nor overwritten, and only regular files are logs.
 """
 
+import contextlib
 import csv
+import fcntl
 import io
 import os
+import stat
+import threading
 from pathlib import Path
 
 from workflow import logformat
@@ -48,6 +58,102 @@ def _metadata_text(value) -> str:
     return " ".join(str(value).split())
 
 
+def check_output(path: Path) -> None:
+    """Raise :class:`InputFileError` unless ``path`` is absent or a writable log this module wrote.
+
+    A log this module wrote starts with its title line (an empty file, or one cut inside the
+    title, holds nothing to lose).  Reads only that line, so that a device or a huge foreign
+    file is refused at once.
+    """
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        return
+    except OSError as error:
+        raise InputFileError(f"{path}: cannot use it as a log: {error.strerror}") from None
+    if not stat.S_ISREG(mode):
+        raise InputFileError(f"{path}: not a regular file; a log must be a file (choose another --out)")
+    title = f"# {TITLE}\n".encode()
+    try:
+        with open(path, "rb") as file:
+            first = file.read(len(title))
+    except OSError as error:
+        raise InputFileError(f"{path}: cannot read it: {error.strerror}") from None
+    if not title.startswith(first):  # empty, or cut inside our title line: nothing to lose
+        raise InputFileError(f"{path}: not a log tactile wrote (no '# {TITLE}' title line); "
+                             "it is left untouched: choose another --out")
+    if not os.access(path, os.W_OK):
+        raise InputFileError(f"{path}: not writable; cannot resume or restart it")
+
+
+_HELD: dict[tuple[Path, int], list] = {}
+_HELD_GUARD = threading.Lock()
+
+
+@contextlib.contextmanager
+def exclusive(path):
+    """Hold the one-writer lock of the log ``path`` (:func:`check_output` first); re-entrant in a thread.
+
+    Raises
+    ------
+    InputFileError
+        If another process (or thread) writes the log, naming the pid in its lock file.
+    """
+    path = Path(path)
+    key = (path.resolve(), threading.get_ident())
+    with _HELD_GUARD:
+        held = _HELD.get(key)
+        if held:
+            held[1] += 1
+    if not held:
+        check_output(path)
+        descriptor = _lock(path)
+        held = _HELD[key] = [descriptor, 1]
+    try:
+        yield
+    finally:
+        with _HELD_GUARD:
+            held[1] -= 1
+            if not held[1]:
+                del _HELD[key]
+                with contextlib.suppress(FileNotFoundError):
+                    os.unlink(lock_path(path))
+                os.close(held[0])
+
+
+def lock_path(path: Path) -> Path:
+    """The lock file of the log ``path``: ``<name>.lock`` beside it."""
+    return path.with_name(path.name + ".lock")
+
+
+def _lock(path: Path) -> int:
+    """An open descriptor holding the flock of ``lock_path(path)``, with our pid written in it."""
+    lock = lock_path(path)
+    try:
+        lock.parent.mkdir(parents=True, exist_ok=True)
+        while True:
+            descriptor = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                owner = os.read(descriptor, 32).decode("ascii", "replace").strip() or "unknown"
+                os.close(descriptor)
+                raise InputFileError(f"{path}: in use by another tactile process (pid {owner}); "
+                                     f"wait for it to finish or stop it (its lock: {lock})") from None
+            try:
+                same = os.path.samestat(os.fstat(descriptor), os.stat(lock))
+            except FileNotFoundError:
+                same = False
+            if same:  # else the holder removed it between our open and flock: lock the new file
+                break
+            os.close(descriptor)
+        os.ftruncate(descriptor, 0)
+        os.write(descriptor, f"{os.getpid()}\n".encode())
+    except OSError as error:
+        raise InputFileError(f"{path}: cannot lock it ({lock}): {error.strerror}") from None
+    return descriptor
+
+
 def read_log(path: Path) -> tuple[dict, list[dict], int]:
     """Metadata, complete rows (column -> text) and the byte length of the complete lines of a log we wrote.
 
@@ -56,12 +162,16 @@ def read_log(path: Path) -> tuple[dict, list[dict], int]:
     Raises
     ------
     InputFileError
-        If the header row is not ours or a complete row is malformed (file and line named).
+        If the header row is not ours, the file is not UTF-8 or a complete row is malformed (file and line named).
     """
     data = path.read_bytes()
     complete = data[: data.rfind(b"\n") + 1]
+    try:
+        text = complete.decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise InputFileError(f"{path}: not a UTF-8 text log (byte {error.start}); not resuming it") from None
     metadata, rows, header = {}, [], None
-    for number, line in enumerate(complete.decode("utf-8").splitlines(), start=1):
+    for number, line in enumerate(text.splitlines(), start=1):
         if header is None and line.startswith("#"):
             key, separator, value = line[1:].partition(":")
             if separator:
@@ -89,7 +199,7 @@ class LogWriter:
         ``key -> value`` for the ``# key: value`` lines; ``procedure`` and the ``plan_*`` keys
         must match when resuming.
     restart : bool
-        Discard an existing log instead of resuming it.
+        Discard an existing log (one this module wrote) instead of resuming it.
     fsync : bool
         fsync after every row (durable against power loss, not only against crashes).
     """
@@ -100,12 +210,17 @@ class LogWriter:
         self.metadata = {"format_version": logformat.FORMAT_VERSION, **metadata}
         self.rows: list[dict] = []
         self.truncated_bytes = 0
+        with contextlib.ExitStack() as stack:
+            stack.enter_context(exclusive(self.path))
+            self._open(restart)
+            self._lock = stack.pop_all()
+        self.keys = {(row[logformat.SWEEP], row[logformat.FREQUENCY], row[logformat.DRIVE_VOLTAGE]) for row in self.rows}
+
+    def _open(self, restart: bool) -> None:
         if not (self.path.exists() and not restart and self._resume()):
-            self.path.parent.mkdir(parents=True, exist_ok=True)
             self._file = open(self.path, "w", encoding="utf-8", newline="")
             lines = [f"# {TITLE}"] + [f"# {key}: {_metadata_text(value)}" for key, value in self.metadata.items()]
             self._write("\n".join(lines) + "\n" + ",".join(logformat.COLUMNS) + "\n")
-        self.keys = {(row[logformat.SWEEP], row[logformat.FREQUENCY], row[logformat.DRIVE_VOLTAGE]) for row in self.rows}
 
     def _resume(self) -> bool:
         old_metadata, self.rows, complete_length = read_log(self.path)
@@ -141,7 +256,11 @@ class LogWriter:
         self.keys.add((text[logformat.SWEEP], text[logformat.FREQUENCY], text[logformat.DRIVE_VOLTAGE]))
 
     def close(self) -> None:
-        self._file.close()
+        """Close the log and release its lock."""
+        try:
+            self._file.close()
+        finally:
+            self._lock.close()
 
     def __enter__(self):
         return self

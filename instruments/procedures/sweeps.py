@@ -23,7 +23,9 @@ from instruments.drivers.errors import CommunicationError, InstrumentError, Safe
 from instruments.drivers.generator import FunctionGenerator, check_voltage_limit
 from instruments.drivers.vibrometer import VelocityReading, Vibrometer, full_scale
 from instruments.procedures.logwriter import LogWriter, point_key
+from instruments.simulator.generator import FREQUENCY_RANGE
 from workflow import logformat
+from workflow.errors import TactileError
 from workflow.progress import Progress
 
 DEFAULT_RETRIES = 3
@@ -32,6 +34,44 @@ DEFAULT_SETTLE_TIME = 0.3
 """Wait after changing the drive before reading the velocity [s] (Q/(pi f) is ~2 ms; the lock-in needs longer)."""
 RANGE_HEADROOM = 1.25
 """A decoder range is used only if its full scale exceeds the last reading by this factor [-]."""
+MIN_POINTS_PER_SWEEP = 3
+"""Fewest points of a frequency sweep (a peak needs neighbours)."""
+MAX_POINTS_PER_SWEEP = 10_000
+"""Most points of one frequency sweep."""
+MAX_PLANNED_POINTS = 100_000
+"""Most points of one procedure (about 14 h of bench time at the default settle time)."""
+
+
+class PlanError(TactileError, ValueError):
+    """A plan refused before anything is sent: a size or a frequency out of bounds."""
+
+
+def check_sizes(sweeps: dict, total: int, what: str) -> None:
+    """Raise :class:`PlanError` unless each frequency sweep has 3 to 10 000 points and ``total`` is at most 100 000.
+
+    Parameters
+    ----------
+    sweeps : dict
+        Name (as the user gave it, e.g. ``--points``) -> points of that sweep.
+    total : int
+        Points of the whole procedure.
+    what : str
+        What ``total`` counts, for the message.
+    """
+    for name, count in sweeps.items():
+        if count < MIN_POINTS_PER_SWEEP:
+            raise PlanError(f"{name} must be at least {MIN_POINTS_PER_SWEEP} (a peak needs neighbours), got {count}")
+        if count > MAX_POINTS_PER_SWEEP:
+            raise PlanError(f"{name} {count} exceeds the limit of {MAX_POINTS_PER_SWEEP} points per sweep")
+    if total > MAX_PLANNED_POINTS:
+        raise PlanError(f"{what}: {total} points exceed the limit of {MAX_PLANNED_POINTS} points per procedure")
+
+
+def check_frequencies(low: float, high: float, what: str) -> None:
+    """Raise :class:`PlanError` unless [``low``, ``high``] [Hz] is within the generator's sine range."""
+    if not FREQUENCY_RANGE[0] <= low <= high <= FREQUENCY_RANGE[1]:
+        raise PlanError(f"{what}: {low:.12g} Hz to {high:.12g} Hz is outside the generator's range "
+                        f"{FREQUENCY_RANGE[0]:g} Hz to {FREQUENCY_RANGE[1]:.12g} Hz")
 
 
 @dataclass(frozen=True)
@@ -130,9 +170,14 @@ class Station:
         self._voltage = None
 
     def drive(self, frequency: float, voltage: float) -> None:
-        """Sine at ``frequency`` [Hz] with ``voltage`` [V peak across the ceramics], output on."""
+        """Sine at ``frequency`` [Hz] with ``voltage`` [V peak across the ceramics], output on.
+
+        The generator's error queue is read after each setting: a refused setting raises
+        :class:`InstrumentError` (the run stops; the point is not logged).
+        """
         self.check_voltage(voltage)
         self.generator.frequency = frequency
+        self.generator.check_errors(f"setting {frequency:.12g} Hz; that point is not logged")
         if voltage != self._voltage:
             self.generator.amplitude_vpp = self.amplifier.generator_vpp(voltage)
             self.generator.check_errors(f"setting {voltage:g} V across the ceramics")
@@ -324,6 +369,11 @@ class ResonancePlan:
     fine_points: int = 41
     voltage: float = 2.0
 
+    def __post_init__(self):
+        check_sizes({"coarse_points": self.coarse_points, "fine_points": self.fine_points},
+                    self.coarse_points + self.fine_points, "resonance plan")
+        check_frequencies(self.start, self.stop, "resonance plan")
+
 
 def resonance_search(station: Station, path, plan: ResonancePlan = ResonancePlan(), metadata: dict | None = None,
                      restart: bool = False, fsync: bool = True) -> ProcedureResult:
@@ -400,6 +450,11 @@ class CampaignPlan:
     points_per_sweep: int = 51
     voltages: tuple = (2.5, 5.0, 7.5, 10.0, 12.5, 15.0)
 
+    def __post_init__(self):
+        check_sizes({"points_per_sweep": self.points_per_sweep}, self.points_per_sweep * len(self.voltages),
+                    "campaign plan")
+        check_frequencies(self.center_frequency - self.span / 2, self.center_frequency + self.span / 2, "campaign plan")
+
     def points(self) -> list[PlannedPoint]:
         half = self.span / 2
         frequencies = np.linspace(self.center_frequency - half, self.center_frequency + half, self.points_per_sweep)
@@ -435,6 +490,10 @@ class VoltageSweepPlan:
 
     frequency: float
     voltages: tuple = tuple(float(v) for v in range(1, 16))
+
+    def __post_init__(self):
+        check_sizes({}, len(self.voltages), "voltage-sweep plan")
+        check_frequencies(self.frequency, self.frequency, "voltage-sweep plan")
 
 
 def voltage_sweep(station: Station, path, plan: VoltageSweepPlan, metadata: dict | None = None, restart: bool = False,

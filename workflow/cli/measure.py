@@ -12,8 +12,7 @@ import sys
 from pathlib import Path
 
 from instruments.drivers.amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT, DEFAULT_GAIN
-from workflow.cli.options import add_bench_arguments, add_json_flag, bench_settings
-from workflow.cli.options import Stopped, StopSignals
+from workflow.cli.options import Stopped, StopSignals, add_bench_arguments, add_json_flag, bench_settings
 from workflow.errors import TactileError
 
 DEFAULT_DATA_DIR = Path("measurements")
@@ -38,7 +37,8 @@ def register(subparsers) -> None:
         description="Run a measurement procedure against serial ports (--generator/--vibrometer) or the in-process "
         "simulator (--simulate). Each point is appended to a CSV log (docs/log-format.md) at once, by default "
         f"{DEFAULT_DATA_DIR}/<procedure>.csv in the working directory (a folder git ignores); rerunning the "
-        "same command resumes an interrupted log.",
+        "same command resumes an interrupted log. One process writes a log at a time (a second one is refused, "
+        "naming the first's pid); a refused instrument setting stops the run before its point is logged.",
     )
     procedures = parser.add_subparsers(dest="procedure", metavar="PROCEDURE", parser_class=type(parser))
     procedures.required = True
@@ -56,7 +56,7 @@ def register(subparsers) -> None:
                        help=f"safety limit, peak volts across the ceramics (default {DEFAULT_CERAMIC_VOLTAGE_LIMIT:g})")
     ports.add_argument("--out", type=Path, help=f"log file (default: {DEFAULT_DATA_DIR}/<procedure>.csv in the working "
                        "directory, a folder git ignores; the path is printed at the end)")
-    ports.add_argument("--restart", action="store_true", help="overwrite an existing log instead of resuming it")
+    ports.add_argument("--restart", action="store_true", help="overwrite an existing log tactile wrote instead of resuming it (any other file is never overwritten nor appended to: the command refuses it)")
     add_bench_arguments(common)
     add_json_flag(common)
 
@@ -64,8 +64,8 @@ def register(subparsers) -> None:
                                       description="Find the resonance: a coarse sweep then a fine one around its peak.")
     resonance.add_argument("--start-hz", type=float, default=25e3, help="coarse sweep start [Hz] (default 25000)")
     resonance.add_argument("--stop-hz", type=float, default=40e3, help="coarse sweep stop [Hz] (default 40000)")
-    resonance.add_argument("--coarse-points", type=int, default=61, help="points of the coarse sweep (default 61)")
-    resonance.add_argument("--fine-points", type=int, default=41, help="points of the fine sweep (default 41)")
+    resonance.add_argument("--coarse-points", type=int, default=61, help="points of the coarse sweep, 3 to 10000 (default 61)")
+    resonance.add_argument("--fine-points", type=int, default=41, help="points of the fine sweep, 3 to 10000 (default 41)")
     resonance.add_argument("--voltage", type=float, default=2.0, help="drive, peak volts across the ceramics (default 2)")
 
     campaign = procedures.add_parser("campaign", parents=[common], help="Q(v) campaign: sweeps at several voltages",
@@ -74,7 +74,7 @@ def register(subparsers) -> None:
                                      "being resumed or from a resonance search logged to <out>-resonance.csv.")
     campaign.add_argument("--voltages", type=_voltages, default=(2.5, 5.0, 7.5, 10.0, 12.5, 15.0),
                           help="peak volts across the ceramics, comma-separated (default 2.5,5,7.5,10,12.5,15)")
-    campaign.add_argument("--points", type=int, default=51, help="frequency points per sweep (default 51)")
+    campaign.add_argument("--points", type=int, default=51, help="frequency points per sweep, 3 to 10000; at most 100000 points in all (default 51)")
     campaign.add_argument("--span-hz", type=float, default=1600.0, help="sweep width [Hz] (default 1600)")
     campaign.add_argument("--center-hz", type=float, help="sweep centre [Hz] (default: see above)")
 
@@ -83,7 +83,7 @@ def register(subparsers) -> None:
                                   "--frequency-hz the frequency comes from the log being resumed or from a resonance "
                                   "search logged to <out>-resonance.csv.")
     sweep.add_argument("--voltages", type=_voltages, default=tuple(float(v) for v in range(1, 16)),
-                       help="peak volts across the ceramics, comma-separated (default 1,2,...,15)")
+                       help="peak volts across the ceramics, comma-separated, at most 100000 (default 1,2,...,15)")
     sweep.add_argument("--frequency-hz", type=float, help="drive frequency [Hz] (default: see above)")
     for sub in (resonance, campaign, sweep):
         sub.set_defaults(handler=run)
@@ -135,23 +135,30 @@ def _centre(args, station, metadata, out: Path, key: str) -> float:
 
 
 def _check_plan_flags(args) -> None:
+    from instruments.procedures.sweeps import check_sizes
+
     positive = {flag: getattr(args, flag.lstrip("-").replace("-", "_"), None)
                 for flag in ("--start-hz", "--stop-hz", "--voltage", "--span-hz", "--center-hz", "--frequency-hz")}
     for flag, value in positive.items():
         if value is not None and not value > 0:
             raise TactileError(f"{flag} must be positive, got {value:g}")
-    for flag in ("--coarse-points", "--fine-points", "--points"):
-        value = getattr(args, flag.lstrip("-").replace("-", "_"), None)
-        if value is not None and value < 3:
-            raise TactileError(f"{flag} must be at least 3 (a peak needs neighbours), got {value}")
+    if args.procedure == "resonance":
+        sweeps = {"--coarse-points": args.coarse_points, "--fine-points": args.fine_points}
+        check_sizes(sweeps, sum(sweeps.values()), "--coarse-points + --fine-points")
+    elif args.procedure == "campaign":
+        check_sizes({"--points": args.points}, args.points * len(args.voltages), "--points x --voltages")
+    else:
+        check_sizes({}, len(args.voltages), "--voltages")
     if args.procedure == "resonance" and not args.start_hz < args.stop_hz:
         raise TactileError(f"--start-hz {args.start_hz:g} must be below --stop-hz {args.stop_hz:g}")
 
 
 def run(args):
+    from instruments.procedures.logwriter import exclusive
+
     _check_plan_flags(args)
     out = args.out or DEFAULT_DATA_DIR / f"{args.procedure}.csv"
-    with StopSignals() as signals:
+    with exclusive(out), StopSignals() as signals:
         station, metadata = _open_station(args)
         try:
             result = _measure(args, station, metadata, out)

@@ -109,7 +109,7 @@ def load_config(path=None) -> dict:
 
 
 def merge(defaults: dict, user: dict, source: str = "configuration") -> dict:
-    """``defaults`` updated by ``user``, checking sections, keys and types."""
+    """``defaults`` updated by ``user``, checking sections, keys, types and the campaign's size."""
     merged = copy.deepcopy(defaults)
     for section, values in user.items():
         if section not in defaults:
@@ -122,7 +122,20 @@ def merge(defaults: dict, user: dict, source: str = "configuration") -> dict:
                     f"{source}: unknown key '{section}.{key}'; known keys of [{section}]: {', '.join(defaults[section])}"
                 )
             merged[section][key] = _checked(value, defaults[section][key], f"{section}.{key}", source)
+    _check_campaign_size(merged["campaign"], source)
     return merged
+
+
+def _check_campaign_size(campaign: dict, source: str) -> None:
+    """Refuse a [campaign] too small or too large to run (the procedures' limits), naming the key."""
+    from instruments.procedures.sweeps import PlanError, check_sizes
+
+    points = campaign["points_per_sweep"]
+    try:
+        check_sizes({"campaign.points_per_sweep": points}, points * len(campaign["voltages_v"]),
+                    "campaign.points_per_sweep x campaign.voltages_v")
+    except PlanError as error:
+        raise InputFileError(f"{source}: {error}") from None
 
 
 def _checked(value, default, name: str, source: str):
