@@ -2,6 +2,7 @@
 generator driver's limit holds whatever state the instrument was left in."""
 
 import json
+import math
 import random
 import signal
 import subprocess
@@ -138,14 +139,15 @@ class DevicePort:
 
 
 def generator_left_in(**state) -> tuple[FunctionGenerator, GeneratorDevice]:
+    """A driver on a simulated generator left in ``state`` (High Z load unless given)."""
     device = GeneratorDevice(DEVICE_LIMIT)
-    device.state = GeneratorState(**state)
+    device.state = GeneratorState(**{"load": math.inf, **state})
     return FunctionGenerator(DevicePort(device), max_peak_voltage=DRIVER_LIMIT), device
 
 
 def test_offset_check_reads_the_amplitude_in_vpp_when_the_instrument_is_left_in_vrms():
     device = GeneratorDevice(DEVICE_LIMIT)
-    for line in ("VOLT:UNIT VRMS", "VOLT 2"):
+    for line in ("OUTP:LOAD INF", "VOLT:UNIT VRMS", "VOLT 2"):
         device.handle_line(line)
     generator = FunctionGenerator(DevicePort(device), max_peak_voltage=3.0)
     with pytest.raises(SafetyLimitError, match="output peak 3.328"):
@@ -176,10 +178,16 @@ def test_no_sequence_of_driver_commands_exceeds_the_limit(unit, sign, function):
     generator, device = generator_left_in(function=function, unit=unit, amplitude_vpp=2.0, offset=sign * 0.5)
     rng = random.Random(f"{unit}{sign}{function}")
     accepted = refused = 0
+    loads_seen = set()
     for _ in range(150):
-        device.state = replace(device.state, unit=rng.choice(["VPP", "VRMS"]))  # front panel, or another program
+        # the front panel, or another program, changes the unit and the load setting (within the limit)
+        device.state = replace(device.state, unit=rng.choice(["VPP", "VRMS"]))
+        other_load = replace(device.state, load=rng.choice([math.inf, 50.0, 1000.0]))
+        if other_load.peak_voltage <= DRIVER_LIMIT:
+            device.state = other_load
         true_vpp = device.state.amplitude_vpp
         assert generator.amplitude_vpp == pytest.approx(true_vpp)
+        loads_seen.add(device.state.load)
         action = rng.choice(["amplitude", "offset", "function", "raw"])
         try:
             if action == "amplitude":
@@ -196,6 +204,7 @@ def test_no_sequence_of_driver_commands_exceeds_the_limit(unit, sign, function):
         assert device.state.peak_voltage <= DRIVER_LIMIT + 1e-9
         assert device.errors == []  # the simulator's own limit was never needed
     assert accepted > 20 and refused > 20  # both sides of the limit were exercised
+    assert loads_seen >= {math.inf, 50.0}  # the limit was decided under more than one load setting
     assert generator.amplitude_unit in ("VPP", "VRMS")
 
 

@@ -54,6 +54,7 @@ def test_generator_settings_and_queries_replay():
         ("FREQ 32126.5", None),
         ("FREQ?", b"+3.21265000000000E+04\n"),
         ("VOLT:OFFS?", b"+0.00000000000000E+00\n"),
+        ("OUTP:LOAD?", b"+9.90000000000000E+37\n"),
         ("VOLT:UNIT VPP;:VOLT 2.5", None),
         ("OUTP 1", None),
         ("OUTP?", b"1\n"),
@@ -78,15 +79,34 @@ def test_generator_error_queue_is_reported_as_one_error():
 
 def test_generator_driver_refuses_above_its_limit_without_sending_the_amplitude():
     # only the offset query goes out; the amplitude command never does
-    port = ReplayPort([("VOLT:OFFS?", b"+0.00000000000000E+00\n")])
+    port = ReplayPort([("VOLT:OFFS?", b"+0.00000000000000E+00\n"), ("OUTP:LOAD?", b"+9.90000000000000E+37\n"),])
     generator = FunctionGenerator(port, max_peak_voltage=3.0)
     with pytest.raises(SafetyLimitError, match="exceeds the limit 3 V"):
         generator.amplitude_vpp = 6.2
     assert port.done()
 
 
+def test_generator_driver_counts_the_load_setting():
+    """At the 50 ohm load setting the amplifier's high-impedance input sees twice the stated level:
+    4 Vpp (2 V peak, 4 V at the terminals) is refused under a 3 V limit, 2.5 Vpp is accepted."""
+    port = ReplayPort([
+        ("VOLT:OFFS?", b"+0.00000000000000E+00\n"),
+        ("OUTP:LOAD?", b"+5.00000000000000E+01\n"),
+        ("VOLT:OFFS?", b"+0.00000000000000E+00\n"),
+        ("OUTP:LOAD?", b"+5.00000000000000E+01\n"),
+        ("VOLT:UNIT VPP;:VOLT 2.5", None),
+    ])
+    generator = FunctionGenerator(port, max_peak_voltage=3.0)
+    with pytest.raises(SafetyLimitError, match="x2 into the amplifier"):
+        generator.amplitude_vpp = 4.0
+    generator.amplitude_vpp = 2.5
+    assert port.done()
+    with pytest.raises(SafetyLimitError, match="refusing"):
+        FunctionGenerator(ReplayPort([]), 3.0).write("OUTP:LOAD 50")  # the load goes through load_ohm
+
+
 def test_generator_driver_refuses_an_offset_that_pushes_the_peak_over_the_limit():
-    port = ReplayPort([("VOLT:UNIT VPP;:VOLT?", b"+5.00000000000000E+00\n")])
+    port = ReplayPort([("VOLT:UNIT VPP;:VOLT?", b"+5.00000000000000E+00\n"), ("OUTP:LOAD?", b"+9.90000000000000E+37\n"),])
     with pytest.raises(SafetyLimitError):
         FunctionGenerator(port, max_peak_voltage=3.0).offset = 0.6
     assert port.done()

@@ -57,6 +57,7 @@ def test_generator_program_lines_with_semicolons_and_unknown_headers():
 
 def test_simulated_generator_refuses_beyond_its_limit_and_keeps_the_previous_output():
     generator = GeneratorDevice(peak_voltage_limit=1.5)  # 30 V across the ceramics through a gain of 20
+    generator.handle_line("OUTP:LOAD INF")  # High Z: the stated levels are the terminal levels
     generator.handle_line("VOLT 2.0")
     generator.handle_line("VOLT 3.2")
     assert generator.state.amplitude_vpp == 2.0
@@ -66,6 +67,23 @@ def test_simulated_generator_refuses_beyond_its_limit_and_keeps_the_previous_out
     generator.handle_line("VOLT:UNIT VRMS;:VOLT 1.1")  # 3.1 Vpp
     assert generator.state.amplitude_vpp == 2.0
     assert generator.handle_line("SYST:ERR?").startswith("-222")
+
+
+def test_the_simulated_load_setting_doubles_the_terminal_voltage_at_50_ohm():
+    """As a 33500: levels are stated into the load setting (50 ohm after *RST); an amplifier's
+    high-impedance input sees (R + 50) / R times them, and the limit holds on what it sees."""
+    generator = GeneratorDevice(peak_voltage_limit=1.5)
+    assert float(generator.handle_line("OUTP:LOAD?")) == 50.0
+    generator.handle_line("VOLT 1.4")  # 2.8 Vpp at the terminals: peak 1.4 V
+    assert generator.state.terminal_amplitude_vpp == pytest.approx(2.8)
+    generator.handle_line("VOLT 2.0")  # peak 2 V at the terminals: refused
+    assert generator.state.amplitude_vpp == 1.4 and generator.handle_line("SYST:ERR?").startswith("-222")
+    generator.handle_line("OUTP:LOAD 25")  # x3: refused, the output keeps its load
+    assert generator.state.load == 50.0 and generator.handle_line("SYST:ERR?").startswith("-222")
+    generator.handle_line("OUTP:LOAD INF")
+    assert float(generator.handle_line("OUTP:LOAD?")) > 1e37 and generator.state.terminal_amplitude_vpp == 1.4
+    generator.handle_line("*RST")
+    assert generator.state.load == 50.0
 
 
 def test_default_law_gives_q54_at_the_working_point_and_more_at_low_velocity():
@@ -97,7 +115,7 @@ def test_resonance_curve_peak_and_half_power_bandwidth_at_low_drive():
 def test_simulated_instruments_measure_the_model_with_drift_and_noise():
     bench, generator, vibrometer = open_bench(relative_noise=0.0, floor_fraction=0.0, phase_noise=0.0)
     f_r = bench.settings.response.resonance_frequency
-    generator.write(f"FREQ {f_r};:VOLT 3;:OUTP 1\nSet,VeloDec,1,Range,50mm/s/V\n".encode())
+    generator.write(f"OUTP:LOAD INF;:FREQ {f_r};:VOLT 3;:OUTP 1\nSet,VeloDec,1,Range,50mm/s/V\n".encode())
     vibrometer.write(b"Set,VeloDec,1,Range,50mm/s/V\n")
     assert vibrometer.readline() == b"50mm/s/V\n"
     vibrometer.write(b"Get,LockIn,0,Velocity\n")
@@ -110,7 +128,7 @@ def test_simulated_instruments_measure_the_model_with_drift_and_noise():
 
 def test_over_range_is_reported_not_clipped_silently():
     bench, generator, vibrometer = open_bench()
-    generator.write(f"FREQ {bench.settings.response.resonance_frequency};:VOLT 3;:OUTP 1\n".encode())
+    generator.write(f"OUTP:LOAD INF;:FREQ {bench.settings.response.resonance_frequency};:VOLT 3;:OUTP 1\n".encode())
     vibrometer.write(b"Set,VeloDec,1,Range,1mm/s/V\nGet,LockIn,0,Velocity\n")
     vibrometer.readline()
     amplitude, _, status = vibrometer.readline().decode().strip().split(",")
@@ -184,7 +202,7 @@ def test_pty_server_end_to_end():
         assert b"33521A" in generator.readline()
         generator.write(b"FREQ 32126\nVOLT 40\nSYST:ERR?\n")  # 200 V: refused
         assert generator.readline().startswith(b"-222")
-        generator.write(b"VOLT 3\nOUTP ON\n")
+        generator.write(b"OUTP:LOAD INF\nVOLT 3\nOUTP ON\n")
         vibrometer.write(b"Set,VeloDec,1,Range,50mm/s/V\nGet,LockIn,0,Velocity\n")
         assert vibrometer.readline() == b"50mm/s/V\n"
         amplitude, _, status = vibrometer.readline().decode().strip().split(",")

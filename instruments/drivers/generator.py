@@ -7,9 +7,13 @@ instrument's real state, read just before: amplitudes are always volts peak-to-p
 and every amplitude command *and query* sets ``VOLT:UNIT VPP`` on the same line, so an
 instrument left in ``VRMS`` (or ``DBM``) is neither misread nor mis-set.  The peak
 amplitude/2 + |offset| bounds the output of every function (for ``DC`` the level is the
-offset alone; counting the amplitude too errs on the safe side).  Levels are set only
-through ``amplitude_vpp`` and ``offset``: :meth:`FunctionGenerator.write` (under ``set``
-and ``query``) refuses any other command that sets a level.
+offset alone; counting the amplitude too errs on the safe side).  The instrument states
+levels into its load setting (``OUTP:LOAD``, 50 ohm after ``*RST``); into the amplifier's
+high-impedance input the terminals carry (R_load + 50 ohm) / R_load times that, twice at
+50 ohm, so every limit decision reads the load setting and counts that factor.  Levels and
+the load are set only through ``amplitude_vpp``, ``offset`` and ``load_ohm``:
+:meth:`FunctionGenerator.write` (under ``set`` and ``query``) refuses any other command that
+sets a level or the load.
 """
 
 import math
@@ -23,8 +27,13 @@ LOWEST_AMPLITUDE_VPP = 1e-3
 """The 33500 series' smallest amplitude [V peak-to-peak]: the safe state left at the end of a run."""
 AMPLITUDE_QUERY = "VOLT:UNIT VPP;:VOLT?"
 """The amplitude in V peak-to-peak whatever unit the instrument was left in."""
-_LEVEL_NODE = re.compile(r"VOLT|OFFS|AMPL|APPL|HIGH|LOW|LEV", re.IGNORECASE)
-"""Header nodes that set an output level when given an argument (``VOLT:UNIT`` only renames it)."""
+_LEVEL_NODE = re.compile(r"VOLT|OFFS|AMPL|APPL|HIGH|LOW|LEV|LOAD", re.IGNORECASE)
+"""Header nodes that set an output level, or the load the level is stated into, when given an
+argument (``VOLT:UNIT`` only renames it)."""
+SOURCE_IMPEDANCE_OHM = 50.0
+"""The 33500 series' output impedance [ohm]."""
+HIGH_Z_THRESHOLD_OHM = 1e37
+"""``OUTP:LOAD?`` answers 9.9E+37 for the High Z setting [ohm]."""
 
 
 def _scpi_bool(reply: str) -> bool:
@@ -49,6 +58,11 @@ def _sets_level(line: str) -> bool:
         if argument.strip() and _LEVEL_NODE.search(header) and not header.upper().endswith(":UNIT"):
             return True
     return False
+
+
+def _open_circuit_gain(load_ohm: float) -> float:
+    """(R_load + 50 ohm) / R_load, 1 for High Z [-]."""
+    return 1.0 if math.isinf(load_ohm) else (load_ohm + SOURCE_IMPEDANCE_OHM) / load_ohm
 
 
 def check_voltage_limit(limit: float) -> float:
@@ -98,6 +112,22 @@ class FunctionGenerator(LineInstrument):
         self._send(f"VOLT:UNIT VPP;:VOLT {_number(vpp)}")
 
     @property
+    def load_ohm(self) -> float:
+        """Load setting [ohm] (``math.inf`` for High Z): the instrument states levels into it."""
+        value = parse_with(float, "OUTP:LOAD?", self.query("OUTP:LOAD?"), self._where())
+        return math.inf if value >= HIGH_Z_THRESHOLD_OHM else value
+
+    @load_ohm.setter
+    def load_ohm(self, ohm: float) -> None:
+        self.check_peak_voltage(self.amplitude_vpp, self.offset, _open_circuit_gain(ohm))
+        self._send("OUTP:LOAD " + ("INF" if math.isinf(ohm) else _number(ohm)))
+
+    @property
+    def open_circuit_gain(self) -> float:
+        """Terminal voltage into a high-impedance input over the stated level [-], from the load setting."""
+        return _open_circuit_gain(self.load_ohm)
+
+    @property
     def offset(self) -> float:
         """DC offset [V] (the level of the ``DC`` function); refused above the peak-voltage limit."""
         return parse_with(float, "VOLT:OFFS?", self.query("VOLT:OFFS?"), self._where())
@@ -133,12 +163,16 @@ class FunctionGenerator(LineInstrument):
         self._send(f"VOLT:UNIT VPP;:VOLT {_number(LOWEST_AMPLITUDE_VPP)}")
         self._send("VOLT:OFFS 0")
 
-    def check_peak_voltage(self, vpp: float, offset: float) -> None:
-        """Raise :class:`SafetyLimitError` if ``vpp``/2 + |``offset``| exceeds the limit (nothing is sent)."""
-        peak = abs(vpp) / 2 + abs(offset)
+    def check_peak_voltage(self, vpp: float, offset: float, gain: float | None = None) -> None:
+        """Raise :class:`SafetyLimitError` if the terminal peak (``vpp``/2 + |``offset``|) x ``gain``
+        exceeds the limit (nothing is sent); ``gain`` defaults to the instrument's
+        :attr:`open_circuit_gain`, read now."""
+        gain = self.open_circuit_gain if gain is None else gain
+        peak = (abs(vpp) / 2 + abs(offset)) * gain
         if not peak <= self.max_peak_voltage * (1 + 1e-12):
+            load = "" if gain == 1 else f" (x{gain:g} into the amplifier: the load setting is not High Z)"
             raise SafetyLimitError(
-                f"{self._where()}: refusing {vpp:g} Vpp with offset {offset:g} V: output peak {peak:g} V "
+                f"{self._where()}: refusing {vpp:g} Vpp with offset {offset:g} V: output peak {peak:g} V{load} "
                 f"exceeds the limit {self.max_peak_voltage:g} V"
             )
 

@@ -11,6 +11,7 @@ Voltages are peak volts across the ceramics; the station converts them through t
 amplifier gain and refuses anything above its safety limit before sending it.
 """
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -159,6 +160,7 @@ class Station:
         def configure():
             self.generator.output = False
             self.generator.clear()
+            self.generator.load_ohm = math.inf  # High Z: the stated amplitude is what the amplifier gets
             self.generator.function = "SIN"
             self.generator.offset = 0.0
             self.generator.check_errors("configuring the output")

@@ -123,7 +123,7 @@ class Bench:
         state = self.generator.state
         if not state.output or state.function != "SIN":
             return 0.0
-        return float(self.amplifier.ceramic_voltage(state.amplitude_vpp))
+        return float(self.amplifier.ceramic_voltage(state.terminal_amplitude_vpp))
 
     def _surface_velocity(self):
         self.time += self.settings.measurement_time

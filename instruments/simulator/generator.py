@@ -23,6 +23,14 @@ AMPLITUDE_RANGE = (1e-3, 10.0)
 FUNCTIONS = ("SIN", "SQU", "TRI", "RAMP", "PULS", "PRBS", "NOIS", "ARB", "DC")
 FUNCTION_LONG_FORMS = {"SINUSOID": "SIN", "SQUARE": "SQU", "TRIANGLE": "TRI", "PULSE": "PULS", "NOISE": "NOIS"}
 NO_ERROR = '+0,"No error"'
+SOURCE_IMPEDANCE = 50.0
+"""Output impedance of the generator [ohm]."""
+LOAD_RANGE = (1.0, 10e3)
+"""Settable load resistances [ohm]; ``INF`` (High Z) is also accepted."""
+DEFAULT_LOAD = 50.0
+"""Load setting after power-on and ``*RST`` [ohm] (as the 33500 series)."""
+HIGH_Z_REPLY = 9.9e37
+"""What ``OUTP:LOAD?`` answers for the High Z (infinite) setting."""
 VRMS_PER_VPP = 1 / (2 * np.sqrt(2))
 """Sine: V_rms / V_pp [-]."""
 
@@ -43,6 +51,8 @@ class GeneratorState:
     offset : float
         [V]
     output : bool
+    load : float
+        Load setting [ohm] (``inf``: High Z): amplitude and offset are stated into this load.
     """
 
     function: str = "SIN"
@@ -51,11 +61,24 @@ class GeneratorState:
     unit: str = "VPP"
     offset: float = 0.0
     output: bool = False
+    load: float = DEFAULT_LOAD
+
+    @property
+    def open_circuit_gain(self) -> float:
+        """Terminal voltage into a high-impedance input (an amplifier) over the stated one [-]:
+        (R_load + 50 ohm) / R_load, 1 for High Z, 2 for the default 50 ohm setting."""
+        return 1.0 if np.isinf(self.load) else (self.load + SOURCE_IMPEDANCE) / self.load
 
     @property
     def peak_voltage(self) -> float:
-        """Largest |output voltage| = amplitude/2 + |offset| [V]."""
-        return self.amplitude_vpp / 2 + abs(self.offset)
+        """Largest |output voltage| at the terminals into a high-impedance input,
+        (amplitude/2 + |offset|) times :attr:`open_circuit_gain` [V]."""
+        return (self.amplitude_vpp / 2 + abs(self.offset)) * self.open_circuit_gain
+
+    @property
+    def terminal_amplitude_vpp(self) -> float:
+        """Amplitude at the terminals into a high-impedance input [V peak-to-peak]."""
+        return self.amplitude_vpp * self.open_circuit_gain
 
 
 class CommandError(Exception):
@@ -112,6 +135,7 @@ class GeneratorDevice:
                 ("[SOURce#:]VOLTage:UNIT", self._unit),
                 ("[SOURce#:]VOLTage[:LEVel][:IMMediate]:OFFSet", self._offset),
                 ("[SOURce#:]VOLTage[:LEVel][:IMMediate][:AMPLitude]", self._amplitude),
+                ("OUTPut#:LOAD", self._load),
                 ("OUTPut#[:STATe]", self._output),
             )
         ]
@@ -224,3 +248,14 @@ class GeneratorDevice:
         if argument.upper() not in states:
             raise CommandError(-224, "Illegal parameter value")
         self._apply(output=states[argument.upper()])
+
+    def _load(self, argument):
+        if argument is None:
+            return _format(HIGH_Z_REPLY if np.isinf(self.state.load) else self.state.load)
+        word = argument.strip().upper()
+        named = {"INF": np.inf, "INFINITY": np.inf, "MIN": LOAD_RANGE[0], "MINIMUM": LOAD_RANGE[0],
+                 "MAX": LOAD_RANGE[1], "MAXIMUM": LOAD_RANGE[1], "DEF": DEFAULT_LOAD, "DEFAULT": DEFAULT_LOAD}
+        value = named[word] if word in named else _number(argument)
+        if not (np.isinf(value) or LOAD_RANGE[0] <= value <= LOAD_RANGE[1]):
+            raise CommandError(-222, "Data out of range")
+        self._apply(load=value)
