@@ -363,20 +363,35 @@ def damped_maps(
         drawn = posterior.draws(draws, seed)
         on_axis = LAWS[posterior.law_name](**{k: np.reshape(v, (-1, 1, 1)) for k, v in law_parameters(drawn).items()})
         interval = np.quantile(required_voltage(plate, on_axis, target), QUANTILES, axis=0)
-    parameters = ", ".join(f"{k} = {v:.4g}" for k, v in law_parameters(median).items())
-    return DampedMaps(
+    return _damped_maps(
+        problem,
+        optimum,
+        _law_label(posterior.law_name, median),
         wavelength=wavelength,
         resonator_thickness=thickness,
         deflection=damped_deflection(plate, problem.voltage, median),
         frequency=np.broadcast_to(analytical.resonance_frequency(plate), (grid, grid)),
         required_voltage=required_voltage(plate, median, target),
         required_voltage_interval=interval,
+    )
+
+
+def _damped_maps(problem: DesignProblem, optimum, law_label: str, **grids) -> "DampedMaps":
+    """:class:`DampedMaps` from its grids and the problem's limits."""
+    return DampedMaps(
+        **grids,
         ceramic_thickness=problem.ceramic_thickness,
         min_frequency=problem.min_frequency,
         min_resonator_thickness=problem.min_resonator_thickness,
         optimum=optimum,
-        law_label=f"{posterior.law_name} Q(v), median: {parameters}",
+        law_label=law_label,
     )
+
+
+def _law_label(law_name: str, law) -> str:
+    """"quadratic Q(v), median: q0 = ..., alpha = ..." for a figure's title."""
+    parameters = ", ".join(f"{k} = {v:.4g}" for k, v in law_parameters(law).items())
+    return f"{law_name} Q(v), median: {parameters}"
 
 
 def design_summary(design: DampedDesign) -> dict:
@@ -463,8 +478,10 @@ def fem_damped_maps(posterior: DampingPosterior, problem: DesignProblem, fem_mod
     def grid(values):
         return np.reshape(np.array(values, dtype=float), shape + np.shape(values)[1:])
 
-    parameters = ", ".join(f"{k} = {v:.4g}" for k, v in law_parameters(law).items())
-    return DampedMaps(
+    return _damped_maps(
+        problem,
+        optimum,
+        "FEM, " + _law_label(posterior.law_name, law),
         wavelength=wavelength,
         resonator_thickness=thickness,
         deflection=grid([fem_damped_deflection(r, law) for r in results]),
@@ -473,11 +490,6 @@ def fem_damped_maps(posterior: DampingPosterior, problem: DesignProblem, fem_mod
         required_voltage_interval=np.moveaxis(
             grid([np.quantile(fem_required_voltage(r, drawn), QUANTILES) for r in results]), -1, 0
         ),
-        ceramic_thickness=problem.ceramic_thickness,
-        min_frequency=problem.min_frequency,
-        min_resonator_thickness=problem.min_resonator_thickness,
-        optimum=optimum,
-        law_label=f"FEM, {posterior.law_name} Q(v), median: {parameters}",
     )
 
 
