@@ -5,6 +5,8 @@ samples in natural units (``q0`` [-], ``alpha`` [s^2/m^2 or s/m]), and the full 
 coordinates for reference.
 """
 
+import zipfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict
@@ -88,9 +90,10 @@ def load_posterior(path) -> DampingPosterior:
             samples = np.asarray(content["parameter_samples"], dtype=float)
     except FileNotFoundError:
         raise InputFileError(f"{path}: no such posterior file (write one with 'tactile fit-damping ... --out DIR')") from None
-    except (OSError, ValueError, KeyError):
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error):
         raise InputFileError(
-            f"{path}: not a posterior written by 'tactile fit-damping' (expected its posterior.npz or its --out folder)"
+            f"{path}: empty, truncated or not a posterior written by 'tactile fit-damping' "
+            "(expected its posterior.npz or its --out folder)"
         ) from None
     if law_name not in LAWS:
         raise InputFileError(f"{path}: unknown Q(v) law {law_name!r}; expected one of {', '.join(LAWS)}")
