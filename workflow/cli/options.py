@@ -126,7 +126,7 @@ def add_drive_options(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--voltage",
-        type=bounded(float, *LIMITS["design.voltage_v"]),
+        type=bounded(float, *LIMITS["design.voltage_v"], "V"),
         default=materials.DESIGN_VOLTAGE,
         help=f"drive amplitude across the ceramics [V peak], {limit_text('design.voltage_v', 'V')} "
         f"(default: {materials.DESIGN_VOLTAGE:g})",
