@@ -78,6 +78,11 @@ CASES = {
     "measure seed -1": (["measure", "campaign", "--simulate", "--seed", "-1", "--out", "c.csv"], ["--seed", "4294967295"]),
     "simulate seed 2^32": (["simulate", "--seed", str(2**32)], ["--seed", "0 to 4294967295"]),
     "fit seed -1": (["fit-damping", "log.csv", "--out", "fit", "--seed", "-1"], ["--seed", "0 to 4294967295"]),
+    "fit max steps 1e20": (["fit-damping", "log.csv", "--out", "fit", "--max-steps", "1" + "0" * 20], ["--max-steps", "1000000"]),
+    "measure timeout -1": (["measure", "resonance", "--simulate", "--timeout", "-1", "--out", "r.csv"], ["--timeout", "3600 s"]),
+    "measure baudrate 0": (["measure", "resonance", "--simulate", "--baudrate", "0", "--out", "r.csv"], ["--baudrate", "50 to"]),
+    "measure retries -1": (["measure", "resonance", "--simulate", "--retries", "-1", "--out", "r.csv"], ["--retries", "0 to 100"]),
+    "bench limit inf": (["measure", "resonance", "--simulate", "--bench-limit", "inf", "--out", "r.csv"], ["--bench-limit", "finite"]),
     # output locations
     "maps out file": (["maps", "--hp-mm", "1", "--grid", "2", "--out", "file.txt"], ["--out file.txt", "not a folder"]),
     "maps out under file": (["maps", "--hp-mm", "1", "--grid", "2", "--out", "file.txt/sub"], ["--out file.txt/sub"]),
@@ -112,7 +117,7 @@ def test_one_error_line_exit_2_and_inputs_unchanged(inputs, capsys, argv, expect
     for text in expected:
         assert text in err
     assert {path: path.read_bytes() for path in inputs.iterdir() if path.is_file()} == before
-    assert not (inputs / "fit").exists() and not (inputs / "maps").exists()
+    assert not any((inputs / name).exists() for name in ("fit", "maps", "r.csv", "c.csv"))
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders")

@@ -239,8 +239,8 @@ def bench_settings(args):
     except ValueError as error:
         raise TactileError(f"bad fault flag: {error}") from None
     limit = DEFAULT_CERAMIC_VOLTAGE_LIMIT if args.bench_limit is None else args.bench_limit
-    if not limit > 0:
-        raise TactileError(f"--bench-limit must be positive, got {limit:g}")
+    if not (math.isfinite(limit) and limit > 0):
+        raise TactileError(f"--bench-limit must be a finite number of volts > 0, got {limit:g}")
     gain = getattr(args, "amplifier_gain", DEFAULT_GAIN)
     return default_bench_settings(seed=args.seed, faults=faults, ceramic_voltage_limit=limit, amplifier_gain=gain)
 

@@ -28,9 +28,11 @@ LIMITS = {
     "maps.fem_grid": (2, 400),
     "campaign.seed": (0, 2**32 - 1),
     "damping.seed": (0, 2**32 - 1),
+    "damping.max_steps": (1, 1_000_000),
 }
 """Accepted range of numeric keys, shared with the command-line options of the same quantity: drive
-amplitude [V peak across the ceramics], quality factor [-], map points per axis, random seeds.
+amplitude [V peak across the ceramics], quality factor [-], map points per axis, random seeds, chain length
+(a million steps is about an hour per law).
 Every other number must be finite."""
 
 
