@@ -8,23 +8,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_fit_damping import run_cli
 
-from workflow.cli import main
-from workflow.damping.posterior import DampingPosterior, save_posterior
+from workflow.damping.posterior import DampingPosterior, load_posterior, save_posterior
 from workflow.models import materials
 from workflow.models.plate import ORIGINAL_PLATE
 from workflow.optimise.problem import DesignProblem, optimise_analytical
 
 SAMPLE = Path(__file__).resolve().parents[1] / "data" / "sample_campaign.csv"
-
-
-def run_cli(capsys, *argv):
-    try:
-        status = main([str(a) for a in argv])
-    except SystemExit as exit_:
-        status = exit_.code
-    out, err = capsys.readouterr()
-    return status, out, err
 
 
 def _with_velocity(text: str, value: str, rows=None) -> str:
@@ -54,9 +45,13 @@ def inputs(tmp_path, monkeypatch):
     (tmp_path / "file.txt").write_text("not a folder\n", encoding="utf-8")
     (tmp_path / "folder").mkdir()
     (tmp_path / "empty.npz").write_bytes(b"")
-    samples = np.column_stack([np.full(8, 150.0), np.full(8, 0.25)])
-    posterior = DampingPosterior("quadratic", {"q0": samples[:, 0], "alpha": samples[:, 1]})
-    whole = save_posterior(posterior, tmp_path / "whole.npz", samples, ["q0", "alpha"]).read_bytes()
+    posteriors = {"whole.npz": (150.0, 0.25), "negative_q0.npz": (-5.0, 0.25), "negative_alpha.npz": (150.0, -1e3),
+                  "huge_alpha.npz": (150.0, 1e300)}
+    for name, (q0, alpha) in posteriors.items():
+        samples = np.column_stack([np.full(8, q0), np.full(8, alpha)])
+        posterior = DampingPosterior("quadratic", {"q0": samples[:, 0], "alpha": samples[:, 1]})
+        save_posterior(posterior, tmp_path / name, samples, ["q0", "alpha"])
+    whole = (tmp_path / "whole.npz").read_bytes()
     (tmp_path / "truncated.npz").write_bytes(whole[: len(whole) // 2])
     (tmp_path / "hot.toml").write_text("[design]\nvoltage_v = 1e4\n", encoding="utf-8")
     (tmp_path / "inf.toml").write_text("[fem]\nwidth_max_mm = inf\n", encoding="utf-8")
@@ -96,6 +91,10 @@ CASES = {
     "empty posterior": (["optimize", "--hp-mm", "1", "--damping", "empty.npz"], ["empty.npz", "truncated"]),
     "truncated posterior": (["evaluate", "--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "1", "--damping", "truncated.npz"],
                             ["truncated.npz"]),
+    "posterior q0 < 1": (["optimize", "--hp-mm", "1", "--damping", "negative_q0.npz"], ["negative_q0.npz", "q0", "1 to 100000"]),
+    "posterior alpha < 0": (["optimize", "--hp-mm", "1", "--damping", "negative_alpha.npz"], ["negative_alpha.npz", "alpha", "0 to 1e+12"]),
+    "posterior alpha 1e300": (["evaluate", "--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "1", "--damping", "huge_alpha.npz"],
+                              ["huge_alpha.npz", "alpha"]),
     "config is a folder": (["run", "--config", "folder", "--print-config"], ["folder: is a folder"]),
     "config voltage 1e4": (["run", "--config", "hot.toml", "--print-config"], ["hot.toml", "design.voltage_v", "1000"]),
     "config inf": (["run", "--config", "inf.toml", "--print-config"], ["inf.toml", "fem.width_max_mm", "finite"]),
@@ -118,6 +117,11 @@ def test_one_error_line_exit_2_and_inputs_unchanged(inputs, capsys, argv, expect
         assert text in err
     assert {path: path.read_bytes() for path in inputs.iterdir() if path.is_file()} == before
     assert not any((inputs / name).exists() for name in ("fit", "maps", "r.csv", "c.csv"))
+
+
+def test_the_undamaged_posterior_loads(inputs):
+    posterior = load_posterior(inputs / "whole.npz")
+    assert posterior.law_name == "quadratic" and posterior.median_law().q0 == 150.0
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders")
