@@ -61,55 +61,64 @@ def inputs(tmp_path, monkeypatch):
 
 CASES = {
     # extreme numbers
-    "voltage 1e300": (["optimize", "--hp-mm", "1", "--voltage", "1e300", "--json"], ["--voltage", "1000 V"]),
-    "q 1e300": (["optimize", "--hp-mm", "1", "--q", "1e300", "--json"], ["--q", "100000"]),
-    "q below 1": (["evaluate", "--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "1", "--q", "0.5"], ["--q", "1 to"]),
-    "voltage nan": (["evaluate", "--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "1", "--voltage", "nan"], ["--voltage"]),
-    "maps voltage 1e4": (["maps", "--hp-mm", "1", "--voltage", "1e4", "--grid", "5", "--out", "maps"], ["--voltage", "1000"]),
-    "fem space mapping 1e4": (["optimize", "--model", "fem", "--method", "space-mapping", "--hp-mm", "1", "--voltage", "1e4"],
-                              ["--voltage", "1000"]),
-    "maps grid 1": (["maps", "--hp-mm", "1", "--grid", "1", "--out", "maps"], ["--grid", "2 to 400"]),
-    "maps grid huge": (["maps", "--hp-mm", "1", "--grid", "100000000", "--out", "maps"], ["--grid", "2 to 400"]),
-    "measure seed -1": (["measure", "campaign", "--simulate", "--seed", "-1", "--out", "c.csv"], ["--seed", "4294967295"]),
-    "simulate seed 2^32": (["simulate", "--seed", str(2**32)], ["--seed", "0 to 4294967295"]),
-    "fit seed -1": (["fit-damping", "log.csv", "--out", "fit", "--seed", "-1"], ["--seed", "0 to 4294967295"]),
-    "fit max steps 1e20": (["fit-damping", "log.csv", "--out", "fit", "--max-steps", "1" + "0" * 20], ["--max-steps", "1000000"]),
-    "measure timeout -1": (["measure", "resonance", "--simulate", "--timeout", "-1", "--out", "r.csv"], ["--timeout", "3600 s"]),
-    "measure baudrate 0": (["measure", "resonance", "--simulate", "--baudrate", "0", "--out", "r.csv"], ["--baudrate", "50 to"]),
-    "measure retries -1": (["measure", "resonance", "--simulate", "--retries", "-1", "--out", "r.csv"], ["--retries", "0 to 100"]),
-    "bench limit inf": (["measure", "resonance", "--simulate", "--bench-limit", "inf", "--out", "r.csv"], ["--bench-limit", "finite"]),
+    "voltage 1e300": ("optimize --hp-mm 1 --voltage 1e300 --json", ["--voltage", "1000 V"]),
+    "q 1e300": ("optimize --hp-mm 1 --q 1e300 --json", ["--q", "100000"]),
+    "q below 1": ("evaluate --lambda-mm 24 --hi-mm 2 --hp-mm 1 --q 0.5", ["--q", "1 to"]),
+    "voltage nan": ("evaluate --lambda-mm 24 --hi-mm 2 --hp-mm 1 --voltage nan", ["--voltage"]),
+    "maps voltage 1e4": ("maps --hp-mm 1 --voltage 1e4 --grid 5 --out maps", ["--voltage", "1000"]),
+    "fem space mapping 1e4": (
+        "optimize --model fem --method space-mapping --hp-mm 1 --voltage 1e4",
+        ["--voltage", "1000"],
+    ),
+    "maps grid 1": ("maps --hp-mm 1 --grid 1 --out maps", ["--grid", "2 to 400"]),
+    "maps grid huge": ("maps --hp-mm 1 --grid 100000000 --out maps", ["--grid", "2 to 400"]),
+    "measure seed -1": ("measure campaign --simulate --seed -1 --out c.csv", ["--seed", "4294967295"]),
+    "simulate seed 2^32": ("simulate --seed 4294967296", ["--seed", "0 to 4294967295"]),
+    "fit seed -1": ("fit-damping log.csv --out fit --seed -1", ["--seed", "0 to 4294967295"]),
+    "fit max steps 1e20": (
+        "fit-damping log.csv --out fit --max-steps 100000000000000000000",
+        ["--max-steps", "1000000"],
+    ),
+    "measure timeout -1": ("measure resonance --simulate --timeout -1 --out r.csv", ["--timeout", "3600 s"]),
+    "measure baudrate 0": ("measure resonance --simulate --baudrate 0 --out r.csv", ["--baudrate", "50 to"]),
+    "measure retries -1": ("measure resonance --simulate --retries -1 --out r.csv", ["--retries", "0 to 100"]),
+    "bench limit inf": ("measure resonance --simulate --bench-limit inf --out r.csv", ["--bench-limit", "finite"]),
     # output locations
-    "maps out file": (["maps", "--hp-mm", "1", "--grid", "2", "--out", "file.txt"], ["--out file.txt", "not a folder"]),
-    "maps out under file": (["maps", "--hp-mm", "1", "--grid", "2", "--out", "file.txt/sub"], ["--out file.txt/sub"]),
-    "maps out in proc": (["maps", "--hp-mm", "1", "--grid", "2", "--out", "/proc/tactile-maps"], ["--out /proc/tactile-maps"]),
-    "run out file": (["run", "--out", "file.txt"], ["--out file.txt", "not a folder"]),
-    "run out under file": (["run", "--out", "file.txt/sub"], ["--out file.txt/sub"]),
-    "run out in proc": (["run", "--out", "/proc/tactile-run"], ["--out /proc/tactile-run"]),
-    "fit out file": (["fit-damping", "log.csv", "--out", "file.txt"], ["--out file.txt", "not a folder"]),
-    "fit out in proc": (["fit-damping", "log.csv", "--out", "/proc/tactile-fit"], ["--out /proc/tactile-fit"]),
+    "maps out file": ("maps --hp-mm 1 --grid 2 --out file.txt", ["--out file.txt", "not a folder"]),
+    "maps out under file": ("maps --hp-mm 1 --grid 2 --out file.txt/sub", ["--out file.txt/sub"]),
+    "maps out in proc": ("maps --hp-mm 1 --grid 2 --out /proc/tactile-maps", ["--out /proc/tactile-maps"]),
+    "run out file": ("run --out file.txt", ["--out file.txt", "not a folder"]),
+    "run out under file": ("run --out file.txt/sub", ["--out file.txt/sub"]),
+    "run out in proc": ("run --out /proc/tactile-run", ["--out /proc/tactile-run"]),
+    "fit out file": ("fit-damping log.csv --out file.txt", ["--out file.txt", "not a folder"]),
+    "fit out in proc": ("fit-damping log.csv --out /proc/tactile-fit", ["--out /proc/tactile-fit"]),
     # damaged inputs
-    "empty posterior": (["optimize", "--hp-mm", "1", "--damping", "empty.npz"], ["empty.npz", "truncated"]),
-    "truncated posterior": (["evaluate", "--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "1", "--damping", "truncated.npz"],
-                            ["truncated.npz"]),
-    "posterior q0 < 1": (["optimize", "--hp-mm", "1", "--damping", "negative_q0.npz"], ["negative_q0.npz", "q0", "1 to 100000"]),
-    "posterior alpha < 0": (["optimize", "--hp-mm", "1", "--damping", "negative_alpha.npz"], ["negative_alpha.npz", "alpha", "0 to 1e+12"]),
-    "posterior alpha 1e300": (["evaluate", "--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "1", "--damping", "huge_alpha.npz"],
-                              ["huge_alpha.npz", "alpha"]),
-    "config is a folder": (["run", "--config", "folder", "--print-config"], ["folder: is a folder"]),
-    "config voltage 1e4": (["run", "--config", "hot.toml", "--print-config"], ["hot.toml", "design.voltage_v", "1000"]),
-    "config inf": (["run", "--config", "inf.toml", "--print-config"], ["inf.toml", "fem.width_max_mm", "finite"]),
-    "config seed -1": (["run", "--config", "seed.toml", "--print-config"], ["seed.toml", "campaign.seed", "4294967295"]),
-    "log 1e6 m/s": (["fit-damping", "fast.csv", "--out", "fit"], ["fast.csv, line", "0 to 10 m/s"]),
-    "log all zero": (["fit-damping", "zero.csv", "--out", "fit"], ["zero.csv, line", "1e-06 m/s"]),
-    "log tiny": (["fit-damping", "tiny.csv", "--out", "fit"], ["tiny.csv, line", "1e-06 m/s"]),
-    "log long line": (["fit-damping", "long.csv", "--out", "fit"], ["long.csv, line", "10000"]),
+    "empty posterior": ("optimize --hp-mm 1 --damping empty.npz", ["empty.npz", "truncated"]),
+    "truncated posterior": ("evaluate --lambda-mm 24 --hi-mm 2 --hp-mm 1 --damping truncated.npz", ["truncated.npz"]),
+    "posterior q0 < 1": ("optimize --hp-mm 1 --damping negative_q0.npz", ["negative_q0.npz", "q0", "1 to 100000"]),
+    "posterior alpha < 0": (
+        "optimize --hp-mm 1 --damping negative_alpha.npz",
+        ["negative_alpha.npz", "alpha", "0 to 1e+12"],
+    ),
+    "posterior alpha 1e300": (
+        "evaluate --lambda-mm 24 --hi-mm 2 --hp-mm 1 --damping huge_alpha.npz",
+        ["huge_alpha.npz", "alpha"],
+    ),
+    "config is a folder": ("run --config folder --print-config", ["folder: is a folder"]),
+    "config voltage 1e4": ("run --config hot.toml --print-config", ["hot.toml", "design.voltage_v", "1000"]),
+    "config inf": ("run --config inf.toml --print-config", ["inf.toml", "fem.width_max_mm", "finite"]),
+    "config seed -1": ("run --config seed.toml --print-config", ["seed.toml", "campaign.seed", "4294967295"]),
+    "log 1e6 m/s": ("fit-damping fast.csv --out fit", ["fast.csv, line", "0 to 10 m/s"]),
+    "log all zero": ("fit-damping zero.csv --out fit", ["zero.csv, line", "1e-06 m/s"]),
+    "log tiny": ("fit-damping tiny.csv --out fit", ["tiny.csv, line", "1e-06 m/s"]),
+    "log long line": ("fit-damping long.csv --out fit", ["long.csv, line", "10000"]),
 }
 
 
 @pytest.mark.parametrize("argv, expected", CASES.values(), ids=CASES.keys())
 def test_one_error_line_exit_2_and_inputs_unchanged(inputs, capsys, argv, expected):
     before = {path: path.read_bytes() for path in inputs.iterdir() if path.is_file()}
-    status, _, err = run_cli(capsys, *argv)
+    status, _, err = run_cli(capsys, *argv.split())
     assert status == 2, err
     assert len(err.strip().splitlines()) == 1, err
     assert "Traceback" not in err and "internal error" not in err

@@ -48,9 +48,12 @@ def bounded(kind, low, high, unit: str = ""):
         try:
             value = kind(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected {'an integer' if kind is int else 'a number'}, got {text!r}") from None
+            expected = "an integer" if kind is int else "a number"
+            raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}") from None
         if not (math.isfinite(value) and low <= value <= high):
-            raise argparse.ArgumentTypeError(f"{text} is outside the accepted range {_number(low)} to {_number(high)}{unit}")
+            raise argparse.ArgumentTypeError(
+                f"{text} is outside the accepted range {_number(low)} to {_number(high)}{unit}"
+            )
         return value
 
     return convert
@@ -82,7 +85,9 @@ def output_folder(path, option: str = "--out") -> Path:
     """
     path = Path(path)
     if path.exists() and not path.is_dir():
-        raise InputFileError(f"{option} {path}: exists and is not a folder (give a folder, or a path that does not exist)")
+        raise InputFileError(
+            f"{option} {path}: exists and is not a folder (give a folder, or a path that does not exist)"
+        )
     try:
         path.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryFile(dir=path):
