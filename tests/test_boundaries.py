@@ -56,6 +56,7 @@ def inputs(tmp_path, monkeypatch):
     (tmp_path / "hot.toml").write_text("[design]\nvoltage_v = 1e4\n", encoding="utf-8")
     (tmp_path / "inf.toml").write_text("[fem]\nwidth_max_mm = inf\n", encoding="utf-8")
     (tmp_path / "seed.toml").write_text("[campaign]\nseed = -1\n", encoding="utf-8")
+    (tmp_path / "draws.toml").write_text("[damping]\nposterior_draws = 0\n", encoding="utf-8")
     return tmp_path
 
 
@@ -108,6 +109,7 @@ CASES = {
     "config voltage 1e4": ("run --config hot.toml --print-config", ["hot.toml", "design.voltage_v", "1000"]),
     "config inf": ("run --config inf.toml --print-config", ["inf.toml", "fem.width_max_mm", "finite"]),
     "config seed -1": ("run --config seed.toml --print-config", ["seed.toml", "campaign.seed", "4294967295"]),
+    "config no draws": ("run --config draws.toml --print-config", ["draws.toml", "damping.posterior_draws", "1 to 10000"]),
     "log 1e6 m/s": ("fit-damping fast.csv --out fit", ["fast.csv, line", "0 to 10 m/s"]),
     "log all zero": ("fit-damping zero.csv --out fit", ["zero.csv, line", "1e-06 m/s"]),
     "log tiny": ("fit-damping tiny.csv --out fit", ["tiny.csv, line", "1e-06 m/s"]),

@@ -29,10 +29,12 @@ LIMITS = {
     "campaign.seed": (0, 2**32 - 1),
     "damping.seed": (0, 2**32 - 1),
     "damping.max_steps": (1, 1_000_000),
+    "damping.posterior_draws": (1, 10_000),
+    "fem.width_points": (2, 1000),
 }
 """Accepted range of numeric keys, shared with the command-line options of the same quantity: drive
 amplitude [V peak across the ceramics], quality factor [-], map points per axis, random seeds, chain length
-(a million steps is about an hour per law).
+(a million steps is about an hour per law), posterior draws propagated, widths of the FEM sweep.
 Every other number must be finite."""
 
 
