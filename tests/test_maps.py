@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from workflow.cli import main
+from test_cli import run_cli
 from workflow.execution.cache import EvaluationCache
 from workflow.models.fem import FemSettings
 from workflow.models.plate import ORIGINAL_PLATE
@@ -44,12 +44,6 @@ def test_width_sweep_marks_transverse_points(tmp_path):
     sweep = width_sweep(model, ORIGINAL_PLATE, np.array([30e-3, 55e-3]))
     assert sweep.deflection.shape == sweep.transverse.shape == (2,)
     assert np.all((sweep.transverse_indicator >= 0) & (sweep.transverse_indicator <= 1))
-
-
-def run_cli(capsys, *argv):
-    code = main(list(argv))
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def test_maps_command_json_shape(tmp_path, capsys):

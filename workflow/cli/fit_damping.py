@@ -1,14 +1,14 @@
 """``tactile fit-damping``: Bayesian fit of Q(v) to interferometer logs."""
 
-import argparse
 import sys
 from pathlib import Path
 
-from workflow.cli.options import add_json_flag
+from workflow.cli.options import add_json_flag, bounded, limit_text, output_folder, seed_option
 from workflow.damping.fit import fit_damping, fit_summary
 from workflow.damping.laws import LAWS
 from workflow.damping.logs import drop_short_sweeps, read_logs
-from workflow.pipeline.damping_files import output_folder, write_fit
+from workflow.pipeline.config import LIMITS
+from workflow.pipeline.damping_files import write_fit
 
 SAMPLED_LAWS = tuple(name for name in LAWS if name != "constant")
 """Laws ``--law`` accepts; the constant-Q baseline is always in the comparison (BIC at the MAP)."""
@@ -32,21 +32,12 @@ def register(subparsers) -> None:
         default="all",
         help=f"Q(v) law to sample; 'all' samples {', '.join(SAMPLED_LAWS)} and keeps the best by WAIC (default: all)",
     )
-    parser.add_argument("--seed", type=int, default=0, help="random seed of the walkers and the sampler (default: 0)")
-    parser.add_argument("--max-steps", type=_positive_int, default=20000, help="cap on each chain's length (default: 20000)")
+    seed_option(parser, 0, "random seed of the walkers and the sampler")
+    parser.add_argument("--max-steps", type=bounded(int, *LIMITS["damping.max_steps"]), default=20000,
+                        help=f"cap on each chain's length, {limit_text('damping.max_steps')} (default: 20000)")
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     add_json_flag(parser)
     parser.set_defaults(handler=run)
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return value
 
 
 def run(args) -> dict:

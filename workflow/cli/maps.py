@@ -15,11 +15,15 @@ from workflow.cli.options import (
     add_json_flag,
     add_model_option,
     add_width_option,
+    bounded,
     design_problem,
+    limit_text,
     load_damping,
+    output_folder,
 )
 from workflow.errors import TactileError
 from workflow.execution.cache import EvaluationCache
+from workflow.pipeline.config import LIMITS
 from workflow.optimise.damped import damped_fem_optimum, damped_maps, damped_optimum, fem_damped_maps, map_draws
 from workflow.optimise.fem_optimum import optimise_fem
 from workflow.optimise.maps import design_map, width_sweep
@@ -29,8 +33,6 @@ from workflow.units import KHZ, MM, UM
 
 DEFAULT_GRID = {"analytical": 81, "fem": 12}
 """Grid points per axis when --grid is not given."""
-MAX_GRID = 400
-"""Largest accepted --grid."""
 
 
 def register(subparsers) -> None:
@@ -51,8 +53,9 @@ def register(subparsers) -> None:
     add_damping_option(parser)
     parser.add_argument(
         "--grid",
-        type=int,
-        help=f"points per axis (default: {DEFAULT_GRID['analytical']} analytical, {DEFAULT_GRID['fem']} FEM)",
+        type=bounded(int, *LIMITS["maps.grid"]),
+        help=f"points per axis, {limit_text('maps.grid')} (default: {DEFAULT_GRID['analytical']} analytical, "
+        f"{DEFAULT_GRID['fem']} FEM)",
     )
     parser.add_argument("--scheduler", metavar="ADDRESS", help="tcp://host:port of a Dask scheduler (default: local cores)")
     parser.add_argument(
@@ -68,12 +71,11 @@ def register(subparsers) -> None:
 
 def run(args) -> dict:
     points = DEFAULT_GRID[args.model] if args.grid is None else args.grid
-    if not 2 <= points <= MAX_GRID:
-        raise TactileError(f"maps: --grid {points} must be between 2 and {MAX_GRID}")
     if args.width_sweep and args.model != "fem":
         raise TactileError("maps: --width-sweep needs --model fem (the beam model does not depend on b)")
     problem = design_problem(args, args.hp_mm * MM)
     posterior = load_damping(args)
+    output_folder(args.out)
     if args.model == "analytical":
         model = analytical_model(args.q, args.voltage)
     else:
@@ -82,7 +84,6 @@ def run(args) -> dict:
         model = FemModel(
             q=args.q, voltage=args.voltage, cache=EvaluationCache(), scheduler=args.scheduler, progress=True
         )
-    args.out.mkdir(parents=True, exist_ok=True)
     if posterior is None:
         record = _constant_q_record(args, problem, model, points)
     else:

@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 
 from instruments.drivers.amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT, DEFAULT_GAIN
-from workflow.cli.options import Stopped, StopSignals, add_bench_arguments, add_json_flag, bench_settings
+from workflow.cli.options import Stopped, StopSignals, add_bench_arguments, add_json_flag, bench_settings, bounded
 from workflow.errors import TactileError
 
 DEFAULT_DATA_DIR = Path("measurements")
@@ -47,9 +47,12 @@ def register(subparsers) -> None:
     ports.add_argument("--generator", metavar="PORT", help="serial port (or pyserial URL) of the signal generator")
     ports.add_argument("--vibrometer", metavar="PORT", help="serial port (or pyserial URL) of the vibrometer")
     ports.add_argument("--simulate", action="store_true", help="use the in-process bench simulator instead of ports")
-    ports.add_argument("--baudrate", type=int, default=9600, help="serial baud rate (default 9600)")
-    ports.add_argument("--timeout", type=float, default=1.0, help="reply timeout [s] (default 1)")
-    ports.add_argument("--retries", type=int, default=3, help="retries of a point after a timeout or garbled reply (default 3)")
+    ports.add_argument("--baudrate", type=bounded(int, 50, 4_000_000), default=9600,
+                       help="serial baud rate, 50 to 4000000 (default 9600)")
+    ports.add_argument("--timeout", type=bounded(float, 0.001, 3600.0, "s"), default=1.0,
+                       help="reply timeout [s], 0.001 to 3600 (default 1)")
+    ports.add_argument("--retries", type=bounded(int, 0, 100), default=3,
+                       help="retries of a point after a timeout or garbled reply, 0 to 100 (default 3)")
     ports.add_argument("--amplifier-gain", type=float, default=DEFAULT_GAIN,
                        help=f"power amplifier voltage gain (default {DEFAULT_GAIN:g})")
     ports.add_argument("--max-voltage", type=float, default=DEFAULT_CERAMIC_VOLTAGE_LIMIT, metavar="VOLTS",
@@ -103,8 +106,6 @@ def _open_station(args):
                            f"{DEFAULT_CERAMIC_VOLTAGE_LIMIT:g}), got {args.max_voltage:g}")
     if not (math.isfinite(args.amplifier_gain) and args.amplifier_gain > 0):
         raise TactileError(f"--amplifier-gain must be a finite number > 0 [V/V], got {args.amplifier_gain:g}")
-    if args.retries < 0:
-        raise TactileError(f"--retries must be >= 0, got {args.retries}")
     options = {"retries": args.retries}
     if args.simulate:
         if args.generator or args.vibrometer:

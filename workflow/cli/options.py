@@ -6,13 +6,16 @@ The one module that command modules share: no command module imports another.
 import argparse
 import math
 import signal
+import tempfile
 from contextlib import contextmanager
+from pathlib import Path
 
 from workflow.damping.posterior import load_posterior
-from workflow.errors import GeometryError, TactileError
+from workflow.errors import GeometryError, InputFileError, TactileError
 from workflow.models import materials
 from workflow.models.plate import ORIGINAL_PLATE, Plate, check_design_space
 from workflow.optimise.problem import DesignProblem
+from workflow.pipeline.config import LIMITS
 from workflow.units import MM
 
 MODELS = ("analytical", "fem")
@@ -35,6 +38,63 @@ def positive_float(text: str) -> float:
     if value <= 0:
         raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
     return value
+
+
+def bounded(kind, low, high, unit: str = ""):
+    """argparse type: a finite ``kind`` (float or int) in [low, high], the range named in the error."""
+    unit = f" {unit}" if unit else ""
+
+    def convert(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            expected = "an integer" if kind is int else "a number"
+            raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}") from None
+        if not (math.isfinite(value) and low <= value <= high):
+            raise argparse.ArgumentTypeError(
+                f"{text} is outside the accepted range {_number(low)} to {_number(high)}{unit}"
+            )
+        return value
+
+    return convert
+
+
+def limit_text(key: str, unit: str = "") -> str:
+    """The accepted range of a :data:`~workflow.pipeline.config.LIMITS` key for --help, e.g. ``"0.001 to 1000 V"``."""
+    low, high = LIMITS[key]
+    return f"{_number(low)} to {_number(high)}" + (f" {unit}" if unit else "")
+
+
+def _number(value) -> str:
+    return str(value) if isinstance(value, int) else f"{value:g}"
+
+
+def seed_option(parser, default: int, help: str) -> None:
+    """A ``--seed`` option in the accepted range of numpy's seeds."""
+    parser.add_argument("--seed", type=bounded(int, *LIMITS["campaign.seed"]), default=default,
+                        help=f"{help}, {limit_text('campaign.seed')} (default {default})")
+
+
+def output_folder(path, option: str = "--out") -> Path:
+    """The folder ``path`` for a command's outputs, created if missing and checked writable before any work.
+
+    Raises
+    ------
+    InputFileError
+        ``path`` is an existing file, lies under a file, or cannot be created or written to, naming ``option``.
+    """
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise InputFileError(
+            f"{option} {path}: exists and is not a folder (give a folder, or a path that does not exist)"
+        )
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path):
+            pass
+    except OSError as error:
+        raise InputFileError(f"{option} {path}: cannot write a folder there ({error.strerror or error})") from None
+    return path
 
 
 def add_model_option(parser: argparse.ArgumentParser) -> None:
@@ -64,13 +124,17 @@ def add_width_option(parser: argparse.ArgumentParser) -> None:
 def add_drive_options(parser: argparse.ArgumentParser) -> None:
     """--q (the plate's quality factor) and --voltage."""
     parser.add_argument(
-        "--q", type=positive_float, default=materials.PLATE_Q, help=f"plate quality factor (default: {materials.PLATE_Q:g})"
+        "--q",
+        type=bounded(float, *LIMITS["design.q"]),
+        default=materials.PLATE_Q,
+        help=f"plate quality factor, {limit_text('design.q')} (default: {materials.PLATE_Q:g})",
     )
     parser.add_argument(
         "--voltage",
-        type=positive_float,
+        type=bounded(float, *LIMITS["design.voltage_v"], "V"),
         default=materials.DESIGN_VOLTAGE,
-        help=f"drive amplitude across the ceramics [V peak] (default: {materials.DESIGN_VOLTAGE:g})",
+        help=f"drive amplitude across the ceramics [V peak], {limit_text('design.voltage_v', 'V')} "
+        f"(default: {materials.DESIGN_VOLTAGE:g})",
     )
 
 
@@ -161,7 +225,7 @@ def damping_line(record: dict) -> str:
 def add_bench_arguments(parser) -> None:
     """Flags that configure a simulated bench (shared with ``tactile measure --simulate``)."""
     group = parser.add_argument_group("simulated bench")
-    group.add_argument("--seed", type=int, default=0, help="seed of the measurement noise (default 0)")
+    seed_option(group, 0, "seed of the measurement noise")
     group.add_argument("--drop-rate", type=float, default=0.0, help="probability of a dropped reply (default 0)")
     group.add_argument("--garble-rate", type=float, default=0.0, help="probability of a garbled reply (default 0)")
     group.add_argument("--disconnect-at", type=int, default=None, metavar="N",
@@ -180,8 +244,8 @@ def bench_settings(args):
     except ValueError as error:
         raise TactileError(f"bad fault flag: {error}") from None
     limit = DEFAULT_CERAMIC_VOLTAGE_LIMIT if args.bench_limit is None else args.bench_limit
-    if not limit > 0:
-        raise TactileError(f"--bench-limit must be positive, got {limit:g}")
+    if not (math.isfinite(limit) and limit > 0):
+        raise TactileError(f"--bench-limit must be a finite number of volts > 0, got {limit:g}")
     gain = getattr(args, "amplifier_gain", DEFAULT_GAIN)
     return default_bench_settings(seed=args.seed, faults=faults, ceramic_voltage_limit=limit, amplifier_gain=gain)
 

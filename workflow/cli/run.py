@@ -3,7 +3,7 @@
 import sys
 from pathlib import Path
 
-from workflow.cli.options import add_json_flag
+from workflow.cli.options import add_json_flag, output_folder
 from workflow.execution.cache import EvaluationCache
 from workflow.pipeline.config import load_config, to_toml
 from workflow.pipeline.report import write_report
@@ -35,7 +35,7 @@ def run(args):
         return None
     context = RunContext(
         config=config,
-        out=args.out,
+        out=output_folder(args.out),
         scheduler=args.scheduler or config["run"]["scheduler"] or None,
         logs=list(args.logs or config["campaign"]["logs"]),
         cache=EvaluationCache() if config["run"]["cache"] else None,

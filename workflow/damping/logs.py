@@ -28,6 +28,15 @@ _QUANTITY_STEMS = {
 
 _MISSING = {"", "nan", "NaN", "NAN"}
 
+MAX_LINE_LENGTH = 10_000
+"""Longest accepted line [characters]; a data row is under 200."""
+MAX_VELOCITY = 10.0
+"""Largest accepted velocity amplitude [m/s]: above any vibrometer decoder's range and any plate
+(10 m/s is 64 µm at 25 kHz); a larger value is a unit or transcription error."""
+MIN_PEAK_VELOCITY = 1e-6
+"""Smallest accepted peak velocity of a sweep [m/s]: a sweep whose every velocity is below this
+(all zeros, or "tiny" values such as a velocity in km/s) holds no resonance to fit."""
+
 
 @dataclass(frozen=True)
 class CampaignLog:
@@ -163,11 +172,13 @@ def read_log(path) -> CampaignLog:
         raise InputFileError(f"{path}: no data row has a velocity reading")
     arrays = {name: np.asarray(values, dtype=float) for name, values in table.items()}
     _check_physical(path, arrays, np.asarray(line_numbers))
+    sweep = _sweep_index(path, arrays)
+    _check_peaks(path, arrays[logformat.VELOCITY], sweep, np.asarray(line_numbers))
     return CampaignLog(
         frequency=arrays[logformat.FREQUENCY],
         drive_voltage=arrays[logformat.DRIVE_VOLTAGE],
         velocity=arrays[logformat.VELOCITY],
-        sweep=_sweep_index(path, arrays),
+        sweep=sweep,
         sources=(str(path),),
         warnings=tuple(warnings),
     )
@@ -191,6 +202,11 @@ def _text_lines(path: Path):
             f"{path}, line {line}: not UTF-8 (byte 0x{raw[error.start]:02x} at offset {error.start})"
         ) from None
     lines = list(enumerate(text.split("\n"), start=1))
+    for number, line in lines:
+        if len(line) > MAX_LINE_LENGTH:
+            raise InputFileError(
+                f"{path}, line {number}: {len(line)} characters, longer than the {MAX_LINE_LENGTH} accepted per line"
+            )
     warnings = []
     if lines and lines[-1][1] == "":
         lines.pop()
@@ -246,17 +262,32 @@ def _number(path: Path, line: int, column: str, cell: str) -> float:
 
 
 def _check_physical(path: Path, arrays: dict, line_numbers: np.ndarray) -> None:
-    """Refuse non-positive frequencies and negative voltages or velocities."""
+    """Refuse non-positive frequencies, negative voltages, and velocities outside 0 to :data:`MAX_VELOCITY`."""
+    velocity = arrays[logformat.VELOCITY]
     checks = (
         (logformat.FREQUENCY, arrays[logformat.FREQUENCY] <= 0, "a frequency must be positive"),
         (logformat.DRIVE_VOLTAGE, arrays[logformat.DRIVE_VOLTAGE] < 0, "a peak voltage must be >= 0"),
-        (logformat.VELOCITY, arrays[logformat.VELOCITY] < 0, "a velocity amplitude must be >= 0"),
+        (logformat.VELOCITY, (velocity < 0) | (velocity > MAX_VELOCITY),
+         f"a velocity amplitude must be in 0 to {MAX_VELOCITY:g} m/s"),
     )
     for column, bad, reason in checks:
         if bad.any():
             value = arrays[column][bad][0]
             line = line_numbers[np.argmax(bad)]
             raise InputFileError(f"{path}, line {line}: {column} = {value:g}: {reason}")
+
+
+def _check_peaks(path: Path, velocity: np.ndarray, sweep: np.ndarray, line_numbers: np.ndarray) -> None:
+    """Refuse a sweep whose peak velocity is below :data:`MIN_PEAK_VELOCITY`, naming its first line."""
+    peaks = np.zeros(int(sweep.max()) + 1)
+    np.maximum.at(peaks, sweep, velocity)
+    low = np.nonzero(peaks < MIN_PEAK_VELOCITY)[0]
+    if low.size:
+        line = line_numbers[np.argmax(sweep == low[0])]
+        raise InputFileError(
+            f"{path}, line {line}: the sweep starting here peaks at {peaks[low[0]]:g} m/s, below the "
+            f"{MIN_PEAK_VELOCITY:g} m/s accepted (all-zero velocities, or a velocity not in m/s?)"
+        )
 
 
 def _sweep_index(path: Path, arrays: dict) -> np.ndarray:

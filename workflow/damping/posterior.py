@@ -5,6 +5,8 @@ samples in natural units (``q0`` [-], ``alpha`` [s^2/m^2 or s/m]), and the full 
 coordinates for reference.
 """
 
+import zipfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict
@@ -12,10 +14,14 @@ from typing import Dict
 import numpy as np
 
 from workflow.damping.laws import LAWS, parameter_names
+from workflow.damping.likelihood import Q0_RANGE
 from workflow.errors import InputFileError
 
 POSTERIOR_FILE = "posterior.npz"
 """File name of the posterior in a fit's output folder."""
+MAX_ALPHA = 1e12
+"""Largest accepted loss coefficient alpha [s^2/m^2 or s/m]: the fit's prior bound for the quadratic law
+at the smallest peak velocity a log may have (1e-6 m/s)."""
 
 
 @dataclass(frozen=True)
@@ -88,9 +94,10 @@ def load_posterior(path) -> DampingPosterior:
             samples = np.asarray(content["parameter_samples"], dtype=float)
     except FileNotFoundError:
         raise InputFileError(f"{path}: no such posterior file (write one with 'tactile fit-damping ... --out DIR')") from None
-    except (OSError, ValueError, KeyError):
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error):
         raise InputFileError(
-            f"{path}: not a posterior written by 'tactile fit-damping' (expected its posterior.npz or its --out folder)"
+            f"{path}: empty, truncated or not a posterior written by 'tactile fit-damping' "
+            "(expected its posterior.npz or its --out folder)"
         ) from None
     if law_name not in LAWS:
         raise InputFileError(f"{path}: unknown Q(v) law {law_name!r}; expected one of {', '.join(LAWS)}")
@@ -99,4 +106,9 @@ def load_posterior(path) -> DampingPosterior:
         raise InputFileError(f"{path}: parameters {names} do not match the {law_name} law ({expected})")
     if not np.all(np.isfinite(samples)):
         raise InputFileError(f"{path}: non-finite posterior samples")
+    ranges = {"q0": Q0_RANGE, "alpha": (0.0, MAX_ALPHA)}
+    for i, name in enumerate(names):
+        low, high = ranges.get(name, (-np.inf, np.inf))
+        if not np.all((samples[:, i] >= low) & (samples[:, i] <= high)):
+            raise InputFileError(f"{path}: posterior samples of {name} outside the accepted range {low:g} to {high:g}")
     return DampingPosterior(law_name, {name: samples[:, i] for i, name in enumerate(names)}, source=str(path))

@@ -192,6 +192,7 @@ def maximise_deflection(
         start = feasible_start(counting, problem)
     # Work in millimetres so both variables are O(1).
     scale = MM
+    start_mm = np.clip(start / scale, problem.lower / scale, problem.upper / scale)
     step = relative_step * (problem.upper - problem.lower) / scale
     offsets = _difference_offsets(step, difference)
     cache = {}
@@ -210,7 +211,9 @@ def maximise_deflection(
             return np.array([(values[1 + 2 * i] - values[2 + 2 * i]) / (2 * step[i]) for i in range(2)])
         return np.array([(values[1 + i] - values[0]) / step[i] for i in range(2)])
 
-    deflection_unit = 1e-6  # objective in micrometres, frequency constraint relative
+    # Objective in micrometres, or in tenths of the start's deflection when that is larger (a large
+    # Q x voltage: SLSQP stops on round-off when the objective is in the thousands); frequency constraint relative.
+    deflection_unit = max(1e-6, float(evaluate(start_mm)[0][0]) / 10)
 
     def objective(x, grad):
         deflection, _ = evaluate(x)
@@ -231,7 +234,7 @@ def maximise_deflection(
     optimizer.add_inequality_constraint(constraint, constraint_tolerance)
     optimizer.set_xtol_rel(xtol_rel)
     optimizer.set_maxeval(max_evaluations)
-    x_opt = optimizer.optimize(list(np.clip(start / scale, problem.lower / scale, problem.upper / scale)))
+    x_opt = optimizer.optimize(list(start_mm))
     status = _STATUS.get(optimizer.last_optimize_result(), str(optimizer.last_optimize_result()))
     deflection, frequency = (float(v[0]) for v in evaluate(np.asarray(x_opt)))
     slack = max(1e-6, constraint_tolerance)

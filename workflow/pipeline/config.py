@@ -5,6 +5,7 @@ keys, with values of the same type (an int is accepted where a float is expected
 """
 
 import copy
+import math
 import sys
 from dataclasses import MISSING, fields
 from importlib import resources
@@ -19,6 +20,22 @@ if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
     import tomli as tomllib
+
+LIMITS = {
+    "design.voltage_v": (1e-3, 1000.0),
+    "design.q": (1.0, 1e5),
+    "maps.grid": (2, 400),
+    "maps.fem_grid": (2, 400),
+    "campaign.seed": (0, 2**32 - 1),
+    "damping.seed": (0, 2**32 - 1),
+    "damping.max_steps": (1, 1_000_000),
+    "damping.posterior_draws": (1, 10_000),
+    "fem.width_points": (2, 1000),
+}
+"""Accepted range of numeric keys, shared with the command-line options of the same quantity: drive
+amplitude [V peak across the ceramics], quality factor [-], map points per axis, random seeds, chain length
+(a million steps is about an hour per law), posterior draws propagated, widths of the FEM sweep.
+Every other number must be finite."""
 
 
 def default_config() -> dict:
@@ -101,6 +118,10 @@ def load_config(path=None) -> dict:
         user = tomllib.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise InputFileError(f"{path}: no such configuration file") from None
+    except IsADirectoryError:
+        raise InputFileError(f"{path}: is a folder, not a TOML configuration file") from None
+    except OSError as error:
+        raise InputFileError(f"{path}: cannot read the configuration file ({error.strerror or error})") from None
     except UnicodeDecodeError:
         raise InputFileError(f"{path}: not a UTF-8 text file") from None
     except tomllib.TOMLDecodeError as error:
@@ -122,6 +143,7 @@ def merge(defaults: dict, user: dict, source: str = "configuration") -> dict:
                     f"{source}: unknown key '{section}.{key}'; known keys of [{section}]: {', '.join(defaults[section])}"
                 )
             merged[section][key] = _checked(value, defaults[section][key], f"{section}.{key}", source)
+            _check_range(merged[section][key], f"{section}.{key}", source)
     _check_campaign_size(merged["campaign"], source)
     return merged
 
@@ -136,6 +158,16 @@ def _check_campaign_size(campaign: dict, source: str) -> None:
                     "campaign.points_per_sweep x campaign.voltages_v")
     except PlanError as error:
         raise InputFileError(f"{source}: {error}") from None
+
+
+def _check_range(value, name: str, source: str) -> None:
+    """Refuse a non-finite number, or one outside :data:`LIMITS`, naming the key and the range."""
+    for item in value if isinstance(value, list) else [value]:
+        if isinstance(item, float) and not math.isfinite(item):
+            raise InputFileError(f"{source}: '{name}' must be a finite number, got {item!r}")
+        if name in LIMITS and not LIMITS[name][0] <= item <= LIMITS[name][1]:
+            raise InputFileError(f"{source}: '{name}' = {item!r} is outside the accepted range "
+                                 f"{LIMITS[name][0]} to {LIMITS[name][1]}")
 
 
 def _checked(value, default, name: str, source: str):
