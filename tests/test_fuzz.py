@@ -304,3 +304,41 @@ def test_no_sequence_of_driver_calls_exceeds_the_drivers_limit(calls, limit):
             pass
         if device.state.output:
             assert device.state.peak_voltage <= limit * (1 + 1e-9), (name, value, device.state)
+
+
+# --- what the fuzzing found, kept as plain regression tests --------------------------------------
+
+@pytest.mark.parametrize("data, reason", [
+    (b"\r\x01", "line 1: a carriage return inside the line"),
+    (b"frequency_hz,drive_voltage_v,velocity_m_s\r1,1,1\r", "line 1: a carriage return inside the line"),
+    (b"frequency_hz,drive_voltage_v,velocity_m_s\n" + b"1" * 200_000 + b",1,1\n", "line 2: not a CSV row (field larger"),
+    (b"\x01\x0b\x01", r"missing required column 'frequency_hz' (header: '\x01\x0b\x01')"),
+])
+def test_found_log_inputs_are_refused_in_one_line(data, reason):
+    _, error = read_file_bytes(data)
+    assert reason in str(error)
+
+
+def test_found_driver_sequences_are_refused():
+    device = GeneratorDevice(DRIVER_DEVICE_LIMIT)
+    generator = FunctionGenerator(DevicePort(device), max_peak_voltage=0.0625)
+    for command in ("OUTP?", "VOLT:OFFS?"):  # an unread reply would answer the next limit decision's query
+        with pytest.raises(InstrumentError, match="a query's reply must be read"):
+            generator.write(command)
+    with pytest.raises(InstrumentError, match="not one line of printable ASCII"):
+        generator.set("FREQ 1\u00b5")
+    generator.reset()  # 0.1 Vpp into 50 ohm: 0.1 V peak, output off
+    with pytest.raises(TactileError, match="exceeds the limit 0.0625 V"):
+        generator.output = True
+    assert not device.state.output and device.errors == []
+
+
+@pytest.mark.parametrize("encoding, separator, reason", [
+    ("utf-16", ",", "UTF-16 text, not UTF-8"),
+    ("utf-8", ";", "line 1: fields separated by ';'; a log separates them by ','"),
+    ("utf-8-sig", "\t", r"line 1: fields separated by '\t'"),
+])
+def test_a_spreadsheet_export_in_another_encoding_or_separator_is_named(encoding, separator, reason):
+    text = separator.join(logformat.REQUIRED_COLUMNS) + "\n" + separator.join(["31000", "5", "0.1"]) + "\n"
+    _, error = read_file_bytes(text.encode(encoding))
+    assert reason in str(error)

@@ -13,7 +13,7 @@ high-impedance input the terminals carry (R_load + 50 ohm) / R_load times that, 
 50 ohm, so every limit decision reads the load setting and counts that factor.  Levels and
 the load are set only through ``amplitude_vpp``, ``offset`` and ``load_ohm``:
 :meth:`FunctionGenerator.write` (under ``set`` and ``query``) refuses any other command that
-sets a level or the load.
+sets a level or the load, and ``write`` refuses queries (an unread reply would answer the next query).
 """
 
 import math

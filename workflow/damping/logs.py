@@ -8,6 +8,7 @@ dropouts) are dropped and counted, and an incomplete last line without a newline
 writer interrupted mid-row) is ignored.
 """
 
+import codecs
 import csv
 import math
 from dataclasses import dataclass
@@ -140,6 +141,9 @@ def read_log(path) -> CampaignLog:
         raise InputFileError(f"{path}: no header row (expected columns {', '.join(logformat.REQUIRED_COLUMNS)})")
     header_number, header_line = body[0]
     header = [name.strip() for name in _fields(path, header_number, header_line)]
+    separator = next((mark for mark in ";\t" if len(header) == 1 and mark in header[0]), None)
+    if separator:
+        raise InputFileError(f"{path}, line {header_number}: fields separated by {separator!r}; a log separates them by ','")
     columns = _column_indices(path, header_number, header)
     rows = body[1:]
     if not rows:
@@ -181,6 +185,8 @@ def _text_lines(path: Path):
         raise InputFileError(f"{path}: cannot read ({error.strerror or error})") from None
     if not raw.strip():
         raise InputFileError(f"{path}: empty file")
+    if raw.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
+        raise InputFileError(f"{path}: UTF-16 text, not UTF-8 (save the log as UTF-8)")
     if b"\x00" in raw:
         raise InputFileError(f"{path}: binary data (NUL bytes), not a CSV log")
     try:
