@@ -190,21 +190,25 @@ HEADER_PATTERNS = ("*IDN", "*RST", "*CLS", "*OPC", "SYSTem:ERRor[:NEXT]", "[SOUR
 """The headers of docs/instruments.md, as the 33500 manual writes them, and a few it lacks."""
 
 
+SUFFIXES = ("", "", "1", "2", "01", "0", "99999999999999999999")
+QUERY_MARKS = ("", "", "?")
+
+
 @st.composite
-def scpi_headers(draw):
-    """A header from HEADER_PATTERNS: random short/long forms, case, optional nodes, suffixes, query mark."""
-    pattern = draw(st.sampled_from(HEADER_PATTERNS))
+def scpi_headers(draw, patterns=HEADER_PATTERNS, suffixes=SUFFIXES, query_marks=QUERY_MARKS):
+    """A header from ``patterns``: random short/long forms, case, optional nodes, suffixes, query mark."""
+    pattern = draw(st.sampled_from(patterns))
     nodes = []
     for node in pattern.replace("[", " [").replace("]", "] ").replace(":", " ").split():
         if node.startswith("[") and not draw(st.booleans()):
             continue
         word = node.strip("[]")
-        suffix = draw(st.sampled_from(["", "", "1", "2", "01", "0", "99999999999999999999"])) if "#" in word else ""
+        suffix = draw(st.sampled_from(suffixes)) if "#" in word else ""
         word = word.rstrip("#")
         form = word if draw(st.booleans()) else "".join(c for c in word if not c.islower())
         nodes.append(draw(st.sampled_from([form, form.upper(), form.lower()])) + suffix)
     header = ":".join(node for node in nodes if node)
-    return draw(st.sampled_from(["", ":"])) + header + draw(st.sampled_from(["", "", "?"]))
+    return draw(st.sampled_from(["", ":"])) + header + draw(st.sampled_from(query_marks))
 
 
 scpi_arguments = st.one_of(number_texts, st.sampled_from(["INF", "MIN", "MAX", "DEF", "ON", "OFF", "VPP", "VRMS", "DBM",
@@ -229,6 +233,13 @@ def test_the_simulated_generator_never_raises_and_never_exceeds_its_limit(lines,
         assert reply is None or (reply.isprintable() and reply.isascii()), reply
         assert device.state.peak_voltage <= limit + 1e-9, (line, device.state)
         assert len(device.errors) <= MAX_ERRORS
+
+
+@fuzz(header=scpi_headers(HEADER_PATTERNS[4:12] + ("*IDN", "*OPC"), suffixes=("", "1"), query_marks=("?",)))
+def test_every_form_of_a_documented_query_is_answered(header):
+    """Short or long form, any case, optional nodes or not, channel 1 or none: a reply, no error."""
+    device = GeneratorDevice(1.0)
+    assert device.handle_line(header) and device.errors == [], header
 
 
 @fuzz(line=scpi_lines)
