@@ -1,14 +1,13 @@
 """Property-based (Hypothesis) tests of the parsers at the boundaries: the interferometer-log
 reader, the simulator's SCPI and vibrometer command parsers, and the generator driver's limit.
 
-Each property runs twice: under the default profile (a few dozen examples per target, a few
+Each property runs twice: under the default profile (40 examples per property, about two
 seconds in all) and, marked ``slow``, under the ``long`` profile (thousands of examples):
 ``pytest -m slow tests/test_fuzz.py``.  ``HYPOTHESIS_PROFILE=long pytest tests/test_fuzz.py``
 runs the default-suite tests with the long profile too.  Profiles are registered in
 ``tests/conftest.py``.
 """
 
-import functools
 import math
 import tempfile
 from dataclasses import replace
@@ -70,14 +69,17 @@ def log_like_bytes(draw):
     """Text shaped like a log (comments, a header, rows of numbers), damaged at random, then encoded."""
     separator = draw(st.sampled_from(SEPARATORS))
     line_end = draw(st.sampled_from(LINE_ENDS))
-    header = draw(st.permutations(list(logformat.REQUIRED_COLUMNS) + draw(st.lists(st.sampled_from(COLUMN_NAMES), max_size=3))))
-    lines = draw(st.lists(st.sampled_from(["# tactile interferometer log", "# format_version: 1", "", "#"]), max_size=3))
+    extra = draw(st.lists(st.sampled_from(COLUMN_NAMES), max_size=3))
+    header = draw(st.permutations(list(logformat.REQUIRED_COLUMNS) + extra))
+    lines = draw(st.lists(st.sampled_from(["# tactile interferometer log", "# format_version: 1", "", "#"]),
+                          max_size=3))
     lines.append(separator.join(header))
     width = st.integers(min_value=max(0, len(header) - 1), max_value=len(header) + 1)
     for _ in range(draw(st.integers(min_value=0, max_value=8))):
         lines.append(separator.join(draw(st.lists(cells, min_size=draw(width), max_size=len(header) + 1))))
     if draw(st.booleans()):  # a very long line somewhere
-        lines.insert(draw(st.integers(0, len(lines))), draw(st.sampled_from(["1", "a", "1,", ",", '"'])) * draw(st.integers(1000, 300_000)))
+        long_line = draw(st.sampled_from(["1", "a", "1,", ",", '"'])) * draw(st.integers(1000, 300_000))
+        lines.insert(draw(st.integers(0, len(lines))), long_line)
     text = line_end.join(lines) + draw(st.sampled_from(["", line_end]))
     return text.encode(draw(st.sampled_from(ENCODINGS)), errors="replace")
 
@@ -115,10 +117,12 @@ non_negative = st.floats(min_value=0, max_value=1e300, allow_subnormal=True)
 
 @st.composite
 def valid_logs(draw):
-    """(bytes of a valid log, its kept rows as (frequency, voltage, velocity, sweep id or None), whether the last row is dropped)."""
+    """A valid log: (its bytes, its rows as (frequency, voltage, velocity or None for a dropout, sweep id,
+    other value), whether it has a sweep column, whether it ends with a newline)."""
     optional = draw(st.lists(st.sampled_from(logformat.OPTIONAL_COLUMNS + ("x_mm", "note")), unique=True))
     header = draw(st.permutations(list(logformat.REQUIRED_COLUMNS) + optional))
-    voltages = draw(st.lists(st.integers(0, 10_000).map(lambda quarters: quarters / 4), min_size=1, max_size=3, unique=True))
+    quarter_volts = st.integers(0, 10_000).map(lambda quarters: quarters / 4)  # distinct beyond the reader's tolerance
+    voltages = draw(st.lists(quarter_volts, min_size=1, max_size=3, unique=True))
     rows = draw(st.lists(st.tuples(positive, st.sampled_from(voltages), st.one_of(non_negative, st.none()),
                                    st.integers(-5, 5), st.floats(allow_nan=False, allow_infinity=False)),
                          min_size=1, max_size=20))
@@ -226,7 +230,8 @@ device_limits = st.floats(min_value=0.1, max_value=20.0)
 
 @fuzz(lines=st.lists(scpi_lines, max_size=12), limit=device_limits)
 def test_the_simulated_generator_never_raises_and_never_exceeds_its_limit(lines, limit):
-    """Any sequence of lines: errors go to the error queue, replies are printable lines, the peak stays within the limit."""
+    """Any sequence of lines: errors go to the error queue, replies are printable lines, the peak stays
+    within the limit."""
     device = GeneratorDevice(limit)
     for line in lines:
         reply = device.handle_line(line)
@@ -304,7 +309,8 @@ def call(generator: FunctionGenerator, device: GeneratorDevice, name: str, value
 
 @fuzz(calls=st.lists(driver_calls, max_size=25), limit=st.floats(min_value=0.01, max_value=10.0))
 def test_no_sequence_of_driver_calls_exceeds_the_drivers_limit(calls, limit):
-    """Driver calls and raw commands in any order, unit and load changed behind its back: the true peak stays within the limit."""
+    """Driver calls and raw commands in any order, unit and load changed behind its back: while the output
+    is on, the true peak stays within the limit."""
     device = GeneratorDevice(DRIVER_DEVICE_LIMIT)
     device.state = GeneratorState(amplitude_vpp=1e-3, load=math.inf)
     generator = FunctionGenerator(DevicePort(device), max_peak_voltage=limit)
@@ -322,7 +328,8 @@ def test_no_sequence_of_driver_calls_exceeds_the_drivers_limit(calls, limit):
 @pytest.mark.parametrize("data, reason", [
     (b"\r\x01", "line 1: a carriage return inside the line"),
     (b"frequency_hz,drive_voltage_v,velocity_m_s\r1,1,1\r", "line 1: a carriage return inside the line"),
-    (b"frequency_hz,drive_voltage_v,velocity_m_s\n" + b"1" * 200_000 + b",1,1\n", "line 2: not a CSV row (field larger"),
+    (b"frequency_hz,drive_voltage_v,velocity_m_s\n" + b"1" * 200_000 + b",1,1\n",
+     "line 2: not a CSV row (field larger"),
     (b"\x01\x0b\x01", r"missing required column 'frequency_hz' (header: '\x01\x0b\x01')"),
 ])
 def test_found_log_inputs_are_refused_in_one_line(data, reason):

@@ -164,7 +164,9 @@ class FunctionGenerator(LineInstrument):
         """
         self._check_command(command)
         if "?" in command:
-            raise InstrumentError(f"{self._where()}: refusing {command!r} as a write: a query's reply must be read (query)")
+            raise InstrumentError(
+                f"{self._where()}: refusing {command!r} as a write: a query's reply must be read (query)"
+            )
         self._send(command)
 
     def query(self, command: str) -> str:

@@ -143,7 +143,9 @@ def read_log(path) -> CampaignLog:
     header = [name.strip() for name in _fields(path, header_number, header_line)]
     separator = next((mark for mark in ";\t" if len(header) == 1 and mark in header[0]), None)
     if separator:
-        raise InputFileError(f"{path}, line {header_number}: fields separated by {separator!r}; a log separates them by ','")
+        raise InputFileError(
+            f"{path}, line {header_number}: fields separated by {separator!r}; a log separates them by ','"
+        )
     columns = _column_indices(path, header_number, header)
     rows = body[1:]
     if not rows:
@@ -209,7 +211,9 @@ def _text_lines(path: Path):
 def _fields(path: Path, number: int, line: str) -> list:
     """The comma-separated fields of line ``number``."""
     if "\r" in line:
-        raise InputFileError(f"{path}, line {number}: a carriage return inside the line (CR line ends? expected LF or CRLF)")
+        raise InputFileError(
+            f"{path}, line {number}: a carriage return inside the line (CR line ends? expected LF or CRLF)"
+        )
     try:
         return next(csv.reader([line]))
     except csv.Error as error:
