@@ -56,6 +56,9 @@ def test_generator_settings_and_queries_replay():
         ("VOLT:OFFS?", b"+0.00000000000000E+00\n"),
         ("OUTP:LOAD?", b"+9.90000000000000E+37\n"),
         ("VOLT:UNIT VPP;:VOLT 2.5", None),
+        ("VOLT:UNIT VPP;:VOLT?", b"+2.50000000000000E+00\n"),  # switching on checks the limit first
+        ("VOLT:OFFS?", b"+0.00000000000000E+00\n"),
+        ("OUTP:LOAD?", b"+9.90000000000000E+37\n"),
         ("OUTP 1", None),
         ("OUTP?", b"1\n"),
         ("SYST:ERR?", b'+0,"No error"\n'),

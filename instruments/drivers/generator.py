@@ -13,7 +13,7 @@ high-impedance input the terminals carry (R_load + 50 ohm) / R_load times that, 
 50 ohm, so every limit decision reads the load setting and counts that factor.  Levels and
 the load are set only through ``amplitude_vpp``, ``offset`` and ``load_ohm``:
 :meth:`FunctionGenerator.write` (under ``set`` and ``query``) refuses any other command that
-sets a level or the load.
+sets a level or the load, and ``write`` refuses queries (an unread reply would answer the next query).
 """
 
 import math
@@ -45,6 +45,13 @@ def _parse_error(reply: str) -> tuple[int, str]:
     if not separator:
         raise ValueError(reply)
     return int(code), message.strip().strip('"')
+
+
+def _parse_load(reply: str) -> float:
+    value = float(reply)
+    if not value > 0:
+        raise ValueError(reply)
+    return value
 
 
 def _number(value: float) -> str:
@@ -96,7 +103,6 @@ class FunctionGenerator(LineInstrument):
     identity = measurement("*IDN?", "Manufacturer, model, serial number, firmware (str).")
     function = control("FUNC?", "FUNC {}", "Waveform shape, e.g. ``SIN`` (str).", parse=str.upper)
     frequency = control("FREQ?", "FREQ {}", "Output frequency [Hz] (float).", parse=float, format=_number)
-    output = control("OUTP?", "OUTP {}", "Output enabled (bool).", parse=_scpi_bool, format=lambda on: "1" if on else "0")
 
     amplitude_unit = measurement("VOLT:UNIT?", "Unit of ``VOLT`` (str); the driver sets ``VPP`` whenever it uses ``VOLT``.",
                                  parse=str.upper)
@@ -112,9 +118,21 @@ class FunctionGenerator(LineInstrument):
         self._send(f"VOLT:UNIT VPP;:VOLT {_number(vpp)}")
 
     @property
+    def output(self) -> bool:
+        """Output enabled (bool); switching it on checks the limit on the instrument's state first
+        (``*RST`` leaves 0.1 Vpp into 50 ohm, above a limit under 0.1 V)."""
+        return parse_with(_scpi_bool, "OUTP?", self.query("OUTP?"), self._where())
+
+    @output.setter
+    def output(self, on: bool) -> None:
+        if on:
+            self.check_peak_voltage(self.amplitude_vpp, self.offset)
+        self.set("OUTP 1" if on else "OUTP 0")
+
+    @property
     def load_ohm(self) -> float:
         """Load setting [ohm] (``math.inf`` for High Z): the instrument states levels into it."""
-        value = parse_with(float, "OUTP:LOAD?", self.query("OUTP:LOAD?"), self._where())
+        value = parse_with(_parse_load, "OUTP:LOAD?", self.query("OUTP:LOAD?"), self._where())
         return math.inf if value >= HIGH_Z_THRESHOLD_OHM else value
 
     @load_ohm.setter
@@ -138,14 +156,32 @@ class FunctionGenerator(LineInstrument):
         self._send(f"VOLT:OFFS {_number(offset)}")
 
     def write(self, command: str) -> None:
-        """Send one command line; :class:`SafetyLimitError` (nothing sent) if it sets a level.
+        """Send one command line that has no reply; :class:`SafetyLimitError` (nothing sent) if it sets a level.
 
-        Levels go through ``amplitude_vpp`` and ``offset`` only, which check the limit first.
+        Levels go through ``amplitude_vpp``, ``offset`` and ``load_ohm`` only, which check the limit first.
+        A query is refused too (:class:`InstrumentError`, nothing sent): use :meth:`query`, since an unread
+        reply would be taken for the answer to the next query, on which a limit decision may rest.
         """
+        self._check_command(command)
+        if "?" in command:
+            raise InstrumentError(
+                f"{self._where()}: refusing {command!r} as a write: a query's reply must be read (query)"
+            )
+        self._send(command)
+
+    def query(self, command: str) -> str:
+        """Send one command line and return its reply line; level settings are refused as by :meth:`write`."""
+        self._check_command(command)
+        self._send(command)
+        return self.read_line(command)
+
+    def _check_command(self, command: str) -> None:
+        """Refuse (nothing sent) a line that sets a level, or is not one line of printable ASCII."""
         if _sets_level(command):
             raise SafetyLimitError(f"{self._where()}: refusing {command!r}: levels are set through amplitude_vpp and "
                                    "offset, which check the limit")
-        self._send(command)
+        if not (command.isascii() and command.isprintable()):
+            raise InstrumentError(f"{self._where()}: refusing {command!r}: not one line of printable ASCII")
 
     def set(self, command: str) -> None:
         """Send a setting (SCPI settings have no reply); level settings are refused as by :meth:`write`."""

@@ -8,6 +8,7 @@ dropouts) are dropped and counted, and an incomplete last line without a newline
 writer interrupted mid-row) is ignored.
 """
 
+import codecs
 import csv
 import math
 from dataclasses import dataclass
@@ -148,7 +149,12 @@ def read_log(path) -> CampaignLog:
     if not body:
         raise InputFileError(f"{path}: no header row (expected columns {', '.join(logformat.REQUIRED_COLUMNS)})")
     header_number, header_line = body[0]
-    header = [name.strip() for name in next(csv.reader([header_line]))]
+    header = [name.strip() for name in _fields(path, header_number, header_line)]
+    separator = next((mark for mark in ";\t" if len(header) == 1 and mark in header[0]), None)
+    if separator:
+        raise InputFileError(
+            f"{path}, line {header_number}: fields separated by {separator!r}; a log separates them by ','"
+        )
     columns = _column_indices(path, header_number, header)
     rows = body[1:]
     if not rows:
@@ -156,7 +162,7 @@ def read_log(path) -> CampaignLog:
     table = {name: [] for name in columns}
     line_numbers, dropouts = [], 0
     for number, line in rows:
-        cells = next(csv.reader([line]))
+        cells = _fields(path, number, line)
         if len(cells) != len(header):
             raise InputFileError(f"{path}, line {number}: expected {len(header)} fields, got {len(cells)}")
         values = {name: _number(path, number, name, cells[index]) for name, index in columns.items()}
@@ -192,6 +198,8 @@ def _text_lines(path: Path):
         raise InputFileError(f"{path}: cannot read ({error.strerror or error})") from None
     if not raw.strip():
         raise InputFileError(f"{path}: empty file")
+    if raw.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
+        raise InputFileError(f"{path}: UTF-16 text, not UTF-8 (save the log as UTF-8)")
     if b"\x00" in raw:
         raise InputFileError(f"{path}: binary data (NUL bytes), not a CSV log")
     try:
@@ -216,6 +224,18 @@ def _text_lines(path: Path):
     return [(number, line.rstrip("\r")) for number, line in lines], warnings
 
 
+def _fields(path: Path, number: int, line: str) -> list:
+    """The comma-separated fields of line ``number``."""
+    if "\r" in line:
+        raise InputFileError(
+            f"{path}, line {number}: a carriage return inside the line (CR line ends? expected LF or CRLF)"
+        )
+    try:
+        return next(csv.reader([line]))
+    except csv.Error as error:
+        raise InputFileError(f"{path}, line {number}: not a CSV row ({error})") from None
+
+
 def _is_data_line(lines) -> bool:
     """Whether the last line comes after a header (so it is a row, not the header)."""
     content = [line for _, line in lines if line.strip() and not line.lstrip().startswith("#")]
@@ -237,10 +257,12 @@ def _column_indices(path: Path, line: int, header) -> dict:
         lookalikes = [c for c in header if c.lower().replace(" ", "_").startswith(_QUANTITY_STEMS[name])]
         if lookalikes:
             raise InputFileError(
-                f"{path}, line {line}: column '{lookalikes[0]}' has an unknown unit or name; expected '{name}'"
+                f"{path}, line {line}: column {lookalikes[0]!r} has an unknown unit or name; expected '{name}'"
             )
+        shown = ", ".join(header)
         raise InputFileError(
-            f"{path}, line {line}: missing required column '{name}' (header: {', '.join(header) or 'empty'})"
+            f"{path}, line {line}: missing required column '{name}' "
+            f"(header: {(shown if shown.isprintable() else repr(shown)) or 'empty'})"
         )
     return {name: index for name, index in indices.items() if name != logformat.PHASE}
 

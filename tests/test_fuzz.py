@@ -1,0 +1,363 @@
+"""Property-based (Hypothesis) tests of the parsers at the boundaries: the interferometer-log
+reader, the simulator's SCPI and vibrometer command parsers, and the generator driver's limit.
+
+Each property runs twice: under the default profile (40 examples per property, about two
+seconds in all) and, marked ``slow``, under the ``long`` profile (thousands of examples):
+``pytest -m slow tests/test_fuzz.py``.  ``HYPOTHESIS_PROFILE=long pytest tests/test_fuzz.py``
+runs the default-suite tests with the long profile too.  Profiles are registered in
+``tests/conftest.py``.
+"""
+
+import math
+import tempfile
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+
+from instruments.drivers.errors import InstrumentError
+from instruments.drivers.generator import FunctionGenerator
+from instruments.simulator.generator import FUNCTIONS, MAX_ERRORS, GeneratorDevice, GeneratorState
+from instruments.simulator.scpi import split_program
+from instruments.simulator.vibrometer import VibrometerDevice
+from test_bench_safety import DevicePort
+from workflow import logformat
+from workflow.damping.logs import read_logs
+from workflow.errors import InputFileError, TactileError
+
+pytestmark = pytest.mark.timeout(300)  # a hang fails the test instead of stalling the suite
+
+
+def fuzz(**strategies):
+    """Test the property ``body(**examples)`` under the current profile, and under ``long`` when slow."""
+
+    def decorate(body):
+        @pytest.mark.parametrize("profile", [None, pytest.param("long", marks=pytest.mark.slow)])
+        def test(profile):
+            chosen = settings() if profile is None else settings.get_profile(profile)
+            settings(chosen)(given(**strategies)(body))()
+
+        test.__name__, test.__doc__ = body.__name__, body.__doc__
+        return test
+
+    return decorate
+
+
+# --- the interferometer-log reader -----------------------------------------------------------------
+
+ENCODINGS = ("utf-8", "utf-8-sig", "latin-1", "utf-16")
+LINE_ENDS = ("\n", "\r\n", "\r")
+SEPARATORS = (",", ";", "\t")
+COLUMN_NAMES = logformat.COLUMNS + ("x_mm", "y_mm", "frequency_khz", "velocity_mm_s", "voltage", "note", "")
+
+numbers = st.floats(allow_nan=True, allow_infinity=True).map(repr)
+number_texts = st.one_of(
+    numbers,
+    st.sampled_from(["nan", "NaN", "-nan", "inf", "-inf", "Infinity", "1e400", "-1e400", "1e-400", "0", "-0", "",
+                     " ", "1_000", "0x10", "1,5", '"1"', '"', "1e308", "4.9e-324"]),
+    st.integers(min_value=-(10**400), max_value=10**400).map(str),
+    st.text(max_size=8),
+)
+cells = st.one_of(number_texts, st.sampled_from(COLUMN_NAMES))
+
+
+@st.composite
+def log_like_bytes(draw):
+    """Text shaped like a log (comments, a header, rows of numbers), damaged at random, then encoded."""
+    separator = draw(st.sampled_from(SEPARATORS))
+    line_end = draw(st.sampled_from(LINE_ENDS))
+    extra = draw(st.lists(st.sampled_from(COLUMN_NAMES), max_size=3))
+    header = draw(st.permutations(list(logformat.REQUIRED_COLUMNS) + extra))
+    lines = draw(st.lists(st.sampled_from(["# tactile interferometer log", "# format_version: 1", "", "#"]),
+                          max_size=3))
+    lines.append(separator.join(header))
+    width = st.integers(min_value=max(0, len(header) - 1), max_value=len(header) + 1)
+    for _ in range(draw(st.integers(min_value=0, max_value=8))):
+        lines.append(separator.join(draw(st.lists(cells, min_size=draw(width), max_size=len(header) + 1))))
+    if draw(st.booleans()):  # a very long line somewhere
+        long_line = draw(st.sampled_from(["1", "a", "1,", ",", '"'])) * draw(st.integers(1000, 300_000))
+        lines.insert(draw(st.integers(0, len(lines))), long_line)
+    text = line_end.join(lines) + draw(st.sampled_from(["", line_end]))
+    return text.encode(draw(st.sampled_from(ENCODINGS)), errors="replace")
+
+
+log_inputs = st.one_of(st.binary(max_size=2000), log_like_bytes(), st.text(max_size=500).map(str.encode))
+
+
+def read_file_bytes(data: bytes):
+    """read_logs on a file holding ``data``: (log or None, error or None); the file's bytes are unchanged."""
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "log.csv"
+        path.write_bytes(data)
+        try:
+            return read_logs([path]), None
+        except InputFileError as error:
+            message = str(error)
+            assert str(path) in message and len(message.splitlines()) == 1, message
+            return None, error
+        finally:
+            assert path.read_bytes() == data
+
+
+@fuzz(data=log_inputs)
+def test_the_log_reader_returns_a_log_or_one_line_naming_the_file(data):
+    """Any bytes: a log, or one InputFileError line naming the file; never another exception; the file unchanged."""
+    log, _ = read_file_bytes(data)
+    if log is not None:
+        assert len(log.frequency) == len(log.drive_voltage) == len(log.velocity) == len(log.sweep) > 0
+        assert np.all(log.frequency > 0) and np.all(log.drive_voltage >= 0) and np.all(log.velocity >= 0)
+
+
+positive = st.floats(min_value=0, max_value=1e300, exclude_min=True, allow_subnormal=True)
+velocities = st.floats(min_value=1e-6, max_value=10.0)
+"""Velocities a sweep may hold [m/s] (docs/log-format.md: 0 to 10 m/s, each sweep peaking at 1 um/s or more)."""
+
+
+@st.composite
+def valid_logs(draw):
+    """A valid log: (its bytes, its rows as (frequency, voltage, velocity or None for a dropout, sweep id,
+    other value), whether it has a sweep column, whether it ends with a newline)."""
+    optional = draw(st.lists(st.sampled_from(logformat.OPTIONAL_COLUMNS + ("x_mm", "note")), unique=True))
+    header = draw(st.permutations(list(logformat.REQUIRED_COLUMNS) + optional))
+    quarter_volts = st.integers(0, 10_000).map(lambda quarters: quarters / 4)  # distinct beyond the reader's tolerance
+    voltages = draw(st.lists(quarter_volts, min_size=1, max_size=3, unique=True))
+    rows = draw(st.lists(st.tuples(positive, st.sampled_from(voltages), st.one_of(velocities, st.none()),
+                                   st.integers(-5, 5), st.floats(allow_nan=False, allow_infinity=False)),
+                         min_size=1, max_size=20))
+    values = {logformat.FREQUENCY: 0, logformat.DRIVE_VOLTAGE: 1, logformat.VELOCITY: 2, logformat.SWEEP: 3}
+    line_end = draw(st.sampled_from(("\n", "\r\n")))
+    lines = ["# tactile interferometer log", "# format_version: 1", ",".join(header)]
+    for row in rows:
+        fields = []
+        for name in header:
+            value = row[values[name]] if name in values else row[4]
+            fields.append(draw(st.sampled_from(["", "nan"])) if value is None else repr(value))
+        lines.append(",".join(fields))
+        if draw(st.booleans()):
+            lines.append(draw(st.sampled_from(["", "# a comment", "   "])))
+    while lines[-1].strip() == "" or lines[-1].startswith("#"):
+        lines.pop()
+    final_newline = draw(st.booleans())
+    text = line_end.join(lines) + (line_end if final_newline else "")
+    bom = draw(st.sampled_from(["", "\ufeff"]))
+    return (bom + text).encode(), rows, logformat.SWEEP in header, final_newline
+
+
+@fuzz(case=valid_logs())
+def test_valid_logs_read_back_with_the_values_written(case):
+    """A log built from the format with random values reads back exactly: values, dropouts, sweeps."""
+    data, rows, has_sweep, final_newline = case
+    if not final_newline:
+        rows = rows[:-1]  # an incomplete last line is ignored
+    kept = [row for row in rows if row[2] is not None]
+    log, error = read_file_bytes(data)
+    if not kept:
+        assert error is not None
+        return
+    assert error is None, error
+    frequency, voltage, velocity, ids, _ = map(list, zip(*kept))
+    assert list(log.frequency) == frequency and list(log.drive_voltage) == voltage and list(log.velocity) == velocity
+    key = ids if has_sweep else voltage
+    starts = [True] + [a != b for a, b in zip(key[1:], key[:-1])]
+    assert list(log.sweep) == list(np.cumsum(starts) - 1)
+    assert len(log.warnings) == (len(kept) < len(rows)) + (not final_newline)
+
+
+@fuzz(case=valid_logs(), line=st.integers(min_value=0), bad=st.sampled_from(["inf", "-1", "abc", "1e999", "-inf"]))
+def test_a_bad_value_is_refused_naming_its_line(case, line, bad):
+    """One non-finite, negative or non-numeric frequency in a valid log: one line naming the file and that line."""
+    data, rows, _, _ = case
+    lines = data.decode("utf-8-sig").split("\n")
+    header_at = 2  # after the two metadata lines valid_logs writes
+    header = lines[header_at].rstrip("\r").split(",")
+    velocity = header.index(logformat.VELOCITY)
+    complete = lines if data.endswith(b"\n") else lines[:-1]  # an incomplete last line is ignored
+    data_lines = [i for i, text in enumerate(complete) if i > header_at and text.strip() and not text.startswith("#")
+                  and text.rstrip("\r").split(",")[velocity] not in ("", "nan")]  # nor are dropouts checked
+    assume(data_lines)
+    target = data_lines[line % len(data_lines)]
+    fields = lines[target].rstrip("\r").split(",")
+    fields[header.index(logformat.FREQUENCY)] = bad
+    lines[target] = ",".join(fields) + "\r" * lines[target].endswith("\r")
+    _, error = read_file_bytes("\n".join(lines).encode())
+    assert error is not None and f"line {target + 1}:" in str(error)
+
+
+# --- the simulator's command parsers -------------------------------------------------------------
+
+HEADER_PATTERNS = ("*IDN", "*RST", "*CLS", "*OPC", "SYSTem:ERRor[:NEXT]", "[SOURce#:]FUNCtion[:SHAPe]",
+                   "[SOURce#:]FREQuency[:CW]", "[SOURce#:]VOLTage:UNIT", "[SOURce#:]VOLTage[:LEVel][:IMMediate]:OFFSet",
+                   "[SOURce#:]VOLTage[:LEVel][:IMMediate][:AMPLitude]", "OUTPut#:LOAD", "OUTPut#[:STATe]",
+                   "APPLy:SINusoid", "VOLTage:HIGH", "VOLTage:LOW")
+"""The headers of docs/instruments.md, as the 33500 manual writes them, and a few it lacks."""
+
+
+SUFFIXES = ("", "", "1", "2", "01", "0", "99999999999999999999")
+QUERY_MARKS = ("", "", "?")
+
+
+@st.composite
+def scpi_headers(draw, patterns=HEADER_PATTERNS, suffixes=SUFFIXES, query_marks=QUERY_MARKS):
+    """A header from ``patterns``: random short/long forms, case, optional nodes, suffixes, query mark."""
+    pattern = draw(st.sampled_from(patterns))
+    nodes = []
+    for node in pattern.replace("[", " [").replace("]", "] ").replace(":", " ").split():
+        if node.startswith("[") and not draw(st.booleans()):
+            continue
+        word = node.strip("[]")
+        suffix = draw(st.sampled_from(suffixes)) if "#" in word else ""
+        word = word.rstrip("#")
+        form = word if draw(st.booleans()) else "".join(c for c in word if not c.islower())
+        nodes.append(draw(st.sampled_from([form, form.upper(), form.lower()])) + suffix)
+    header = ":".join(node for node in nodes if node)
+    return draw(st.sampled_from(["", ":"])) + header + draw(st.sampled_from(query_marks))
+
+
+scpi_arguments = st.one_of(number_texts, st.sampled_from(["INF", "MIN", "MAX", "DEF", "ON", "OFF", "VPP", "VRMS", "DBM",
+                                                           "SIN", "SQUARE", "1000,8,0", "0", "1"]))
+scpi_commands = st.tuples(scpi_headers(), st.sampled_from(["", " ", "  ", "\t", " ,"]), scpi_arguments).map("".join)
+scpi_lines = st.one_of(
+    st.lists(scpi_commands, min_size=1, max_size=4).flatmap(
+        lambda commands: st.sampled_from([";", "; ", ";:"]).map(lambda separator: separator.join(commands))),
+    st.text(max_size=200),
+    st.text(st.characters(min_codepoint=0x20, max_codepoint=0x7E), max_size=200),
+    st.tuples(st.sampled_from(["VOLT ", "FREQ ", "", ";", ":"]), st.integers(1000, 100_000)).map(lambda t: t[0] * t[1]),
+)
+device_limits = st.floats(min_value=0.1, max_value=20.0)
+
+
+@fuzz(lines=st.lists(scpi_lines, max_size=12), limit=device_limits)
+def test_the_simulated_generator_never_raises_and_never_exceeds_its_limit(lines, limit):
+    """Any sequence of lines: errors go to the error queue, replies are printable lines, the peak stays
+    within the limit."""
+    device = GeneratorDevice(limit)
+    for line in lines:
+        reply = device.handle_line(line)
+        assert reply is None or (reply.isprintable() and reply.isascii()), reply
+        assert device.state.peak_voltage <= limit + 1e-9, (line, device.state)
+        assert len(device.errors) <= MAX_ERRORS
+
+
+@fuzz(header=scpi_headers(HEADER_PATTERNS[4:12] + ("*IDN", "*OPC"), suffixes=("", "1"), query_marks=("?",)))
+def test_every_form_of_a_documented_query_is_answered(header):
+    """Short or long form, any case, optional nodes or not, channel 1 or none: a reply, no error."""
+    device = GeneratorDevice(1.0)
+    assert device.handle_line(header) and device.errors == [], header
+
+
+@fuzz(line=scpi_lines)
+def test_split_program_returns_header_and_argument_pairs(line):
+    """Any line: (header, argument) pairs, headers non-empty and without ';'."""
+    for header, argument in split_program(line):
+        assert header and ";" not in header + argument
+
+
+VIBROMETER_WORDS = ("Get", "GetDevInfo", "Set", "Controller", "VeloDec", "LockIn", "0", "1", "Name", "Version",
+                    "Ranges", "Range", "Velocity", "5mm/s/V", "100MM/S/V", "3mm/s/V", "mm/s/V", "")
+vibrometer_lines = st.one_of(
+    st.lists(st.one_of(st.sampled_from(VIBROMETER_WORDS), st.text(max_size=6)), max_size=7).flatmap(
+        lambda words: st.sampled_from([",", ", ", ";"]).map(lambda separator: separator.join(words))),
+    st.text(max_size=200),
+)
+
+
+@fuzz(lines=st.lists(vibrometer_lines, max_size=12), amplitude=st.floats(min_value=0, max_value=1e3))
+def test_the_simulated_vibrometer_answers_every_line_with_one_line(lines, amplitude):
+    """Any sequence of lines: one printable reply line each (an error reply for what it does not know)."""
+    device = VibrometerDevice(lambda: (amplitude, 0.0), np.random.default_rng(0), 0.01, 1e-3, 0.1)
+    for line in lines:
+        reply = device.handle_line(line)
+        assert isinstance(reply, str) and reply and reply.isprintable() and reply.isascii(), reply
+
+
+# --- the generator driver's limit over the simulated generator -----------------------------------
+
+DRIVER_DEVICE_LIMIT = 1e6
+"""The simulated generator's own limit, far above the driver's, so that only the driver stands in the way [V]."""
+levels = st.floats(min_value=-20, max_value=20)
+driver_calls = st.one_of(
+    st.tuples(st.just("amplitude_vpp"), st.floats(min_value=1e-3, max_value=10)),
+    st.tuples(st.just("offset"), levels),
+    st.tuples(st.just("load_ohm"), st.sampled_from([math.inf, 1.0, 50.0, 1000.0, 10e3])),
+    st.tuples(st.just("function"), st.sampled_from(FUNCTIONS)),
+    st.tuples(st.just("frequency"), st.floats(min_value=1, max_value=1e6)),
+    st.tuples(st.just("output"), st.booleans()),
+    st.tuples(st.sampled_from(["reset", "clear", "switch_off", "check_errors"]), st.none()),
+    st.tuples(st.sampled_from(["write", "set"]), scpi_lines),
+    st.tuples(st.just("unit behind"), st.sampled_from(["VPP", "VRMS"])),
+    st.tuples(st.just("load behind"), st.sampled_from([math.inf, 1.0, 50.0, 1000.0])),
+)
+
+
+def call(generator: FunctionGenerator, device: GeneratorDevice, name: str, value) -> None:
+    """One driver call, or a change made behind the driver's back (only one keeping the peak within its limit)."""
+    if name in ("unit behind", "load behind"):
+        changed = replace(device.state, **{"unit" if name == "unit behind" else "load": value})
+        if changed.peak_voltage <= generator.max_peak_voltage:
+            device.state = changed
+    elif name in ("reset", "clear", "switch_off"):
+        getattr(generator, name)()
+    elif name == "check_errors":
+        generator.check_errors("fuzzing")
+    elif name in ("write", "set"):
+        getattr(generator, name)(value)
+    else:
+        setattr(generator, name, value)
+
+
+@fuzz(calls=st.lists(driver_calls, max_size=25), limit=st.floats(min_value=0.01, max_value=10.0))
+def test_no_sequence_of_driver_calls_exceeds_the_drivers_limit(calls, limit):
+    """Driver calls and raw commands in any order, unit and load changed behind its back: while the output
+    is on, the true peak stays within the limit."""
+    device = GeneratorDevice(DRIVER_DEVICE_LIMIT)
+    device.state = GeneratorState(amplitude_vpp=1e-3, load=math.inf)
+    generator = FunctionGenerator(DevicePort(device), max_peak_voltage=limit)
+    for name, value in calls:
+        try:
+            call(generator, device, name, value)
+        except InstrumentError:
+            pass
+        if device.state.output:
+            assert device.state.peak_voltage <= limit * (1 + 1e-9), (name, value, device.state)
+
+
+# --- what the fuzzing found, kept as plain regression tests --------------------------------------
+
+@pytest.mark.parametrize("data, reason", [
+    (b"\r\x01", "line 1: a carriage return inside the line"),
+    (b"frequency_hz,drive_voltage_v,velocity_m_s\r1,1,1\r", "line 1: a carriage return inside the line"),
+    (b"frequency_hz,drive_voltage_v,velocity_m_s\n" + b"1" * 200_000 + b",1,1\n",
+     "line 2: "),
+    (b"\x01\x0b\x01", r"missing required column 'frequency_hz' (header: '\x01\x0b\x01')"),
+])
+def test_found_log_inputs_are_refused_in_one_line(data, reason):
+    _, error = read_file_bytes(data)
+    assert reason in str(error)
+
+
+def test_found_driver_sequences_are_refused():
+    device = GeneratorDevice(DRIVER_DEVICE_LIMIT)
+    generator = FunctionGenerator(DevicePort(device), max_peak_voltage=0.0625)
+    for command in ("OUTP?", "VOLT:OFFS?"):  # an unread reply would answer the next limit decision's query
+        with pytest.raises(InstrumentError, match="a query's reply must be read"):
+            generator.write(command)
+    with pytest.raises(InstrumentError, match="not one line of printable ASCII"):
+        generator.set("FREQ 1\u00b5")
+    generator.reset()  # 0.1 Vpp into 50 ohm: 0.1 V peak, output off
+    with pytest.raises(TactileError, match="exceeds the limit 0.0625 V"):
+        generator.output = True
+    assert not device.state.output and device.errors == []
+
+
+@pytest.mark.parametrize("encoding, separator, reason", [
+    ("utf-16", ",", "UTF-16 text, not UTF-8"),
+    ("utf-8", ";", "line 1: fields separated by ';'; a log separates them by ','"),
+    ("utf-8-sig", "\t", r"line 1: fields separated by '\t'"),
+])
+def test_a_spreadsheet_export_in_another_encoding_or_separator_is_named(encoding, separator, reason):
+    text = separator.join(logformat.REQUIRED_COLUMNS) + "\n" + separator.join(["31000", "5", "0.1"]) + "\n"
+    _, error = read_file_bytes(text.encode(encoding))
+    assert reason in str(error)
