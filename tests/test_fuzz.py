@@ -17,13 +17,13 @@ import numpy as np
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
+from test_bench_safety import DevicePort
 
 from instruments.drivers.errors import InstrumentError
 from instruments.drivers.generator import FunctionGenerator
 from instruments.simulator.generator import FUNCTIONS, MAX_ERRORS, GeneratorDevice, GeneratorState
 from instruments.simulator.scpi import split_program
 from instruments.simulator.vibrometer import VibrometerDevice
-from test_bench_safety import DevicePort
 from workflow import logformat
 from workflow.damping.logs import read_logs
 from workflow.errors import InputFileError, TactileError

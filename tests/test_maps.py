@@ -4,8 +4,8 @@ import json
 
 import numpy as np
 import pytest
-
 from test_cli import run_cli
+
 from workflow.execution.cache import EvaluationCache
 from workflow.models.fem import FemSettings
 from workflow.models.plate import ORIGINAL_PLATE

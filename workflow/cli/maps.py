@@ -23,11 +23,11 @@ from workflow.cli.options import (
 )
 from workflow.errors import TactileError
 from workflow.execution.cache import EvaluationCache
-from workflow.pipeline.config import LIMITS
 from workflow.optimise.damped import damped_fem_optimum, damped_maps, damped_optimum, fem_damped_maps, map_draws
 from workflow.optimise.fem_optimum import optimise_fem
 from workflow.optimise.maps import design_map, width_sweep
 from workflow.optimise.problem import analytical_model, optimise_analytical
+from workflow.pipeline.config import LIMITS
 from workflow.pipeline.records import damped_optimum_record, fem_damping_record
 from workflow.units import KHZ, MM, UM
 
