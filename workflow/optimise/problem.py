@@ -25,6 +25,10 @@ PlateModel = Callable[[Plate], Tuple[np.ndarray, np.ndarray]]
 """model(plate) -> (deflection [m], resonance frequency [Hz]), batched over the plate's arrays."""
 
 
+FREQUENCY_SLACK = 1e-6
+"""Relative shortfall of f_r below its limit still counted as on it [-] (0.025 Hz at 25 kHz)."""
+
+
 @dataclass(frozen=True)
 class DesignProblem:
     """Maximise the deflection over (lambda, h_i) with f_r >= ``min_frequency``.
@@ -94,7 +98,7 @@ class Optimum:
     evaluations : int
         Geometries the model evaluated (every finite-difference point counts).
     constraint_active : bool
-        Whether f_r sits on its lower limit (within 1e-6 relative, or the constraint tolerance).
+        Whether f_r sits on its lower limit (within :data:`FREQUENCY_SLACK`, or the constraint tolerance).
     status : str
         NLopt's stopping reason.
     """
@@ -237,7 +241,7 @@ def maximise_deflection(
     x_opt = optimizer.optimize(list(start_mm))
     status = _STATUS.get(optimizer.last_optimize_result(), str(optimizer.last_optimize_result()))
     deflection, frequency = (float(v[0]) for v in evaluate(np.asarray(x_opt)))
-    slack = max(1e-6, constraint_tolerance)
+    slack = max(FREQUENCY_SLACK, constraint_tolerance)
     if frequency < problem.min_frequency * (1 - slack):
         raise InfeasibleError(
             f"the optimiser ended on an infeasible point (f_r = {frequency / 1e3:.3f} kHz < "

@@ -22,16 +22,13 @@ from workflow.optimise.damped import (
     required_voltage,
 )
 from workflow.optimise.maps import TRANSVERSE_THRESHOLD
-from workflow.optimise.problem import DesignProblem
+from workflow.optimise.problem import FREQUENCY_SLACK, DesignProblem
 
 DEFAULT_MESH_FREQUENCY_ERROR = 0.0039
 """Relative error of the default FEM mesh's frequency [-]: the default mesh is 0.39 % above the
 Richardson extrapolation of uniform refinements (original plate at b = 55 mm, docs/fem.md,
 "Accuracy: mesh convergence"); refining lowers the frequency."""
 
-FREQUENCY_SLACK = 1e-6
-"""Relative shortfall of the working frequency below the limit still counted as on it [-]
-(the optimiser's constraint slack: 0.025 Hz at 25 kHz)."""
 
 
 @dataclass(frozen=True)

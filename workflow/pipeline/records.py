@@ -10,7 +10,13 @@ from workflow.damping.laws import law_parameters
 from workflow.models.analytical import resonance_frequency
 from workflow.models.materials import TARGET_DEFLECTION
 from workflow.models.plate import Plate
-from workflow.optimise.damped import damped_deflection, fem_damped_deflection, fem_required_voltage, required_voltage
+from workflow.optimise.damped import (
+    QUANTILES,
+    damped_deflection,
+    fem_damped_deflection,
+    fem_required_voltage,
+    required_voltage,
+)
 from workflow.optimise.problem import Optimum
 from workflow.units import KHZ, MM, UM
 
@@ -45,7 +51,7 @@ def damping_record(posterior, plate: Plate, voltage: float, draws: int = POSTERI
     the Q it settles at, 90 % intervals over posterior draws and the voltage for the target."""
     law, drawn = posterior.median_law(), posterior.draws(draws)
     deflection = float(damped_deflection(plate, voltage, law))
-    w05, w95 = np.quantile(damped_deflection(plate, voltage, drawn), [0.05, 0.95])
+    w05, _, w95 = np.quantile(damped_deflection(plate, voltage, drawn), QUANTILES)
     return {
         "w_dyn_um_p05": w05 / UM,
         "w_dyn_um_p95": w95 / UM,
@@ -74,7 +80,7 @@ def damping_keys(posterior, deflection: float, frequency: float, required_voltag
     """Deflection [um] and the Q it settles at, the voltage for the target deflection (median
     and 90 % over posterior draws) and the law used."""
     law = posterior.median_law()
-    v05, v50, v95 = np.quantile(required_voltages, [0.05, 0.5, 0.95])
+    v05, v50, v95 = np.quantile(required_voltages, QUANTILES)
     return {
         "w_dyn_um": deflection / UM,
         "q": float(law.quality_factor(2 * np.pi * frequency * deflection)),
