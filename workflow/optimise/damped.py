@@ -366,7 +366,7 @@ def damped_maps(
     return _damped_maps(
         problem,
         optimum,
-        _law_label(posterior.law_name, median),
+        "beam model, " + _law_label(posterior.law_name, median),
         wavelength=wavelength,
         resonator_thickness=thickness,
         deflection=damped_deflection(plate, problem.voltage, median),
