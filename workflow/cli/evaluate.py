@@ -7,16 +7,19 @@ from workflow.cli.options import (
     add_ceramic_option,
     add_damping_option,
     add_drive_options,
+    add_fem_options,
     add_json_flag,
     add_model_option,
     add_width_option,
+    accuracy_line,
     damping_line,
+    fem_accuracy,
     load_damping,
     plate_from_args,
     positive_float,
 )
 from workflow.models import analytical
-from workflow.pipeline.records import damping_record, fem_damping_record, geometry_record
+from workflow.pipeline.records import damping_record, fem_accuracy_record, fem_damping_record, geometry_record
 from workflow.units import KHZ, UM
 
 
@@ -36,6 +39,7 @@ def register(subparsers) -> None:
     add_width_option(parser)
     add_drive_options(parser)
     add_damping_option(parser)
+    add_fem_options(parser)
     add_json_flag(parser)
     parser.set_defaults(handler=run)
 
@@ -63,9 +67,10 @@ def run(args) -> dict:
     else:
         from workflow.models.fem import evaluate_fem
 
-        fem = evaluate_fem(plate, q=args.q, voltage=args.voltage)
+        fem = evaluate_fem(plate, q=args.q, voltage=args.voltage, settings=fem_accuracy(args))
         result["w_dyn_um"] = fem.deflection / UM
         result["f_r_khz"] = fem.frequency / KHZ
+        result.update(fem_accuracy_record(fem.error))
         result["modes"] = [
             {"f_khz": m.frequency / KHZ, "w_um": m.deflection / UM, "transverse": m.transverse_indicator}
             for m in fem.modes
@@ -88,6 +93,8 @@ def _print_human(result: dict, model: str, working_mode) -> None:
         f"b {result['b_mm']:g} mm, {'Q(v)' if damped else 'Q ' + format(result['q'], 'g')}, "
         f"{result['voltage_v']:g} V -> w_dyn {result['w_dyn_um']:.4f} µm{interval} at f_r {result['f_r_khz']:.3f} kHz"
     )
+    if "f_error_estimate" in result:
+        print(accuracy_line(result))
     if damped:
         print(damping_line(result))
     for index, mode in enumerate(result.get("modes", [])):

@@ -1,9 +1,11 @@
 """``tactile optimize``: the geometry of maximum deflection with f_r >= 25 kHz."""
 
 from workflow.cli.options import (
+    accuracy_line,
     add_ceramic_option,
     add_damping_option,
     add_drive_options,
+    add_fem_options,
     add_hi_min_option,
     add_json_flag,
     add_model_option,
@@ -11,12 +13,13 @@ from workflow.cli.options import (
     ceramic_thicknesses,
     damping_line,
     design_problem,
+    fem_accuracy,
     load_damping,
 )
 from workflow.optimise.damped import damped_fem_optimum, damped_optimum
 from workflow.optimise.fem_optimum import METHODS, optimise_fem
 from workflow.optimise.problem import optimise_analytical
-from workflow.pipeline.records import damped_optimum_record, fem_damping_record, optimum_record
+from workflow.pipeline.records import damped_optimum_record, fem_accuracy_record, fem_damping_record, optimum_record
 
 DEFAULT_METHOD = "space-mapping"
 """--method when not given: a handful of FEM evaluations instead of the direct run's dozens."""
@@ -44,16 +47,17 @@ def register(subparsers) -> None:
     add_width_option(parser)
     add_drive_options(parser)
     add_damping_option(parser)
+    add_fem_options(parser)
     add_json_flag(parser)
     parser.set_defaults(handler=run)
 
 
 def _fem_model(args):
-    """The cached, parallel FEM at --q and --voltage (default mesh)."""
+    """The cached, parallel FEM at --q, --voltage and --accuracy."""
     from workflow.execution.cache import EvaluationCache
     from workflow.optimise.fem_model import FemModel
 
-    return FemModel(q=args.q, voltage=args.voltage, cache=EvaluationCache(), progress=True)
+    return FemModel(q=args.q, voltage=args.voltage, settings=fem_accuracy(args), cache=EvaluationCache(), progress=True)
 
 
 def run(args) -> dict:
@@ -78,7 +82,8 @@ def run(args) -> dict:
             counts = dict(
                 method=found.method, fine_evaluations=found.fine_evaluations, coarse_evaluations=found.coarse_evaluations
             )
-            records.append({**optimum_record(found.optimum, **counts), **extra})
+            accuracy = {**fem_accuracy_record(found.error), "verified": found.verified} if found.error else {}
+            records.append({**optimum_record(found.optimum, **counts), **accuracy, **extra})
     if not args.json:
         for record in records:
             _print_human(record)
@@ -94,5 +99,9 @@ def _print_human(record: dict) -> None:
         f"h_p {record['h_p_mm']:g} mm: lambda {record['lambda_mm']:.4f} mm, h_i {record['h_i_mm']:.4f} mm -> "
         f"w_dyn {record['w_dyn_um']:.4f} µm at f_r {record['f_r_khz']:.3f} kHz ({method}{', '.join(counts)})"
     )
+    if "f_error_estimate" in record:
+        print(accuracy_line(record))
+        if not record["verified"]:
+            print("  WARNING: f_r >= limit not verified on the converged model (see the accuracy line)")
     if "damping" in record:
         print(damping_line(record))

@@ -13,6 +13,7 @@ from pathlib import Path
 from workflow.damping.posterior import load_posterior
 from workflow.errors import GeometryError, InputFileError, TactileError
 from workflow.models import materials
+from workflow.models.fem.accuracy import ACCURACY_RANGE, DEFAULT_ACCURACY, FemAccuracy
 from workflow.models.plate import ORIGINAL_PLATE, Plate, check_design_space
 from workflow.optimise.problem import DesignProblem
 from workflow.pipeline.config import LIMITS
@@ -176,6 +177,35 @@ def design_problem(args, ceramic_thickness: float) -> DesignProblem:
         width=args.b_mm * MM,
         voltage=getattr(args, "voltage", materials.DESIGN_VOLTAGE),
         min_resonator_thickness=hi_min,
+    )
+
+
+def add_fem_options(parser: argparse.ArgumentParser) -> None:
+    """--accuracy: the FEM's target relative frequency error."""
+    low, high = ACCURACY_RANGE
+    parser.add_argument(
+        "--accuracy",
+        type=bounded(float, low, high),
+        default=DEFAULT_ACCURACY,
+        metavar="REL",
+        help=f"FEM only: target relative frequency error, {low:g} to {high:g}; the mesh follows the geometry and "
+        f"is refined until the estimated error meets it (default: {DEFAULT_ACCURACY:g}, i.e. "
+        f"{DEFAULT_ACCURACY * 100:g} %%)",
+    )
+
+
+def fem_accuracy(args) -> FemAccuracy:
+    """The FEM accuracy asked for by --accuracy."""
+    return FemAccuracy(target=args.accuracy)
+
+
+def accuracy_line(record: dict) -> str:
+    """The FEM accuracy of a record with ``fem_accuracy_record`` keys, for people."""
+    verdict = "met" if record["accuracy_met"] else "NOT met (finest mesh reached)"
+    return (
+        f"  FEM accuracy: f_r {record['f_error_estimate'] * 100:+.2f} %, w_dyn {record['w_error_estimate'] * 100:+.2f} % "
+        f"(estimated error of the values above, mesh level {record['mesh_level']}; "
+        f"target {record['accuracy'] * 100:g} % {verdict})"
     )
 
 

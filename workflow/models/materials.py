@@ -60,6 +60,9 @@ PZT = PiezoMaterial(
 )
 """The piezo-ceramic strips (Table 1)."""
 
+EPOXY = Material("epoxy", youngs_modulus=3.0e9, density=1150.0, poisson_ratio=0.35)
+"""A structural epoxy bond (typical values of cured bisphenol-A epoxies, 2-4 GPa; docs/model.md)."""
+
 N_CERAMICS = 7
 """Ceramics along x [-]."""
 CERAMIC_GAP = 1.0e-3

@@ -34,6 +34,11 @@ class Plate:
         Gap between neighbouring ceramics, delta [m].
     resonator, ceramic : Material, PiezoMaterial
         Layer materials.
+    glue_thickness : float
+        Thickness of the bond between each ceramic and the resonator (only under the ceramics) [m];
+        0 (the default, as in the paper) bonds them directly.  The beam model ignores it.
+    glue : Material
+        The bond's material (default: the epoxy record, docs/model.md).
     """
 
     wavelength: float
@@ -44,12 +49,17 @@ class Plate:
     gap: float = materials.CERAMIC_GAP
     resonator: Material = field(default=materials.COPPER_BERYLLIUM, repr=False)
     ceramic: PiezoMaterial = field(default=materials.PZT, repr=False)
+    glue_thickness: float = 0.0
+    glue: Material = field(default=materials.EPOXY, repr=False)
 
     def __post_init__(self):
         for name in ("wavelength", "resonator_thickness", "ceramic_thickness", "width"):
             value = np.asarray(getattr(self, name), dtype=float)
             if not np.all(np.isfinite(value)) or np.any(value <= 0):
                 raise GeometryError(f"{name} must be a positive finite length in metres, got {_show(value)}")
+        glue = np.asarray(self.glue_thickness, dtype=float)
+        if not np.all(np.isfinite(glue)) or np.any(glue < 0):
+            raise GeometryError(f"glue_thickness must be a finite length >= 0 in metres, got {_show(glue)}")
         if not (isinstance(self.n_ceramics, (int, np.integer)) and self.n_ceramics >= 1 and self.n_ceramics % 2 == 1):
             raise GeometryError(f"n_ceramics must be a positive odd integer, got {self.n_ceramics!r}")
         if not np.all(np.asarray(self.wavelength) / 2 > self.gap):
@@ -79,7 +89,7 @@ class Plate:
 
     @property
     def total_thickness(self):
-        """h_p + h_i [m]."""
+        """h_p + h_i [m] (the glue, under the ceramics only, is not counted)."""
         return np.asarray(self.ceramic_thickness) + np.asarray(self.resonator_thickness)
 
     @property

@@ -18,7 +18,7 @@ velocity v* = 2 pi f_r w* is known, so V* = w* / (Q(v*) k) in closed form (FEM:
 V* = V_0 w* / D(Q(v*)), D the deflection at V_0 as a function of Q, linear in V).
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Dict, Optional, Sequence
 
 import numpy as np
@@ -103,6 +103,15 @@ class DampedFemModel:
     law: object
     fem_model: object
     voltage: float = materials.DESIGN_VOLTAGE
+
+    @property
+    def settings(self):
+        """The underlying FEM's settings (an accuracy or a fixed mesh)."""
+        return self.fem_model.settings
+
+    def on_mesh(self, mesh) -> "DampedFemModel":
+        """The same model with its FEM on a fixed mesh."""
+        return replace(self, fem_model=self.fem_model.on_mesh(mesh))
 
     def results(self, plate: Plate):
         return self.fem_model.results(plate)

@@ -10,7 +10,7 @@ fields, Q, the voltage, the FEM settings and a hash of the FEM's source code.
 (results with tangents are cached under their own model name).
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +18,7 @@ import numpy as np
 from workflow.execution.cache import EvaluationCache, cached_map, source_version
 from workflow.models import fem, materials
 from workflow.models.fem import FemResult, FemSettings, evaluate_fem
+from workflow.models.fem.accuracy import FemAccuracy
 from workflow.models.fem.sensitivity import DESIGN_PARAMETERS, best_mode_gradients, evaluate_fem_with_tangents
 from workflow.models.plate import Plate
 
@@ -36,7 +37,7 @@ class FemTask:
     plate: Plate
     q: float
     voltage: float
-    settings: FemSettings
+    settings: FemAccuracy | FemSettings
     tangents: bool = False
 
 
@@ -83,7 +84,8 @@ class FemModel:
         Plate quality factor [-].
     voltage : float
         Drive amplitude [V].
-    settings : FemSettings
+    settings : FemAccuracy or FemSettings
+        An accuracy (each geometry gets the mesh it needs and an error estimate) or a fixed mesh.
     cache : EvaluationCache or None
         None recomputes everything.
     scheduler : None, str or distributed.Client
@@ -96,11 +98,15 @@ class FemModel:
 
     q: float = materials.PLATE_Q
     voltage: float = materials.DESIGN_VOLTAGE
-    settings: FemSettings = field(default_factory=FemSettings)
+    settings: FemAccuracy | FemSettings = field(default_factory=FemAccuracy)
     cache: EvaluationCache | None = None
     scheduler: object = None
     progress: bool = False
     evaluations: int = 0
+
+    def on_mesh(self, mesh: FemSettings) -> "FemModel":
+        """The same model on a fixed mesh (same cache and scheduler), its evaluation count at zero."""
+        return replace(self, settings=mesh, evaluations=0)
 
     def results(self, plate: Plate, with_tangents: bool = False) -> list[FemResult]:
         """The full FEM result of every plate of the batch.

@@ -5,11 +5,14 @@ design sensitivities when the fine model has them (the plain FEM) and from its r
 otherwise (e.g. the FEM with Q(v)).
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from workflow.models.fem.accuracy import ErrorEstimate, FemAccuracy, mesh_for_level
+
 from workflow.optimise.problem import (
+    FREQUENCY_SLACK,
     DesignProblem,
     Optimum,
     PlateModel,
@@ -29,6 +32,8 @@ DIRECT_CONSTRAINT_TOLERANCE = 1e-5
 """Accepted relative shortfall of f_r in the direct run [-] (0.25 Hz: forward differences are noisy)."""
 DIRECT_MAX_ITERATIONS = 100
 """Cap on SLSQP iterations of the direct run (each costs 3 FEM evaluations) [-]."""
+VERIFICATION_ROUNDS = 3
+"""Most optimisations on ever finer meshes before an FEM optimum is returned unverified [-]."""
 
 
 @dataclass(frozen=True)
@@ -44,6 +49,12 @@ class FemOptimum:
         FEM and beam-model geometries evaluated.
     trajectory : tuple of FineStep
         The FEM points of a space-mapping search in evaluation order (empty for the direct run).
+    error : ErrorEstimate or None
+        Discretisation error of the optimum, from its evaluation at the requested accuracy
+        (None when the model ran on a fixed mesh).
+    verified : bool
+        The optimum's frequency, less its estimated error, meets the limit on the converged model
+        (always False on a fixed mesh, where nothing is verified).
     """
 
     optimum: Optimum
@@ -51,6 +62,16 @@ class FemOptimum:
     fine_evaluations: int
     coarse_evaluations: int
     trajectory: tuple = ()
+    error: ErrorEstimate | None = None
+    verified: bool = False
+
+
+def margin_frequency(min_frequency: float, relative_error: float) -> float:
+    """The frequency a mesh must show so that the converged f_r clears ``min_frequency`` by the error [Hz].
+
+    With f_n = f_converged (1 + e): f_n >= f_min (1 + e + |e|).
+    """
+    return min_frequency * (1 + relative_error + abs(relative_error))
 
 
 def optimise_fem(
@@ -60,7 +81,51 @@ def optimise_fem(
     q: float | None = None,
     coarse_model: PlateModel | None = None,
 ) -> FemOptimum:
-    """Maximise the FEM deflection subject to the FEM f_r >= f_min.
+    """Maximise the FEM deflection subject to the FEM f_r >= f_min, verified at the model's accuracy.
+
+    When the model evaluates to an accuracy (``fem_model.settings`` a
+    :class:`~workflow.models.fem.accuracy.FemAccuracy`), the search runs on one fixed mesh (so
+    its responses are smooth in the geometry): the mesh the accuracy asks for at the start point,
+    with the frequency limit raised by the start's estimated error (:func:`margin_frequency`).
+    The optimum is then evaluated again at the requested accuracy; if its verified frequency
+    misses the margin or it needs a finer mesh, the search is repeated from there on that mesh
+    (at most :data:`VERIFICATION_ROUNDS` times).  Parameters as :func:`optimise_fem_on_mesh`.
+    """
+    accuracy = getattr(fem_model, "settings", None)
+    if not isinstance(accuracy, FemAccuracy):
+        return optimise_fem_on_mesh(problem, fem_model, method, q, coarse_model)
+    if coarse_model is None:
+        coarse_model = analytical_model(fem_model.q if q is None else q, problem.voltage)
+    plate = maximise_deflection(coarse_model, problem).plate
+    (check,) = fem_model.results(plate)
+    fine_evaluations, coarse_evaluations, trajectory = 0, 0, ()
+    for _ in range(VERIFICATION_ROUNDS):
+        fixed = fem_model.on_mesh(mesh_for_level(plate, check.error.level, accuracy.n_modes))
+        limit = margin_frequency(problem.min_frequency, check.error.frequency)
+        found = optimise_fem_on_mesh(replace(problem, min_frequency=limit), fixed, method, q, coarse_model)
+        fine_evaluations += found.fine_evaluations
+        coarse_evaluations += found.coarse_evaluations
+        trajectory += found.trajectory
+        plate = found.optimum.plate
+        (check,) = fem_model.results(plate)
+        verified = (
+            check.frequency >= margin_frequency(problem.min_frequency, check.error.frequency) * (1 - FREQUENCY_SLACK)
+            and check.error.level <= fixed.settings.elements_per_ceramic
+        )
+        if verified:
+            break
+    optimum = replace(found.optimum, deflection=check.deflection, frequency=check.frequency)
+    return FemOptimum(optimum, method, fine_evaluations, coarse_evaluations, trajectory, check.error, verified)
+
+
+def optimise_fem_on_mesh(
+    problem: DesignProblem,
+    fem_model,
+    method: str = "space-mapping",
+    q: float | None = None,
+    coarse_model: PlateModel | None = None,
+) -> FemOptimum:
+    """Maximise the FEM deflection subject to the FEM f_r >= f_min, on the model as it is.
 
     Parameters
     ----------

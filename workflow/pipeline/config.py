@@ -31,10 +31,13 @@ LIMITS = {
     "damping.max_steps": (1, 1_000_000),
     "damping.posterior_draws": (1, 10_000),
     "fem.width_points": (2, 1000),
+    "fem.accuracy": (0.0, 0.05),
+    "fem.survey_accuracy": (0.0, 0.05),
 }
 """Accepted range of numeric keys, shared with the command-line options of the same quantity: drive
 amplitude [V peak across the ceramics], quality factor [-], map points per axis, random seeds, chain length
-(a million steps is about an hour per law), posterior draws propagated, widths of the FEM sweep.
+(a million steps is about an hour per law), posterior draws propagated, widths of the FEM sweep, FEM accuracy
+targets (relative frequency error; 0 means the fixed mesh of the [fem] mesh keys).
 Every other number must be finite."""
 
 

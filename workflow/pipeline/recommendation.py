@@ -24,10 +24,6 @@ from workflow.optimise.damped import (
 from workflow.optimise.maps import TRANSVERSE_THRESHOLD
 from workflow.optimise.problem import FREQUENCY_SLACK, DesignProblem
 
-DEFAULT_MESH_FREQUENCY_ERROR = 0.0039
-"""Relative error of the default FEM mesh's frequency [-]: the default mesh is 0.39 % above the
-Richardson extrapolation of uniform refinements (original plate at b = 55 mm, docs/fem.md,
-"Accuracy: mesh convergence"); refining lowers the frequency."""
 
 
 
@@ -64,6 +60,9 @@ class RecommendedDesign:
     beam_required_voltage : float or None
         For a FEM design: the beam model's voltage for ``target`` at its own optimum with Q(v)
         (median over posterior draws) [V].
+    frequency_error : float or None
+        For a FEM design: estimated relative discretisation error of ``frequency`` [-]
+        (``FemResult.error``; None on a fixed mesh, whose error is not estimated).
     """
 
     plate: Plate
@@ -78,6 +77,7 @@ class RecommendedDesign:
     computed_modes: int = 0
     constant_q_ratio: Optional[float] = None
     beam_required_voltage: Optional[float] = None
+    frequency_error: Optional[float] = None
 
     @property
     def frequency_margin(self) -> float:
@@ -129,21 +129,20 @@ class Recommendation:
         Name of the fitted Q(v) law.
     draws : int
         Posterior draws behind the quantiles.
-    mesh_frequency_error : float or None
-        Known relative frequency error of the FEM mesh [-] (:data:`DEFAULT_MESH_FREQUENCY_ERROR`
-        for the default mesh; None when not measured).
     """
 
     designs: Dict[float, RecommendedDesign]
     original: Optional[RecommendedDesign]
     law: str
     draws: int
-    mesh_frequency_error: Optional[float] = None
 
     def margin_within_mesh_error(self, design: RecommendedDesign) -> bool:
-        """Whether a FEM design's frequency margin is smaller than the mesh's known frequency error."""
-        error = self.mesh_frequency_error
-        return design.model == "FEM" and error is not None and design.frequency_margin < error * design.frequency
+        """Whether a FEM design's frequency margin is smaller than its estimated discretisation error
+        (or unknown: a FEM design on a fixed mesh)."""
+        if design.model != "FEM":
+            return False
+        error = design.frequency_error
+        return error is None or design.frequency_margin < abs(error) * design.frequency
 
 
 def quantiles(values) -> Tuple[float, float, float]:
@@ -191,6 +190,7 @@ def fem_recommendation(result, plate: Plate, problem: DesignProblem, draws, targ
         computed_modes=len(result.modes),
         constant_q_ratio=constant_q_ratio,
         beam_required_voltage=beam_required_voltage,
+        frequency_error=None if result.error is None else result.error.frequency,
     )
 
 

@@ -46,6 +46,20 @@ def optimum_record(optimum: Optimum, **counts) -> dict:
     }
 
 
+def fem_accuracy_record(error) -> dict:
+    """The FEM accuracy keys: the relative error estimates of f_r and w_dyn (v_mesh / v_converged - 1),
+    the accuracy asked for, whether it was met, and the mesh level (elements per ceramic)."""
+    if error is None:
+        return {}
+    return {
+        "f_error_estimate": error.frequency,
+        "w_error_estimate": error.deflection,
+        "accuracy": error.target,
+        "accuracy_met": error.met,
+        "mesh_level": error.level,
+    }
+
+
 def damping_record(posterior, plate: Plate, voltage: float, draws: int = POSTERIOR_DRAWS) -> dict:
     """JSON keys for a beam-model evaluation with Q(v): the posterior-median law's deflection,
     the Q it settles at, 90 % intervals over posterior draws and the voltage for the target."""

@@ -166,23 +166,27 @@ def save_figure(figure, path: Path) -> None:
     plt.close(figure)
 
 
-def fem_settings(config: dict):
-    """The FEM mesh of the [fem] section."""
+def fem_settings(config: dict, key: str = "accuracy"):
+    """The FEM settings of the [fem] section: the accuracy ``key`` (``accuracy`` for designs,
+    ``survey_accuracy`` for maps and the width sweep), or the fixed mesh of the mesh keys when it is 0."""
     from workflow.models.fem import FemSettings
+    from workflow.models.fem.accuracy import FemAccuracy
 
     names = FemSettings().as_dict()
-    return FemSettings(**{name: config["fem"][name] for name in names})
+    mesh = FemSettings(**{name: config["fem"][name] for name in names})
+    target = config["fem"][key]
+    return FemAccuracy(target=target, n_modes=mesh.n_modes) if target > 0 else mesh
 
 
-def fem_model(context: RunContext, q: Optional[float] = None):
-    """The cached, parallel FEM plate model of the run."""
+def fem_model(context: RunContext, q: Optional[float] = None, accuracy: str = "accuracy"):
+    """The cached, parallel FEM plate model of the run (``accuracy``: the [fem] key of its target)."""
     from workflow.optimise.fem_model import FemModel
 
     design = context.config["design"]
     return FemModel(
         q=design["q"] if q is None else q,
         voltage=design["voltage_v"],
-        settings=fem_settings(context.config),
+        settings=fem_settings(context.config, accuracy),
         cache=context.cache,
         scheduler=context.scheduler,
         progress=True,
@@ -260,10 +264,8 @@ def recommended_design(context: RunContext):
     The FEM optimum by space mapping where it ran, the beam optimum with Q(v) otherwise;
     the original plate with the FEM as a reference when its FEM ran.
     """
-    from workflow.models.fem import FemSettings
     from workflow.models.plate import ORIGINAL_PLATE
     from workflow.pipeline.recommendation import (
-        DEFAULT_MESH_FREQUENCY_ERROR,
         Recommendation,
         beam_recommendation,
         fem_recommendation,
@@ -290,13 +292,11 @@ def recommended_design(context: RunContext):
     if "fem_original" in context.results:
         (problem,) = design_problems(context.config, [ORIGINAL_PLATE.ceramic_thickness / MM]).values()
         original = fem_recommendation(context.results["fem_original"], ORIGINAL_PLATE, problem, draws, target)
-    default_mesh = fem_settings(context.config) == FemSettings()
     return Recommendation(
         designs=designs,
         original=original,
         law=posterior.law_name,
         draws=damping["posterior_draws"],
-        mesh_frequency_error=DEFAULT_MESH_FREQUENCY_ERROR if default_mesh else None,
     )
 
 
@@ -322,7 +322,7 @@ def fem_maps(context: RunContext):
     optima = context.results.get("fem_optima", {})
     return {
         hp: design_map(
-            fem_model(context),
+            fem_model(context, accuracy="survey_accuracy"),
             problem,
             context.config["maps"]["fem_grid"],
             "fem",
@@ -363,7 +363,7 @@ def fem_width_sweep(context: RunContext):
     from workflow.optimise.maps import width_sweep
 
     widths = sweep_widths(context.config["fem"], ORIGINAL_PLATE.width)
-    return width_sweep(fem_model(context), ORIGINAL_PLATE, widths)
+    return width_sweep(fem_model(context, accuracy="survey_accuracy"), ORIGINAL_PLATE, widths)
 
 
 def width_sweep_figures(context: RunContext, sweep) -> None:

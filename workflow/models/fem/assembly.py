@@ -10,7 +10,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from workflow.models.fem.elements import lame_constants
-from workflow.models.fem.mesh import CERAMIC, RESONATOR, BrickMesh, symmetry_dofs
+from workflow.models.fem.mesh import CERAMIC, GLUE, RESONATOR, BrickMesh, symmetry_dofs
 from workflow.models.plate import Plate
 
 
@@ -35,7 +35,7 @@ class PlateSystem:
 
 
 def _materials(plate: Plate):
-    return {RESONATOR: plate.resonator, CERAMIC: plate.ceramic}
+    return {RESONATOR: plate.resonator, CERAMIC: plate.ceramic, GLUE: plate.glue}
 
 
 def element_dofs(mesh: BrickMesh) -> np.ndarray:

@@ -6,6 +6,7 @@ import numpy as np
 
 from workflow.errors import TactileError
 from workflow.models import analytical
+from workflow.models.fem.accuracy import ErrorEstimate, FemAccuracy, evaluate_to_accuracy
 from workflow.models.fem.assembly import PlateSystem, assemble_system
 from workflow.models.fem.harmonic import ProbeModalModel, probe_modal_model
 from workflow.models.fem.mesh import quarter_plate_mesh
@@ -16,7 +17,7 @@ from workflow.models.fem.probes import (
     probe_matrix,
     transverse_indicator,
 )
-from workflow.models.fem.settings import DEFAULT_SETTINGS, FemSettings
+from workflow.models.fem.settings import FemSettings
 from workflow.models.plate import Plate
 
 
@@ -62,6 +63,8 @@ class FemResult:
         ``probe_model`` with respect to it (a :class:`ProbeModalModel` whose fields hold the
         derivatives, per metre), from :func:`workflow.models.fem.sensitivity.evaluate_fem_with_tangents`;
         None when not computed.
+    error : ErrorEstimate or None
+        Estimated discretisation error of the best mode (evaluations to an accuracy); None on a fixed mesh.
     """
 
     modes: tuple
@@ -71,6 +74,7 @@ class FemResult:
     n_dofs: int
     q: float | None = None
     tangents: dict[str, ProbeModalModel] | None = None
+    error: ErrorEstimate | None = None
 
     @property
     def best(self) -> ModeResult:
@@ -121,11 +125,13 @@ class FemResult:
         }
         if self.tangents is not None:
             data["tangents"] = {name: tangent.to_dict() for name, tangent in self.tangents.items()}
+        if self.error is not None:
+            data["error"] = self.error.to_dict()
         return data
 
     @classmethod
     def from_dict(cls, data: dict) -> "FemResult":
-        tangents = data.get("tangents")
+        tangents, error = data.get("tangents"), data.get("error")
         return cls(
             modes=tuple(ModeResult(**mode) for mode in data["modes"]),
             best_index=int(data["best_index"]),
@@ -134,6 +140,7 @@ class FemResult:
             n_dofs=int(data["n_dofs"]),
             q=None if data.get("q") is None else float(data["q"]),
             tangents=None if tangents is None else {k: ProbeModalModel.from_dict(v) for k, v in tangents.items()},
+            error=None if error is None else ErrorEstimate.from_dict(error),
         )
 
 
@@ -145,7 +152,7 @@ def mode_results(probe_model: ProbeModalModel, q: float) -> tuple:
     return tuple(ModeResult(float(f), float(w), float(t)) for f, w, t in zip(frequencies, deflections, indicators))
 
 
-def evaluate_fem(plate: Plate, q: float, voltage: float, settings: FemSettings = DEFAULT_SETTINGS) -> FemResult:
+def evaluate_fem(plate: Plate, q: float, voltage: float, settings: FemSettings | FemAccuracy = FemAccuracy()) -> FemResult:
     """Evaluate the quarter-plate FEM: modes nearest the beam resonance and their deflections.
 
     Parameters
@@ -156,9 +163,12 @@ def evaluate_fem(plate: Plate, q: float, voltage: float, settings: FemSettings =
         Plate quality factor, structural loss factor 1/Q [-].
     voltage : float
         Drive amplitude across each ceramic [V].
-    settings : FemSettings
-        Mesh resolution and number of modes.
+    settings : FemAccuracy or FemSettings
+        A target accuracy (the mesh follows the geometry and is refined until the estimated
+        frequency error meets it; the result carries its ``error``), or a fixed mesh.
     """
+    if isinstance(settings, FemAccuracy):
+        return evaluate_to_accuracy(plate, settings, lambda mesh: evaluate_fem(plate, q, voltage, mesh))
     _, system, probes = discretise(plate, voltage, settings)
     modes = working_modes(plate, system, settings)
     return fem_result(probe_modal_model(system, modes, probes), q, voltage, system)

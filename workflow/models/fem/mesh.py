@@ -2,7 +2,9 @@
 
 Element edges follow the ceramic edges, so the ceramic layer is made of whole
 elements and the gaps between ceramics (and the free end of the resonator) are empty.
-z = 0 is the free face of the ceramic layer, z = h_p + h_i the top face of the resonator.
+z = 0 is the free face of the ceramic layer, z = h_p the bonded face; a glue layer of the
+plate's ``glue_thickness`` (when > 0) sits between ceramic and resonator, under the ceramics
+only; the top face of the resonator is at :func:`top_face`.
 """
 
 from dataclasses import dataclass
@@ -13,8 +15,10 @@ from workflow.models.fem.elements import BRICKS, ReferenceBrick
 from workflow.models.fem.settings import FemSettings
 from workflow.models.plate import Plate
 
-RESONATOR, CERAMIC = 0, 1
+RESONATOR, CERAMIC, GLUE = 0, 1, 2
 """Material ids of the elements."""
+GLUE_ELEMENTS = 1
+"""Elements through the glue layer's thickness (tens of um: one quadratic element) [-]."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -30,7 +34,7 @@ class BrickMesh:
     cells : (n, 3) int array
         Grid indices (i_x, i_y, i_z) of the kept elements.
     material : (n,) int array
-        RESONATOR or CERAMIC per element.
+        RESONATOR, CERAMIC or GLUE per element.
     polarity : (n,) float array
         +1/-1 poling sign of ceramic elements, 0 for the resonator [-].
     node_number : 3D int array
@@ -78,8 +82,22 @@ class BrickMesh:
         return coordinates
 
 
-def _subdivide(breakpoints, counts) -> np.ndarray:
-    pieces = [np.linspace(a, b, n + 1)[:-1] for a, b, n in zip(breakpoints[:-1], breakpoints[1:], counts)]
+def _subdivide(breakpoints, counts, grading=None) -> np.ndarray:
+    """Edges of ``counts[i]`` elements on each segment [breakpoints[i], breakpoints[i+1]].
+
+    ``grading[i]`` is (c_left, c_right) in [0, 1): elements shrink towards a graded end by the
+    factor (1 - c) / (1 + c) relative to the mean size (the map t -> t - c sin(2 pi t)/(2 pi) for
+    both ends, t +- c sin(pi t)/pi for one); None or (0, 0) is uniform.
+    """
+    pieces = []
+    for index, (a, b, n) in enumerate(zip(breakpoints[:-1], breakpoints[1:], counts)):
+        t = np.linspace(0.0, 1.0, n + 1)[:-1]
+        left, right = (0.0, 0.0) if grading is None else grading[index]
+        if left and right:
+            t = t - left * np.sin(2 * np.pi * t) / (2 * np.pi)
+        elif left or right:
+            t = t + (right - left) * np.sin(np.pi * t) / np.pi
+        pieces.append(a + (b - a) * t)
     return np.concatenate(pieces + [breakpoints[-1:]])
 
 
@@ -119,22 +137,35 @@ def quarter_plate_mesh(plate: Plate, settings: FemSettings) -> BrickMesh:
     ).astype(int)
     free_end = len(lengths) - 1
     counts[free_end] = max(1, int(np.ceil(lengths[free_end] / element_length - 0.25)))
-    x_edges = _subdivide(breakpoints, counts)
+    grade = settings.grading
+    is_ceramic = ceramic_index >= 0
+    grading = [
+        (grade if breakpoints[i] > 0 else 0.0, grade) if is_ceramic[i] else (grade if i == free_end else 0.0, 0.0)
+        for i in range(len(counts))
+    ]
+    x_edges = _subdivide(breakpoints, counts, grading)
     segment_of_x_cell = np.repeat(np.arange(len(counts)), counts)
 
-    h_p, h_i = float(plate.ceramic_thickness), float(plate.resonator_thickness)
+    h_p, h_i, h_g = float(plate.ceramic_thickness), float(plate.resonator_thickness), float(plate.glue_thickness)
     n_layer = settings.elements_per_layer
-    z_edges = _subdivide(np.array([0.0, h_p, h_p + h_i]), [n_layer, n_layer])
+    n_glue = GLUE_ELEMENTS if h_g > 0 else 0
+    if n_glue:
+        z_edges = _subdivide(
+            np.array([0.0, h_p, h_p + h_g, h_p + h_g + h_i]),
+            [n_layer, n_glue, n_layer],
+            [(0.0, grade), (0.0, 0.0), (grade, 0.0)],
+        )
+    else:
+        z_edges = _subdivide(np.array([0.0, h_p, h_p + h_i]), [n_layer, n_layer], [(0.0, grade), (grade, 0.0)])
     y_edges = np.linspace(0.0, float(plate.width) / 2, settings.elements_across_half_width + 1)
 
     grid_shape = (len(x_edges) - 1, len(y_edges) - 1, len(z_edges) - 1)
     cells = np.stack(np.meshgrid(*(np.arange(n) for n in grid_shape), indexing="ij"), axis=-1).reshape(-1, 3)
     cell_ceramic = ceramic_index[segment_of_x_cell[cells[:, 0]]]
-    in_ceramic_layer = cells[:, 2] < n_layer
-    keep = ~in_ceramic_layer | (cell_ceramic >= 0)
-    cells, cell_ceramic, in_ceramic_layer = cells[keep], cell_ceramic[keep], in_ceramic_layer[keep]
-    material = np.where(in_ceramic_layer, CERAMIC, RESONATOR)
-    polarity = np.where(in_ceramic_layer, np.asarray(plate.polarities)[cell_ceramic], 0).astype(float)
+    layer = np.where(cells[:, 2] < n_layer, CERAMIC, np.where(cells[:, 2] < n_layer + n_glue, GLUE, RESONATOR))
+    keep = (layer == RESONATOR) | (cell_ceramic >= 0)
+    cells, cell_ceramic, material = cells[keep], cell_ceramic[keep], layer[keep]
+    polarity = np.where(material == CERAMIC, np.asarray(plate.polarities)[cell_ceramic], 0).astype(float)
 
     brick = BRICKS[settings.element]
     grid_nodes = 2 * cells[:, None, :] + brick.local_nodes[None]  # (n, n_local, 3)
@@ -152,6 +183,11 @@ def quarter_plate_mesh(plate: Plate, settings: FemSettings) -> BrickMesh:
         node_number=node_number.reshape(node_shape),
         connectivity=inverse.reshape(len(cells), brick.n_nodes),
     )
+
+
+def top_face(plate: Plate) -> float:
+    """Height of the resonator's top face, where the deflection is measured: h_p + glue + h_i [m]."""
+    return float(plate.total_thickness) + float(plate.glue_thickness)
 
 
 def symmetry_dofs(mesh: BrickMesh) -> np.ndarray:

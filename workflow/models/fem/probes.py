@@ -3,7 +3,7 @@
 import numpy as np
 import scipy.sparse as sp
 
-from workflow.models.fem.mesh import BrickMesh
+from workflow.models.fem.mesh import BrickMesh, top_face
 from workflow.models.plate import Plate
 
 N_ANTINODE_LINES = 4
@@ -16,7 +16,7 @@ def antinode_probe_points(plate: Plate) -> np.ndarray:
     """Probe points on the top face, shape (4 * 11, 3), line-major [m]."""
     x = np.arange(N_ANTINODE_LINES) * float(plate.wavelength) / 2
     y = np.linspace(0.0, float(plate.width) / 2, POINTS_PER_LINE)
-    z = float(plate.total_thickness)
+    z = top_face(plate)
     xx, yy = np.meshgrid(x, y, indexing="ij")
     return np.column_stack([xx.ravel(), yy.ravel(), np.full(xx.size, z)])
 

@@ -25,7 +25,7 @@ with the best mode's index held fixed (the one-sided derivative of the max).
 """
 
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -40,12 +40,13 @@ from workflow.models.fem.assembly import (
     reduce_system,
     scatter_matrices,
 )
-from workflow.models.fem.evaluate import FemResult, discretise, fem_result, working_modes
+from workflow.models.fem.accuracy import FemAccuracy, mesh_for_level
+from workflow.models.fem.evaluate import FemResult, discretise, evaluate_fem, fem_result, working_modes
 from workflow.models.fem.harmonic import ProbeModalModel, probe_modal_model, shifted_residual
 from workflow.models.fem.mesh import BrickMesh, quarter_plate_mesh
 from workflow.models.fem.modes import ShiftedModes
 from workflow.models.fem.probes import antinode_probe_points, probe_matrix
-from workflow.models.fem.settings import DEFAULT_SETTINGS, FemSettings
+from workflow.models.fem.settings import FemSettings
 from workflow.models.plate import Plate
 
 DESIGN_PARAMETERS = ("wavelength", "resonator_thickness")
@@ -330,7 +331,7 @@ def evaluate_fem_with_tangents(
     plate: Plate,
     q: float,
     voltage: float,
-    settings: FemSettings = DEFAULT_SETTINGS,
+    settings: FemSettings | FemAccuracy = FemAccuracy(),
     parameters: Iterable[str] = DESIGN_PARAMETERS,
     n_blocks: int = KRYLOV_BLOCKS,
 ) -> FemResult:
@@ -344,7 +345,9 @@ def evaluate_fem_with_tangents(
         Quality factor [-].
     voltage : float
         Drive amplitude [V].
-    settings : FemSettings
+    settings : FemSettings or FemAccuracy
+        A fixed mesh, or an accuracy: the mesh is chosen by :func:`evaluate_fem` (whose error
+        estimate the result keeps) and the tangents are computed on it.
     parameters : iterable of str
         Plate fields to differentiate (lengths [m]); default lambda and h_i.
     n_blocks : int
@@ -355,6 +358,12 @@ def evaluate_fem_with_tangents(
     FemResult
         The same numbers as ``evaluate_fem``, with ``tangents`` {parameter: d probe_model / d parameter}.
     """
+    if isinstance(settings, FemAccuracy):
+        error = evaluate_fem(plate, q, voltage, settings).error
+        with_tangents = evaluate_fem_with_tangents(
+            plate, q, voltage, mesh_for_level(plate, error.level, settings.n_modes), parameters, n_blocks
+        )
+        return replace(with_tangents, error=error)
     mesh, system, probes = discretise(plate, voltage, settings)
     modes = working_modes(plate, system, settings)
     parameters = tuple(parameters)
