@@ -121,10 +121,37 @@ class ReferenceBrick:
         stiffness : (6, 6) array
             Voigt stiffness of the material [Pa].
         """
-        sizes = np.atleast_2d(sizes)
-        volume = np.prod(sizes, axis=1)
-        scale = volume[:, None, None] / (sizes[:, :, None] * sizes[:, None, :])
-        return np.einsum("mkl,klij->mij", scale, self.elasticity_blocks(stiffness))
+        return np.einsum("mkl,klij->mij", _gradient_scale(sizes), self.elasticity_blocks(stiffness))
+
+    def box_piezo_coupling(self, sizes, piezo_stress) -> np.ndarray:
+        """K_u phi of boxes: int e_kij d_j v_i d_k psi, shape (m, 3n, n) [C/m^2 m = C/m].
+
+        Parameters
+        ----------
+        sizes : (m, 3) array
+            Box edge lengths [m].
+        piezo_stress : (3, 6) array
+            e [C/m^2] (Voigt columns).
+        """
+        tensor = np.asarray(piezo_stress)[:, VOIGT]  # e_kij
+        blocks = np.stack(
+            [
+                np.stack([np.kron(self.gradient_products[j, k], tensor[k, :, j][:, None]) for k in range(3)])
+                for j in range(3)
+            ]
+        )
+        return np.einsum("mjk,jkab->mab", _gradient_scale(sizes), blocks)
+
+    def box_permittivity(self, sizes, permittivity) -> np.ndarray:
+        """K_phi phi of boxes: int eps_jk d_j psi d_k phi, shape (m, n, n) [F].
+
+        Parameters
+        ----------
+        permittivity : (3, 3) array
+            eps^S [F/m].
+        """
+        blocks = np.asarray(permittivity)[:, :, None, None] * self.gradient_products
+        return np.einsum("mjk,jkab->mab", _gradient_scale(sizes), blocks)
 
     def box_mass(self, sizes, density) -> np.ndarray:
         """Consistent mass matrices; shape (m, 3n, 3n) [kg]."""
@@ -146,6 +173,12 @@ class ReferenceBrick:
         tensor = np.asarray(stress, dtype=float)[:, VOIGT]  # (m, 3, 3)
         per_axis = (volume[:, None] / sizes)[:, :, None] * self.gradient_means[None]  # (m, 3 axes j, n)
         return np.einsum("mij,mja->mai", tensor, per_axis).reshape(len(sizes), 3 * self.n_nodes)
+
+
+def _gradient_scale(sizes) -> np.ndarray:
+    """V / (h_k h_l) of boxes with edge lengths ``sizes`` (m, 3), shape (m, 3, 3) [m]."""
+    sizes = np.atleast_2d(sizes)
+    return np.prod(sizes, axis=1)[:, None, None] / (sizes[:, :, None] * sizes[:, None, :])
 
 
 def _grid(max_count: int, value: int) -> np.ndarray:
