@@ -9,7 +9,6 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from workflow.models.fem.elements import lame_constants
 from workflow.models.fem.mesh import CERAMIC, GLUE, RESONATOR, BrickMesh, symmetry_dofs
 from workflow.models.plate import Plate
 
@@ -53,8 +52,7 @@ def element_matrices(mesh: BrickMesh, plate: Plate):
     mass = np.empty_like(stiffness)
     for material_id, material in _materials(plate).items():
         rows = unique_keys[:, 3] == material_id
-        lam, mu = lame_constants(material.youngs_modulus, material.poisson_ratio)
-        stiffness[rows] = mesh.brick.box_stiffness(unique_keys[rows, :3], lam, mu)
+        stiffness[rows] = mesh.brick.box_stiffness(unique_keys[rows, :3], material.stiffness_matrix())
         mass[rows] = mesh.brick.box_mass(unique_keys[rows, :3], material.density)
     return stiffness[which.ravel()], mass[which.ravel()]
 
@@ -75,11 +73,15 @@ def assemble_matrices(mesh: BrickMesh, plate: Plate):
 
 
 def assemble_piezo_load(mesh: BrickMesh, plate: Plate, voltage: float) -> np.ndarray:
-    """Load of the converse-effect eigenstrain d31 V / h_p (times polarity) in each ceramic [N]."""
+    """Load of the converse effect of a uniform field E_z = polarity V / h_p in each ceramic [N].
+
+    The eigenstress is sigma* = e^T E (e the ceramic's piezo stress constants); for the paper's
+    record, e = c^E d, it is the in-plane isotropic eigenstrain d31 V / h_p.
+    """
     ceramic = mesh.material == CERAMIC
-    lam, mu = lame_constants(plate.ceramic.youngs_modulus, plate.ceramic.poisson_ratio)
-    strain = plate.ceramic.d31 * voltage / float(plate.ceramic_thickness) * mesh.polarity[ceramic]
-    local = mesh.brick.box_eigenstrain_load(mesh.sizes[ceramic], lam, mu, strain)
+    field = voltage / float(plate.ceramic_thickness) * mesh.polarity[ceramic]
+    stress = field[:, None] * plate.ceramic.piezo_matrix()[2][None, :]
+    local = mesh.brick.box_prestress_load(mesh.sizes[ceramic], stress)
     return np.bincount(element_dofs(mesh)[ceramic].ravel(), weights=local.ravel(), minlength=mesh.n_dofs)
 
 

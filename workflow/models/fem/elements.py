@@ -13,17 +13,17 @@ from functools import cached_property
 import numpy as np
 from numpy.polynomial.legendre import leggauss
 
+from workflow.models.materials import voigt_index
+
+
+VOIGT = voigt_index()
+"""Voigt index of each tensor index pair (i, j), shape (3, 3)."""
+
 
 def lame_constants(youngs_modulus, poisson_ratio):
     """Lame constants (lambda, mu) of an isotropic material [Pa]."""
     lam = youngs_modulus * poisson_ratio / ((1 + poisson_ratio) * (1 - 2 * poisson_ratio))
     return lam, youngs_modulus / (2 * (1 + poisson_ratio))
-
-
-def _unit(k, m):
-    unit = np.zeros((3, 3))
-    unit[k, m] = 1.0
-    return unit
 
 
 @dataclass(frozen=True, eq=False)
@@ -98,43 +98,87 @@ class ReferenceBrick:
         points, weights = self._quadrature
         return np.einsum("q,kqa->ka", weights, self.shape_gradient(points))
 
-    def elasticity_blocks(self, lame_lambda, lame_mu) -> np.ndarray:
+    def elasticity_blocks(self, stiffness) -> np.ndarray:
         """Unit-cube stiffness parts B_kl with K_e = sum_kl V / (h_k h_l) B_kl; shape (3, 3, 3n, 3n) [Pa].
 
-        From a(u, v) = int lambda div u div v + mu (d_j u_i + d_i u_j) d_j v_i.
-        """
-        size = 3 * self.n_nodes
-        blocks = np.empty((3, 3, size, size))
-        for k in range(3):
-            for m in range(3):
-                coupling = lame_lambda * _unit(k, m) + lame_mu * _unit(m, k) + (lame_mu * np.eye(3) if k == m else 0)
-                blocks[k, m] = np.kron(self.gradient_products[k, m], coupling)
-        return blocks
+        From a(u, v) = int C_ikjl d_l u_j d_k v_i: B_kl = kron(R_kl, C_kl) with (C_kl)_ij = C_ikjl.
 
-    def box_stiffness(self, sizes, lame_lambda, lame_mu) -> np.ndarray:
-        """Stiffness matrices of boxes with edge lengths ``sizes`` (m, 3) [m]; shape (m, 3n, 3n) [N/m]."""
-        sizes = np.atleast_2d(sizes)
-        volume = np.prod(sizes, axis=1)
-        scale = volume[:, None, None] / (sizes[:, :, None] * sizes[:, None, :])
-        return np.einsum("mkl,klij->mij", scale, self.elasticity_blocks(lame_lambda, lame_mu))
+        Parameters
+        ----------
+        stiffness : (6, 6) array
+            Voigt stiffness C (xx, yy, zz, yz, xz, xy) [Pa].
+        """
+        tensor = np.asarray(stiffness)[VOIGT[:, :, None, None], VOIGT[None, None, :, :]]  # C_ikjl
+        return np.stack(
+            [np.stack([np.kron(self.gradient_products[k, m], tensor[:, k, :, m]) for m in range(3)]) for k in range(3)]
+        )
+
+    def box_stiffness(self, sizes, stiffness) -> np.ndarray:
+        """Stiffness matrices of boxes with edge lengths ``sizes`` (m, 3) [m]; shape (m, 3n, 3n) [N/m].
+
+        Parameters
+        ----------
+        stiffness : (6, 6) array
+            Voigt stiffness of the material [Pa].
+        """
+        return np.einsum("mkl,klij->mij", _gradient_scale(sizes), self.elasticity_blocks(stiffness))
+
+    def box_piezo_coupling(self, sizes, piezo_stress) -> np.ndarray:
+        """K_u phi of boxes: int e_kij d_j v_i d_k psi, shape (m, 3n, n) [C/m^2 m = C/m].
+
+        Parameters
+        ----------
+        sizes : (m, 3) array
+            Box edge lengths [m].
+        piezo_stress : (3, 6) array
+            e [C/m^2] (Voigt columns).
+        """
+        tensor = np.asarray(piezo_stress)[:, VOIGT]  # e_kij
+        blocks = np.stack(
+            [
+                np.stack([np.kron(self.gradient_products[j, k], tensor[k, :, j][:, None]) for k in range(3)])
+                for j in range(3)
+            ]
+        )
+        return np.einsum("mjk,jkab->mab", _gradient_scale(sizes), blocks)
+
+    def box_permittivity(self, sizes, permittivity) -> np.ndarray:
+        """K_phi phi of boxes: int eps_jk d_j psi d_k phi, shape (m, n, n) [F].
+
+        Parameters
+        ----------
+        permittivity : (3, 3) array
+            eps^S [F/m].
+        """
+        blocks = np.asarray(permittivity)[:, :, None, None] * self.gradient_products
+        return np.einsum("mjk,jkab->mab", _gradient_scale(sizes), blocks)
 
     def box_mass(self, sizes, density) -> np.ndarray:
         """Consistent mass matrices; shape (m, 3n, 3n) [kg]."""
         volume = np.prod(np.atleast_2d(sizes), axis=1)
         return density * volume[:, None, None] * np.kron(self.mass, np.eye(3))[None]
 
-    def box_eigenstrain_load(self, sizes, lame_lambda, lame_mu, strain) -> np.ndarray:
-        """Nodal forces of an in-plane isotropic eigenstrain eps_xx = eps_yy = strain; shape (m, 3n) [N].
+    def box_prestress_load(self, sizes, stress) -> np.ndarray:
+        """Nodal forces of a uniform eigenstress per box, f_(a,i) = int sigma*_ij d_j phi_a; shape (m, 3n) [N].
 
-        f_(a,i) = int sigma*_ii d_i phi_a with sigma* = C : eps*, i.e. sigma*_xx = sigma*_yy =
-        2 (lambda + mu) strain and sigma*_zz = 2 lambda strain.
+        Parameters
+        ----------
+        sizes : (m, 3) array
+            Box edge lengths [m].
+        stress : (m, 6) array
+            sigma* in Voigt order per box [Pa] (for a piezo-ceramic, e^T E; for an eigenstrain, C eps*).
         """
         sizes = np.atleast_2d(sizes)
         volume = np.prod(sizes, axis=1)
-        stress = np.array([2 * (lame_lambda + lame_mu), 2 * (lame_lambda + lame_mu), 2 * lame_lambda])
-        per_axis = (volume[:, None] / sizes)[:, None, :] * self.gradient_means.T[None]  # (m, n, 3)
-        strain = np.asarray(strain, dtype=float).reshape(-1, 1, 1)
-        return (strain * stress * per_axis).reshape(len(sizes), 3 * self.n_nodes)
+        tensor = np.asarray(stress, dtype=float)[:, VOIGT]  # (m, 3, 3)
+        per_axis = (volume[:, None] / sizes)[:, :, None] * self.gradient_means[None]  # (m, 3 axes j, n)
+        return np.einsum("mij,mja->mai", tensor, per_axis).reshape(len(sizes), 3 * self.n_nodes)
+
+
+def _gradient_scale(sizes) -> np.ndarray:
+    """V / (h_k h_l) of boxes with edge lengths ``sizes`` (m, 3), shape (m, 3, 3) [m]."""
+    sizes = np.atleast_2d(sizes)
+    return np.prod(sizes, axis=1)[:, None, None] / (sizes[:, :, None] * sizes[:, None, :])
 
 
 def _grid(max_count: int, value: int) -> np.ndarray:

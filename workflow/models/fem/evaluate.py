@@ -20,6 +20,9 @@ from workflow.models.fem.probes import (
 from workflow.models.fem.settings import FemSettings
 from workflow.models.plate import Plate
 
+QUARTERS = 4
+"""The model is a quarter of the plate; charges and capacitances are reported for the whole plate."""
+
 
 @dataclass(frozen=True)
 class ModeResult:
@@ -65,6 +68,13 @@ class FemResult:
         None when not computed.
     error : ErrorEstimate or None
         Estimated discretisation error of the best mode (evaluations to an accuracy); None on a fixed mesh.
+    antiresonances : tuple of float or None
+        Coupled model (:mod:`workflow.models.fem.piezoelectric`): the open-circuit frequency of each
+        mode, whose ``frequency`` is then the short-circuit resonance [Hz]; None for the eigenstrain model.
+    clamped_capacitance : float or None
+        Coupled model: capacitance of the driven electrodes of the whole plate with u = 0, C_S [F].
+    charge_residual : float or None
+        Coupled model: charge per volt of the whole plate from the modes not computed [F].
     """
 
     modes: tuple
@@ -75,6 +85,9 @@ class FemResult:
     q: float | None = None
     tangents: dict[str, ProbeModalModel] | None = None
     error: ErrorEstimate | None = None
+    antiresonances: tuple | None = None
+    clamped_capacitance: float | None = None
+    charge_residual: float | None = None
 
     @property
     def best(self) -> ModeResult:
@@ -89,6 +102,38 @@ class FemResult:
     def deflection(self) -> float:
         """Deflection of the best mode [m]."""
         return self.best.deflection
+
+    @property
+    def antiresonance(self) -> float:
+        """Open-circuit frequency of the best mode [Hz] (coupled model only)."""
+        return self.antiresonances[self.best_index]
+
+    @property
+    def coupling_factor(self) -> float:
+        """Effective coupling of the best mode, k_eff = sqrt((f_a^2 - f_r^2) / f_a^2) [-] (coupled model only)."""
+        return float(np.sqrt(1 - (self.frequency / self.antiresonance) ** 2))
+
+    def admittance(self, frequencies, q=None) -> np.ndarray:
+        """Electrical admittance of the whole plate, Y = i omega Q_e / V [S] (coupled model only).
+
+        Q_e / V = C_S + sum_m Gamma_m^2 / (omega_m^2 (1 + i/Q) - omega^2) + the other modes' charge,
+        with Gamma_m = phi_m . Gamma the modal force per volt.
+
+        Parameters
+        ----------
+        frequencies : float or array
+            Drive frequency [Hz].
+        q : float, optional
+            Quality factor, structural loss 1/Q [-]; the result's own Q by default.
+        """
+        if self.antiresonances is None:
+            raise TactileError("the admittance needs the coupled piezoelectric model (this result is the eigenstrain one)")
+        q = self.q if q is None else q
+        omega = 2 * np.pi * np.asarray(frequencies, dtype=float)
+        model = self.probe_model
+        per_volt = QUARTERS * (model.modal_forces / self.voltage) ** 2  # modal charges per volt, whole plate
+        dynamic = per_volt / (model.eigenvalues * (1 + 1j / q) - omega[..., None] ** 2)
+        return 1j * omega * (self.clamped_capacitance + self.charge_residual + dynamic.sum(axis=-1))
 
     def deflection_at_q(self, q):
         """Best mode's mean probe deflection at its frequency for other quality factors [m] (vectorised)."""
@@ -127,6 +172,10 @@ class FemResult:
             data["tangents"] = {name: tangent.to_dict() for name, tangent in self.tangents.items()}
         if self.error is not None:
             data["error"] = self.error.to_dict()
+        if self.antiresonances is not None:
+            data["antiresonances"] = [None if np.isnan(f) else f for f in self.antiresonances]
+            data["clamped_capacitance"] = self.clamped_capacitance
+            data["charge_residual"] = self.charge_residual
         return data
 
     @classmethod
@@ -141,6 +190,11 @@ class FemResult:
             q=None if data.get("q") is None else float(data["q"]),
             tangents=None if tangents is None else {k: ProbeModalModel.from_dict(v) for k, v in tangents.items()},
             error=None if error is None else ErrorEstimate.from_dict(error),
+            antiresonances=None
+            if data.get("antiresonances") is None
+            else tuple(np.nan if f is None else float(f) for f in data["antiresonances"]),
+            clamped_capacitance=data.get("clamped_capacitance"),
+            charge_residual=data.get("charge_residual"),
         )
 
 

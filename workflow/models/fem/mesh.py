@@ -167,7 +167,23 @@ def quarter_plate_mesh(plate: Plate, settings: FemSettings) -> BrickMesh:
     cells, cell_ceramic, material = cells[keep], cell_ceramic[keep], layer[keep]
     polarity = np.where(material == CERAMIC, np.asarray(plate.polarities)[cell_ceramic], 0).astype(float)
 
-    brick = BRICKS[settings.element]
+    return brick_mesh(BRICKS[settings.element], (x_edges, y_edges, z_edges), cells, material, polarity)
+
+
+def brick_mesh(brick: ReferenceBrick, edges: tuple, cells, material, polarity) -> BrickMesh:
+    """A :class:`BrickMesh` of the kept ``cells`` of a tensor grid, its nodes numbered.
+
+    Parameters
+    ----------
+    brick : ReferenceBrick
+    edges : tuple of 3 arrays
+        Element boundaries along x, y, z [m].
+    cells : (n, 3) int array
+        Grid indices of the kept elements.
+    material, polarity : (n,) arrays
+        Material id and poling sign per element.
+    """
+    grid_shape = tuple(len(axis_edges) - 1 for axis_edges in edges)
     grid_nodes = 2 * cells[:, None, :] + brick.local_nodes[None]  # (n, n_local, 3)
     node_shape = tuple(2 * n + 1 for n in grid_shape)
     flat = np.ravel_multi_index(tuple(grid_nodes.reshape(-1, 3).T), node_shape)
@@ -176,7 +192,7 @@ def quarter_plate_mesh(plate: Plate, settings: FemSettings) -> BrickMesh:
     node_number[used] = np.arange(len(used))
     return BrickMesh(
         brick=brick,
-        edges=(x_edges, y_edges, z_edges),
+        edges=tuple(edges),
         cells=cells,
         material=material,
         polarity=polarity,

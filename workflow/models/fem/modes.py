@@ -57,20 +57,37 @@ def nearest_modes(system: PlateSystem, frequency: float, n_modes: int) -> Shifte
     """
     shift = (2 * np.pi * frequency) ** 2
     factor = factorise(system.stiffness - shift * system.mass)
+    return shift_invert_modes(system, shift, factor.solve, n_modes)
+
+
+def shift_invert_modes(system: PlateSystem, shift: float, solve_shifted: Callable, n_modes: int) -> ShiftedModes:
+    """The ``n_modes`` elastic eigenpairs nearest ``shift`` of the operator whose shifted inverse is given.
+
+    Parameters
+    ----------
+    system : PlateSystem
+        For its mass matrix and free dofs (the stiffness is only reached through ``solve_shifted``).
+    shift : float
+        sigma [rad^2/s^2].
+    solve_shifted : callable
+        b -> (K - sigma M)^-1 b for the stiffness K whose modes are wanted.
+    n_modes : int
+    """
     rigid = rigid_translation(system)
     rigid_mass = system.mass @ rigid
 
     def solve_elastic(rhs):
-        solution = factor.solve(rhs)
+        solution = solve_shifted(rhs)
         return solution - rigid * (rigid_mass @ solution)
 
-    operator = sla.LinearOperator(system.stiffness.shape, matvec=solve_elastic, dtype=float)
-    start = np.ones(system.stiffness.shape[0])
+    operator = sla.LinearOperator(system.mass.shape, matvec=solve_elastic, dtype=float)
+    start = np.ones(system.mass.shape[0])
     with threadpool_limits(limits=1, user_api="blas"):  # ARPACK's small dense steps only lose from threads
+        # in shift-invert mode ARPACK uses only OPinv and M; the first argument gives shape and type
         eigenvalues, vectors = sla.eigsh(
             system.stiffness, k=n_modes, M=system.mass, sigma=shift, which="LM", OPinv=operator, v0=start, tol=EIGEN_TOLERANCE
         )
     order = np.argsort(eigenvalues)
     vectors = vectors[:, order]
     vectors /= np.sqrt(np.einsum("im,im->m", vectors, system.mass @ vectors))
-    return ShiftedModes(eigenvalues[order], vectors, shift, factor.solve)
+    return ShiftedModes(eigenvalues[order], vectors, shift, solve_shifted)
