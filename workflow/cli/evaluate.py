@@ -19,7 +19,13 @@ from workflow.cli.options import (
     positive_float,
 )
 from workflow.models import analytical
-from workflow.pipeline.records import damping_record, fem_accuracy_record, fem_damping_record, geometry_record
+from workflow.pipeline.records import (
+    damping_record,
+    fem_accuracy_record,
+    fem_coupled_record,
+    fem_damping_record,
+    geometry_record,
+)
 from workflow.units import KHZ, UM
 
 
@@ -71,6 +77,7 @@ def run(args) -> dict:
         result["w_dyn_um"] = fem.deflection / UM
         result["f_r_khz"] = fem.frequency / KHZ
         result.update(fem_accuracy_record(fem.error))
+        result.update(fem_coupled_record(fem))
         result["modes"] = [
             {"f_khz": m.frequency / KHZ, "w_um": m.deflection / UM, "transverse": m.transverse_indicator}
             for m in fem.modes
@@ -93,6 +100,11 @@ def _print_human(result: dict, model: str, working_mode) -> None:
         f"b {result['b_mm']:g} mm, {'Q(v)' if damped else 'Q ' + format(result['q'], 'g')}, "
         f"{result['voltage_v']:g} V -> w_dyn {result['w_dyn_um']:.4f} µm{interval} at f_r {result['f_r_khz']:.3f} kHz"
     )
+    if "f_a_khz" in result:
+        print(
+            f"  coupled piezo model: antiresonance f_a {result['f_a_khz']:.3f} kHz, effective coupling k_eff "
+            f"{result['k_eff']:.3f}, clamped capacitance {result['clamped_capacitance_nf']:.2f} nF"
+        )
     if "f_error_estimate" in result:
         print(accuracy_line(result))
     if damped:

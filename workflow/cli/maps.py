@@ -11,18 +11,22 @@ from workflow.cli.options import (
     add_ceramic_option,
     add_damping_option,
     add_drive_options,
+    add_fem_options,
     add_hi_min_option,
     add_json_flag,
     add_model_option,
     add_width_option,
     bounded,
+    build_plate,
     design_problem,
+    fem_accuracy,
     limit_text,
     load_damping,
     output_folder,
 )
 from workflow.errors import TactileError
 from workflow.execution.cache import EvaluationCache
+from workflow.models.fem.accuracy import SURVEY_ACCURACY
 from workflow.optimise.damped import damped_fem_optimum, damped_maps, damped_optimum, fem_damped_maps, map_draws
 from workflow.optimise.fem_optimum import optimise_fem
 from workflow.optimise.maps import design_map, width_sweep
@@ -51,6 +55,7 @@ def register(subparsers) -> None:
     add_width_option(parser)
     add_drive_options(parser)
     add_damping_option(parser)
+    add_fem_options(parser, accuracy=SURVEY_ACCURACY)
     parser.add_argument(
         "--grid",
         type=bounded(int, *LIMITS["maps.grid"]),
@@ -82,7 +87,12 @@ def run(args) -> dict:
         from workflow.optimise.fem_model import FemModel
 
         model = FemModel(
-            q=args.q, voltage=args.voltage, cache=EvaluationCache(), scheduler=args.scheduler, progress=True
+            q=args.q,
+            voltage=args.voltage,
+            settings=fem_accuracy(args),
+            cache=EvaluationCache(),
+            scheduler=args.scheduler,
+            progress=True,
         )
     if posterior is None:
         record = _constant_q_record(args, problem, model, points)
@@ -90,12 +100,12 @@ def run(args) -> dict:
         record = _damped_record(args, problem, model, points, posterior)
     figures = record["figures"]
     if args.width_sweep:
-        from workflow.models.plate import ORIGINAL_PLATE
         from workflow.pipeline.config import default_config
         from workflow.pipeline.figures.maps import width_sweep_figure
         from workflow.pipeline.steps import sweep_widths
 
-        sweep = width_sweep(model, ORIGINAL_PLATE, sweep_widths(default_config()["fem"], ORIGINAL_PLATE.width))
+        plate = build_plate(args)
+        sweep = width_sweep(model, plate, sweep_widths(default_config()["fem"], plate.width))
         figures.append(_save(width_sweep_figure(sweep, design_width=args.b_mm * MM), args.out / "width_sweep_fem.png"))
         record["width_sweep"] = {
             "b_mm": (sweep.width / MM).tolist(),

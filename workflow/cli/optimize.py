@@ -82,7 +82,13 @@ def run(args) -> dict:
             counts = dict(
                 method=found.method, fine_evaluations=found.fine_evaluations, coarse_evaluations=found.coarse_evaluations
             )
-            accuracy = {**fem_accuracy_record(found.error), "verified": found.verified} if found.error else {}
+            accuracy = {}
+            if found.error is not None:
+                accuracy = {
+                    **fem_accuracy_record(found.error),
+                    "verified": found.verified,
+                    "verification_evaluations": found.verification_evaluations,
+                }
             records.append({**optimum_record(found.optimum, **counts), **accuracy, **extra})
     if not args.json:
         for record in records:
@@ -92,8 +98,8 @@ def run(args) -> dict:
 
 def _print_human(record: dict) -> None:
     """One optimum for people: geometry, deflection, resonance, evaluation counts, the Q(v) law if used."""
-    counts = [f"{record[key]} {name} evaluations" for key, name in (("fine_evaluations", "FEM"), ("coarse_evaluations", "beam"))
-              if key in record]
+    names = (("fine_evaluations", "FEM"), ("verification_evaluations", "accurate FEM"), ("coarse_evaluations", "beam"))
+    counts = [f"{record[key]} {name} evaluations" for key, name in names if key in record]
     method = f"{record['method']}: " if "method" in record else ""
     print(
         f"h_p {record['h_p_mm']:g} mm: lambda {record['lambda_mm']:.4f} mm, h_i {record['h_i_mm']:.4f} mm -> "

@@ -14,10 +14,14 @@ from workflow.damping.posterior import load_posterior
 from workflow.errors import GeometryError, InputFileError, TactileError
 from workflow.models import materials
 from workflow.models.fem.accuracy import ACCURACY_RANGE, DEFAULT_ACCURACY, FemAccuracy
+from workflow.models.fem.settings import PIEZO_MODELS
 from workflow.models.plate import ORIGINAL_PLATE, Plate, check_design_space
 from workflow.optimise.problem import DesignProblem
 from workflow.pipeline.config import LIMITS
-from workflow.units import MM
+from workflow.units import MM, UM
+
+GLUE_RANGE_UM = (0.0, 500.0)
+"""Accepted bond thickness of --glue-um [um]."""
 
 MODELS = ("analytical", "fem")
 
@@ -152,7 +156,7 @@ def add_hi_min_option(parser: argparse.ArgumentParser) -> None:
 
 def plate_from_args(args) -> Plate:
     """The plate named by --lambda-mm, --hi-mm, --hp-mm, --b-mm, checked against Table 1."""
-    plate = Plate(
+    plate = build_plate(args).with_(
         wavelength=args.lambda_mm * MM,
         resonator_thickness=args.hi_mm * MM,
         ceramic_thickness=args.hp_mm * MM,
@@ -177,26 +181,93 @@ def design_problem(args, ceramic_thickness: float) -> DesignProblem:
         width=args.b_mm * MM,
         voltage=getattr(args, "voltage", materials.DESIGN_VOLTAGE),
         min_resonator_thickness=hi_min,
+        build=build_plate(args) if hasattr(args, "ceramic") else ORIGINAL_PLATE,
     )
 
 
-def add_fem_options(parser: argparse.ArgumentParser) -> None:
-    """--accuracy: the FEM's target relative frequency error."""
+def add_build_options(parser: argparse.ArgumentParser, overrides: bool = False) -> None:
+    """--ceramic, --resonator, --glue-um: what the plate is made of (material records, bond).
+
+    With ``overrides`` they default to None: the value of the run's configuration is kept.
+    """
+    kept = " (default: the configuration's [design] value, {})" if overrides else " (default: {})"
+    parser.add_argument(
+        "--ceramic",
+        choices=materials.ceramic_names(),
+        default=None if overrides else materials.PAPER,
+        help="piezo-ceramic material record (docs/model.md)" + kept.format("paper: Table 1 of the paper"),
+    )
+    parser.add_argument(
+        "--resonator",
+        choices=materials.resonator_names(),
+        default=None if overrides else materials.PAPER,
+        help="resonator material record" + kept.format("paper: the paper's CuBe"),
+    )
+    low, high = GLUE_RANGE_UM
+    parser.add_argument(
+        "--glue-um",
+        type=bounded(float, low, high, "um"),
+        default=None if overrides else 0.0,
+        metavar="T",
+        help=f"epoxy bond under each ceramic [um], {low:g} to {high:g}; the FEM models it as a layer "
+        f"(E {materials.EPOXY.youngs_modulus / 1e9:g} GPa, nu {materials.EPOXY.poisson_ratio:g}, "
+        f"{materials.EPOXY.density:g} kg/m^3), the beam model ignores it" + kept.format("0: no bond layer, as in the paper"),
+    )
+
+
+def build_plate(args) -> Plate:
+    """The paper's plate made of the materials and bond of --ceramic, --resonator, --glue-um."""
+    return ORIGINAL_PLATE.with_(
+        ceramic=materials.ceramic(args.ceramic),
+        resonator=materials.resonator(args.resonator),
+        glue_thickness=args.glue_um * UM,
+    )
+
+
+def add_fem_options(parser: argparse.ArgumentParser, overrides: bool = False, accuracy: float = DEFAULT_ACCURACY) -> None:
+    """--accuracy and --piezo (the FEM's target relative frequency error and piezo model), and the build options.
+
+    With ``overrides`` they default to None: the value of the run's configuration is kept;
+    otherwise --accuracy defaults to ``accuracy``.
+    """
+    kept = " (default: the configuration's [fem] value, {})" if overrides else " (default: {})"
+    parser.add_argument(
+        "--piezo",
+        choices=PIEZO_MODELS,
+        default=None if overrides else PIEZO_MODELS[0],
+        help="FEM only: the piezo drive as an eigenstress of a uniform field (eigenstrain, fast, the paper's model) "
+        "or with the electric potential as an unknown (coupled: adds the antiresonance, the effective coupling "
+        "and the admittance)" + kept.format(PIEZO_MODELS[0]),
+    )
+    add_build_options(parser, overrides)
     low, high = ACCURACY_RANGE
     parser.add_argument(
         "--accuracy",
         type=bounded(float, low, high),
-        default=DEFAULT_ACCURACY,
+        default=None if overrides else accuracy,
         metavar="REL",
-        help=f"FEM only: target relative frequency error, {low:g} to {high:g}; the mesh follows the geometry and "
-        f"is refined until the estimated error meets it (default: {DEFAULT_ACCURACY:g}, i.e. "
-        f"{DEFAULT_ACCURACY * 100:g} %%)",
+        help=f"FEM only: target relative frequency error, {low:g} to {high:g}; the mesh follows the geometry and is "
+        "refined until the estimated error meets it" + kept.format(f"{accuracy:g}, i.e. {accuracy * 100:g} %%"),
     )
 
 
+def override_config(config: dict, args) -> dict:
+    """The run's configuration with the FEM and build options given on the command line."""
+    for section, key, option in (
+        ("fem", "accuracy", "accuracy"),
+        ("fem", "piezo", "piezo"),
+        ("design", "ceramic", "ceramic"),
+        ("design", "resonator", "resonator"),
+        ("design", "glue_um", "glue_um"),
+    ):
+        if getattr(args, option) is not None:
+            config[section][key] = getattr(args, option)
+    return config
+
+
 def fem_accuracy(args) -> FemAccuracy:
-    """The FEM accuracy asked for by --accuracy."""
-    return FemAccuracy(target=args.accuracy)
+    """The FEM accuracy and piezo model asked for by --accuracy and --piezo."""
+    return FemAccuracy(target=args.accuracy, piezo=args.piezo)
 
 
 def accuracy_line(record: dict) -> str:

@@ -3,7 +3,7 @@
 import sys
 from pathlib import Path
 
-from workflow.cli.options import add_json_flag, output_folder
+from workflow.cli.options import add_fem_options, add_json_flag, output_folder, override_config
 from workflow.execution.cache import EvaluationCache
 from workflow.pipeline.config import load_config, to_toml
 from workflow.pipeline.report import write_report
@@ -24,12 +24,13 @@ def register(subparsers) -> None:
     parser.add_argument("--logs", type=Path, nargs="+", help="interferometer logs to fit instead of a simulated campaign")
     parser.add_argument("--scheduler", help="tcp://host:port of a Dask scheduler (default: local cores)")
     parser.add_argument("--print-config", action="store_true", help="print the effective configuration and exit")
+    add_fem_options(parser, overrides=True)
     add_json_flag(parser)
     parser.set_defaults(handler=run)
 
 
 def run(args):
-    config = load_config(args.config)
+    config = override_config(load_config(args.config), args)
     if args.print_config:
         print(to_toml(config), end="")
         return None

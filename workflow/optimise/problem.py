@@ -49,6 +49,8 @@ class DesignProblem:
         Upper bound on h_i [m].
     wavelength_range : tuple of float
         Bounds on lambda [m].
+    build : Plate
+        The plate whose materials, glue and number of ceramics the designs share (the paper's by default).
     """
 
     ceramic_thickness: float
@@ -58,6 +60,7 @@ class DesignProblem:
     min_resonator_thickness: float = materials.PRACTICAL_MIN_RESONATOR_THICKNESS
     max_resonator_thickness: float = materials.RESONATOR_THICKNESS_RANGE[1]
     wavelength_range: Tuple[float, float] = materials.WAVELENGTH_RANGE
+    build: Plate = ORIGINAL_PLATE
 
     def __post_init__(self):
         check_design_space(self.plate(np.mean(self.wavelength_range), self.max_resonator_thickness))
@@ -74,8 +77,8 @@ class DesignProblem:
         return np.array([self.wavelength_range[1], self.max_resonator_thickness])
 
     def plate(self, wavelength, resonator_thickness) -> Plate:
-        """The plate at design point (lambda, h_i) [m]."""
-        return Plate(
+        """The plate at design point (lambda, h_i) [m], built like :attr:`build`."""
+        return self.build.with_(
             wavelength=wavelength,
             resonator_thickness=resonator_thickness,
             ceramic_thickness=self.ceramic_thickness,

@@ -31,6 +31,7 @@ LIMITS = {
     "damping.max_steps": (1, 1_000_000),
     "damping.posterior_draws": (1, 10_000),
     "fem.width_points": (2, 1000),
+    "design.glue_um": (0.0, 500.0),
     "fem.accuracy": (0.0, 0.05),
     "fem.survey_accuracy": (0.0, 0.05),
 }
@@ -49,10 +50,11 @@ def default_config() -> dict:
 
 
 def fem_defaults() -> dict:
-    """The mesh keys of [fem] from :class:`workflow.models.fem.FemSettings`."""
+    """The accuracy and mesh keys of [fem] (:mod:`workflow.models.fem.accuracy`, :class:`workflow.models.fem.FemSettings`)."""
     from workflow.models.fem import FemSettings
+    from workflow.models.fem.accuracy import DEFAULT_ACCURACY, SURVEY_ACCURACY
 
-    return FemSettings().as_dict()
+    return {"accuracy": DEFAULT_ACCURACY, "survey_accuracy": SURVEY_ACCURACY, **FemSettings().as_dict()}
 
 
 def campaign_defaults() -> dict:
@@ -101,7 +103,8 @@ def design_defaults() -> dict:
         "target_deflection_um": materials.TARGET_DEFLECTION / UM,
         "q": materials.PLATE_Q,
     }
-    return {key: [round(v, 9) for v in value] if isinstance(value, list) else round(value, 9) for key, value in section.items()}
+    section = {key: [round(v, 9) for v in value] if isinstance(value, list) else round(value, 9) for key, value in section.items()}
+    return {**section, "ceramic": materials.PAPER, "resonator": materials.PAPER, "glue_um": 0.0}
 
 
 def load_config(path=None) -> dict:

@@ -60,6 +60,18 @@ def fem_accuracy_record(error) -> dict:
     }
 
 
+def fem_coupled_record(result) -> dict:
+    """The coupled piezoelectric model's keys: antiresonance [kHz] and effective coupling of the working
+    mode, and the clamped capacitance of the whole plate [nF]; empty for the eigenstrain model."""
+    if result.antiresonances is None:
+        return {}
+    return {
+        "f_a_khz": result.antiresonance / KHZ,
+        "k_eff": result.coupling_factor,
+        "clamped_capacitance_nf": result.clamped_capacitance * 1e9,
+    }
+
+
 def damping_record(posterior, plate: Plate, voltage: float, draws: int = POSTERIOR_DRAWS) -> dict:
     """JSON keys for a beam-model evaluation with Q(v): the posterior-median law's deflection,
     the Q it settles at, 90 % intervals over posterior draws and the voltage for the target."""

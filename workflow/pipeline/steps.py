@@ -17,6 +17,22 @@ from workflow.pipeline.runner import RunContext, Step
 from workflow.units import KHZ, MM, UM
 
 
+def build_plate(config: dict):
+    """The original plate made of the [design] section's ceramic, resonator and bond."""
+    from workflow.models import materials
+    from workflow.models.plate import ORIGINAL_PLATE
+
+    design = config["design"]
+    try:
+        return ORIGINAL_PLATE.with_(
+            ceramic=materials.ceramic(design["ceramic"]),
+            resonator=materials.resonator(design["resonator"]),
+            glue_thickness=design["glue_um"] * UM,
+        )
+    except TactileError as error:
+        raise TactileError(f"configuration [design]: {error}") from None
+
+
 def design_problems(config: dict, thicknesses_mm=None) -> Dict[float, DesignProblem]:
     """One :class:`DesignProblem` per h_p (default: those of the [design] section), keyed by h_p [m]."""
     design = config["design"]
@@ -30,6 +46,7 @@ def design_problems(config: dict, thicknesses_mm=None) -> Dict[float, DesignProb
             min_resonator_thickness=design["hi_min_mm"] * MM,
             max_resonator_thickness=design["hi_max_mm"] * MM,
             wavelength_range=(design["wavelength_min_mm"] * MM, design["wavelength_max_mm"] * MM),
+            build=build_plate(config),
         )
         for thickness in thicknesses_mm
     }
@@ -175,7 +192,7 @@ def fem_settings(config: dict, key: str = "accuracy"):
     names = FemSettings().as_dict()
     mesh = FemSettings(**{name: config["fem"][name] for name in names})
     target = config["fem"][key]
-    return FemAccuracy(target=target, n_modes=mesh.n_modes) if target > 0 else mesh
+    return FemAccuracy(target=target, n_modes=mesh.n_modes, piezo=mesh.piezo) if target > 0 else mesh
 
 
 def fem_model(context: RunContext, q: Optional[float] = None, accuracy: str = "accuracy"):
@@ -195,9 +212,7 @@ def fem_model(context: RunContext, q: Optional[float] = None, accuracy: str = "a
 
 def fem_original(context: RunContext):
     """The FEM of the original plate (all evaluated modes)."""
-    from workflow.models.plate import ORIGINAL_PLATE
-
-    return fem_model(context).results(ORIGINAL_PLATE)[0]
+    return fem_model(context).results(build_plate(context.config))[0]
 
 
 def fem_original_figures(context: RunContext, result) -> None:
@@ -291,7 +306,7 @@ def recommended_design(context: RunContext):
     original = None
     if "fem_original" in context.results:
         (problem,) = design_problems(context.config, [ORIGINAL_PLATE.ceramic_thickness / MM]).values()
-        original = fem_recommendation(context.results["fem_original"], ORIGINAL_PLATE, problem, draws, target)
+        original = fem_recommendation(context.results["fem_original"], build_plate(context.config), problem, draws, target)
     return Recommendation(
         designs=designs,
         original=original,
@@ -359,11 +374,11 @@ def sweep_widths(fem: dict, plate_width: float) -> np.ndarray:
 
 def fem_width_sweep(context: RunContext):
     """w(b) and f(b) of the original plate with the FEM, coarse and finely around its width."""
-    from workflow.models.plate import ORIGINAL_PLATE
     from workflow.optimise.maps import width_sweep
 
-    widths = sweep_widths(context.config["fem"], ORIGINAL_PLATE.width)
-    return width_sweep(fem_model(context, accuracy="survey_accuracy"), ORIGINAL_PLATE, widths)
+    plate = build_plate(context.config)
+    widths = sweep_widths(context.config["fem"], plate.width)
+    return width_sweep(fem_model(context, accuracy="survey_accuracy"), plate, widths)
 
 
 def width_sweep_figures(context: RunContext, sweep) -> None:

@@ -23,7 +23,7 @@ from typing import Callable
 import numpy as np
 
 from workflow.errors import TactileError
-from workflow.models.fem.settings import FemSettings
+from workflow.models.fem.settings import PIEZO_MODELS, FemSettings
 from workflow.models.plate import Plate
 
 LEVELS = (4, 6, 8, 10, 12, 16)
@@ -36,6 +36,8 @@ RICHARDSON_RATE = 2.0
 """Assumed convergence rate p of the frequency and deflection in the element size [-]."""
 DEFAULT_ACCURACY = 2e-3
 """Default target relative frequency error of an FEM evaluation [-] (0.2 %)."""
+SURVEY_ACCURACY = 0.01
+"""Default target of maps and width sweeps (many geometries) [-] (1 %)."""
 ACCURACY_RANGE = (1e-4, 0.05)
 """Accepted targets [-]."""
 
@@ -53,16 +55,21 @@ class FemAccuracy:
     max_level : int
         Finest level allowed (elements per ceramic, one of :data:`LEVELS`) [-]; a result that
         still misses the target there says so (``ErrorEstimate.met``).
+    piezo : str
+        Piezo model, one of :data:`~workflow.models.fem.settings.PIEZO_MODELS`.
     """
 
     target: float = DEFAULT_ACCURACY
     n_modes: int = 6
     max_level: int = 12
+    piezo: str = "eigenstrain"
 
     def __post_init__(self):
         low, high = ACCURACY_RANGE
         if not (isinstance(self.target, (int, float)) and math.isfinite(self.target) and low <= self.target <= high):
             raise TactileError(f"FEM accuracy must be a relative error from {low:g} to {high:g}, got {self.target!r}")
+        if self.piezo not in PIEZO_MODELS:
+            raise TactileError(f"unknown piezo model {self.piezo!r}; choose one of {', '.join(PIEZO_MODELS)}")
         if self.max_level not in LEVELS[1:]:
             raise TactileError(f"max_level must be one of {', '.join(map(str, LEVELS[1:]))}, got {self.max_level!r}")
 
@@ -116,7 +123,7 @@ class ErrorEstimate:
         return cls(**data)
 
 
-def mesh_for_level(plate: Plate, level: int, n_modes: int = 6) -> FemSettings:
+def mesh_for_level(plate: Plate, level: int, n_modes: int = 6, piezo: str = "eigenstrain") -> FemSettings:
     """The mesh of ``plate`` at a level (elements per ceramic), following its geometry.
 
     Parameters
@@ -127,6 +134,8 @@ def mesh_for_level(plate: Plate, level: int, n_modes: int = 6) -> FemSettings:
         Elements per ceramic along x, even [-].
     n_modes : int
         Eigenmodes to compute [-].
+    piezo : str
+        Piezo model.
     """
     ceramic_length = float(plate.ceramic_length)
     mean_length = ceramic_length / level
@@ -138,6 +147,7 @@ def mesh_for_level(plate: Plate, level: int, n_modes: int = 6) -> FemSettings:
         elements_across_half_width=max(3, math.ceil(float(plate.width) / 2 / (WIDTH_ELEMENT_RATIO * mean_length))),
         n_modes=n_modes,
         grading=GRADING,
+        piezo=piezo,
     )
 
 
@@ -204,9 +214,9 @@ def evaluate_to_accuracy(plate: Plate, accuracy: FemAccuracy, evaluate_mesh: Cal
     """
     level = accuracy.start_level
     coarse_level = LEVELS[LEVELS.index(level) - 1]
-    coarse = evaluate_mesh(mesh_for_level(plate, coarse_level, accuracy.n_modes))
+    coarse = evaluate_mesh(mesh_for_level(plate, coarse_level, accuracy.n_modes, accuracy.piezo))
     while True:
-        fine = evaluate_mesh(mesh_for_level(plate, level, accuracy.n_modes))
+        fine = evaluate_mesh(mesh_for_level(plate, level, accuracy.n_modes, accuracy.piezo))
         estimate = estimate_error(fine, coarse, level, coarse_level, accuracy.target)
         if estimate.met or level >= accuracy.max_level:
             return replace(fine, error=estimate)

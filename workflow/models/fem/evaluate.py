@@ -219,10 +219,15 @@ def evaluate_fem(plate: Plate, q: float, voltage: float, settings: FemSettings |
         Drive amplitude across each ceramic [V].
     settings : FemAccuracy or FemSettings
         A target accuracy (the mesh follows the geometry and is refined until the estimated
-        frequency error meets it; the result carries its ``error``), or a fixed mesh.
+        frequency error meets it; the result carries its ``error``), or a fixed mesh; either
+        names the piezo model (the coupled one adds antiresonances and the admittance).
     """
     if isinstance(settings, FemAccuracy):
         return evaluate_to_accuracy(plate, settings, lambda mesh: evaluate_fem(plate, q, voltage, mesh))
+    if settings.piezo == "coupled":
+        from workflow.models.fem.piezoelectric import evaluate_fem_coupled  # it builds on this module
+
+        return evaluate_fem_coupled(plate, q, voltage, settings)
     _, system, probes = discretise(plate, voltage, settings)
     modes = working_modes(plate, system, settings)
     return fem_result(probe_modal_model(system, modes, probes), q, voltage, system)

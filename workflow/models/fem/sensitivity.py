@@ -361,7 +361,7 @@ def evaluate_fem_with_tangents(
     if isinstance(settings, FemAccuracy):
         error = evaluate_fem(plate, q, voltage, settings).error
         with_tangents = evaluate_fem_with_tangents(
-            plate, q, voltage, mesh_for_level(plate, error.level, settings.n_modes), parameters, n_blocks
+            plate, q, voltage, mesh_for_level(plate, error.level, settings.n_modes, settings.piezo), parameters, n_blocks
         )
         return replace(with_tangents, error=error)
     mesh, system, probes = discretise(plate, voltage, settings)

@@ -6,6 +6,10 @@ from workflow.errors import TactileError
 from workflow.models.fem.elements import BRICKS
 
 
+PIEZO_MODELS = ("eigenstrain", "coupled")
+"""The piezo models of the FEM (docs/fem.md)."""
+
+
 @dataclass(frozen=True)
 class FemSettings:
     """Resolution of the structured triquadratic brick mesh of the quarter plate.
@@ -25,6 +29,10 @@ class FemSettings:
         Eigenmodes computed nearest the analytical resonance [-].
     element : str
         Element type: "serendipity20" or "lagrange27" (see :data:`elements.BRICKS`).
+    piezo : str
+        Piezo model: "eigenstrain" (the converse effect as an eigenstress of a uniform field, fast,
+        the paper's model) or "coupled" (the electric potential as an unknown; resonance,
+        antiresonance, coupling and admittance).
     grading : float
         Grading c in [0, 1) of the elements towards the ceramic ends (along x) and the bond
         (through the thickness): the end element is (1 - c)/(1 + c) of the mean size; 0 is uniform.
@@ -37,11 +45,14 @@ class FemSettings:
     n_modes: int = 6
     element: str = "lagrange27"
     grading: float = 0.0
+    piezo: str = "eigenstrain"
 
     def __post_init__(self):
         if self.element not in BRICKS:
             raise TactileError(f"unknown FEM element {self.element!r}; choose one of {', '.join(BRICKS)}")
-        counts = {name: value for name, value in asdict(self).items() if name not in ("element", "grading")}
+        if self.piezo not in PIEZO_MODELS:
+            raise TactileError(f"unknown piezo model {self.piezo!r}; choose one of {', '.join(PIEZO_MODELS)}")
+        counts = {name: value for name, value in asdict(self).items() if name not in ("element", "grading", "piezo")}
         bad = {name: value for name, value in counts.items() if not isinstance(value, int) or value < 1}
         if bad:
             raise TactileError(f"FEM settings must be positive integers, got {bad}")
@@ -64,6 +75,7 @@ class FemSettings:
             n_modes=self.n_modes,
             element=self.element,
             grading=self.grading,
+            piezo=self.piezo,
         )
 
 
