@@ -4,6 +4,7 @@ import pytest
 
 from workflow.models.fem import FemSettings, evaluate_fem
 from workflow.models.fem.convergence import convergence_study, richardson
+from workflow.models.fem.settings import DEFAULT_SETTINGS
 from workflow.models.plate import ORIGINAL_PLATE
 
 CLEAN = ORIGINAL_PLATE.with_(width=55e-3)
@@ -35,7 +36,7 @@ def test_default_mesh_is_within_half_a_percent_of_the_extrapolated_frequency():
     study = convergence_study(CLEAN, 54.0, 15.0, COARSEST, factors=(2, 3, 4))
     rate, limit = study.frequency_extrapolation()
     assert 1.0 < rate < 4.5
-    default = evaluate_fem(CLEAN, 54.0, 15.0)
+    default = evaluate_fem(CLEAN, 54.0, 15.0, DEFAULT_SETTINGS)
     assert abs(default.frequency / limit - 1) < 5e-3
     _, deflection_limit = study.deflection_extrapolation()
     assert abs(default.deflection / deflection_limit - 1) < 0.05

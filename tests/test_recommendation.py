@@ -1,6 +1,6 @@
 """The recommended design: its computation on synthetic FEM results and its rendering."""
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pytest
@@ -8,10 +8,10 @@ import pytest
 from workflow.damping.laws import ConstantQ
 from workflow.models import analytical
 from workflow.models.fem import ModeResult
+from workflow.models.fem.accuracy import ErrorEstimate
 from workflow.models.plate import ORIGINAL_PLATE
 from workflow.optimise.problem import DesignProblem
 from workflow.pipeline.recommendation import (
-    DEFAULT_MESH_FREQUENCY_ERROR,
     Recommendation,
     beam_recommendation,
     fem_recommendation,
@@ -34,6 +34,7 @@ class LinearFemResult:
     best_index: int
     per_q: float
     voltage: float = PROBLEM.voltage
+    error: object = None
 
     @property
     def best(self):
@@ -47,10 +48,12 @@ class LinearFemResult:
         return self.per_q * np.asarray(q)
 
 
-def needing(voltage: float, modes=None, best_index: int = 0) -> LinearFemResult:
-    """A synthetic result that needs ``voltage`` for the target at Q = 54."""
+def needing(voltage: float, modes=None, best_index: int = 0, error: float | None = 1e-5) -> LinearFemResult:
+    """A synthetic result that needs ``voltage`` for the target at Q = 54, its frequency ``error`` estimated
+    (None: a fixed mesh)."""
     modes = modes or (ModeResult(25_010.0, 1e-6, 0.05),)
-    return LinearFemResult(modes, best_index, per_q=TARGET * PROBLEM.voltage / voltage / 54.0)
+    result = LinearFemResult(modes, best_index, per_q=TARGET * PROBLEM.voltage / voltage / 54.0)
+    return result if error is None else _with_error(result, error)
 
 
 def test_required_voltage_and_deflection_come_from_the_draws():
@@ -80,7 +83,7 @@ def test_a_design_below_the_frequency_limit_misses_the_goal_one_on_it_does_not()
     )
     assert below.reaches_target and not below.meets_goal and on.meets_goal
     text = recommendation_section(Recommendation({1 * MM: below, 2 * MM: on}, None, "constant", 3))
-    assert "10 Hz below 25 kHz" in text and "| +0 Hz |" in text
+    assert "10 Hz below 25 kHz" in text and "| +0 Hz (within the mesh error) |" in text
 
 
 def test_the_nearest_transverse_mode_is_reported_with_its_distance():
@@ -106,18 +109,31 @@ def test_a_mixed_working_mode_is_said_so_and_a_lonely_mode_has_no_partner():
     assert "0.30 (mixed)" in text and "none among the 1 computed modes" in text
 
 
-def test_a_margin_within_the_mesh_error_is_flagged_only_for_the_fem():
-    fem = fem_recommendation(needing(12.0), ORIGINAL_PLATE, PROBLEM, DRAWS, TARGET)  # +10 Hz
+def _with_error(result, relative: float):
+    estimate = ErrorEstimate(relative, 0.01, 8, 6, result.frequency, 1e-6, 1.0, 0.002)
+    return replace(result, error=estimate)
+
+
+def test_a_margin_within_the_estimated_error_is_flagged_only_for_the_fem():
+    fem = fem_recommendation(needing(12.0, error=0.0012), ORIGINAL_PLATE, PROBLEM, DRAWS, TARGET)  # +10 Hz
     beam = beam_recommendation(ORIGINAL_PLATE, PROBLEM, DRAWS, TARGET)
-    text = recommendation_section(Recommendation({1 * MM: fem, 2 * MM: beam}, None, "constant", 3,
-                                                 DEFAULT_MESH_FREQUENCY_ERROR))
-    assert "+10 Hz (within the mesh error)" in text
-    assert f"{100 * DEFAULT_MESH_FREQUENCY_ERROR:.2f} % above the mesh-converged value" in text
-    assert "the margins of h_p = 1 mm are within it" in text
+    text = recommendation_section(Recommendation({1 * MM: fem, 2 * MM: beam}, None, "constant", 3))
+    assert "+10 Hz (within the mesh error)" in text and "25.010 (±0.12 %)" in text
+    assert "the estimates, mesh value over converged value − 1, are: h_p 1 mm +0.12 %" in text
+    assert "the margins of h_p = 1 mm are within their error" in text
     assert "not computed (beam model)" in text and "| beam model |" in text
     # the deflection goal is met, the frequency is not promised
     assert "deflection yes; 25 kHz **not assured** (mesh error)" in text
     assert "**Deflection met with h_p = 1 mm, but 25 kHz is not assured**" in text and "Met with" not in text
+
+
+def test_a_margin_beyond_the_estimated_error_is_met_and_a_fixed_mesh_is_not_trusted():
+    assured = fem_recommendation(needing(12.0, error=0.0002), ORIGINAL_PLATE, PROBLEM, DRAWS, TARGET)
+    text = recommendation_section(Recommendation({1 * MM: assured}, None, "constant", 3))
+    assert "every FEM margin above exceeds its error" in text and "Met with h_p = 1 mm" in text
+    fixed = fem_recommendation(needing(12.0, error=None), ORIGINAL_PLATE, PROBLEM, DRAWS, TARGET)
+    text = recommendation_section(Recommendation({1 * MM: fixed}, None, "constant", 3))
+    assert "ran on a fixed mesh" in text and "not assured" in text
 
 
 def test_the_beam_recommendation_of_the_original_plate_needs_more_than_15_v_at_q_54():
