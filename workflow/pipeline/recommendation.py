@@ -63,6 +63,11 @@ class RecommendedDesign:
     frequency_error : float or None
         For a FEM design: estimated relative discretisation error of ``frequency`` [-]
         (``FemResult.error``; None on a fixed mesh, whose error is not estimated).
+    antiresonance : float or None
+        For the coupled piezoelectric FEM: the working mode's open-circuit frequency f_a [Hz].
+    admittance : tuple of arrays or None
+        For the coupled piezoelectric FEM: frequencies [Hz] around f_r and f_a and the whole plate's
+        electrical admittance there, Y = i omega Q_e / V with the plate's Q [S] (complex).
     """
 
     plate: Plate
@@ -78,6 +83,8 @@ class RecommendedDesign:
     constant_q_ratio: Optional[float] = None
     beam_required_voltage: Optional[float] = None
     frequency_error: Optional[float] = None
+    antiresonance: Optional[float] = None
+    admittance: Optional[tuple] = None
 
     @property
     def frequency_margin(self) -> float:
@@ -191,7 +198,24 @@ def fem_recommendation(result, plate: Plate, problem: DesignProblem, draws, targ
         constant_q_ratio=constant_q_ratio,
         beam_required_voltage=beam_required_voltage,
         frequency_error=None if result.error is None else result.error.frequency,
+        **_electrical(result),
     )
+
+
+ADMITTANCE_POINTS = 600
+"""Frequencies of an admittance curve [-]."""
+
+
+def _electrical(result) -> dict:
+    """Antiresonance and admittance curve of a coupled FEM result (none for the eigenstrain model).
+
+    The curve spans the working mode's resonance and antiresonance with a margin of 3 % of f_r.
+    """
+    if getattr(result, "antiresonances", None) is None:
+        return {}
+    low, high = result.frequency, result.antiresonance
+    frequencies = np.linspace(low - 0.03 * low, high + 0.03 * low, ADMITTANCE_POINTS)
+    return {"antiresonance": high, "admittance": (frequencies, result.admittance(frequencies))}
 
 
 def beam_recommendation(plate: Plate, problem: DesignProblem, draws, target: float) -> RecommendedDesign:

@@ -54,7 +54,29 @@ def _recommended_design(context: RunContext, recommendation) -> str:
     fit = context.results.get("damping_fit")
     if not section or fit is None:
         return section
-    return section + "\n\n" + _basis(recommendation, fit.log.velocity, simulated=not context.logs)
+    section += "\n\n" + _basis(recommendation, fit.log.velocity, simulated=not context.logs)
+    if "admittance.png" in context.figures:
+        section += "\n\n" + _electrical(context, recommendation)
+    return section
+
+
+def _electrical(context: RunContext, recommendation) -> str:
+    """What a bench measures first on a piezo plate: its admittance, f_r, f_a and the coupling (coupled FEM)."""
+    rows = [
+        (f"{hp / MM:g}", f"{d.frequency / KHZ:.3f}", f"{d.antiresonance / KHZ:.3f}",
+         f"{np.sqrt(1 - (d.frequency / d.antiresonance) ** 2):.3f}")
+        for hp, d in recommendation.designs.items()
+        if d.admittance is not None
+    ]
+    return "\n\n".join(
+        [
+            "**Electrical admittance** (coupled piezoelectric FEM): the impedance analyser's first check of a built "
+            "plate. The resonance f_r (short circuit, maximum |Y|) is the working frequency; the antiresonance f_a "
+            "(open circuit, minimum |Y|) and the effective coupling k_eff² = (f_a² − f_r²)/f_a² follow.",
+            table(["h_p [mm]", "f_r [kHz]", "f_a [kHz]", "k_eff"], rows),
+            figure(context, "admittance.png", "Admittance |Y| and phase of the recommended designs, with the plate's Q"),
+        ]
+    )
 
 
 def _basis(recommendation, measured_velocity, simulated: bool) -> str:

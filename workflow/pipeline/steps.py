@@ -315,6 +315,19 @@ def recommended_design(context: RunContext):
     )
 
 
+def recommended_design_figures(context: RunContext, recommendation) -> None:
+    """The admittance of the FEM designs when the coupled piezoelectric model ran."""
+    from workflow.pipeline.figures.fem_responses import admittance_figure
+
+    curves = {
+        f"h_p {hp / MM:g} mm": (*design.admittance, design.frequency, design.antiresonance)
+        for hp, design in recommendation.designs.items()
+        if design.admittance is not None
+    }
+    if curves:
+        save_figure(admittance_figure(curves), context.figure_path("admittance.png"))
+
+
 def analytical_maps(context: RunContext):
     """Beam-model maps of w_dyn and f_r over (lambda, h_i) for every h_p, with the optimum."""
     from workflow.optimise.maps import design_map
@@ -396,7 +409,8 @@ STEPS: List[Step] = [
     Step("FEM of the original plate", "fem_original", fem_original, fem_original_figures, cacheable=False),
     Step("FEM responses of the original plate", "fem_responses", fem_responses, fem_responses_figures),
     Step("FEM optimum per h_p (space mapping)", "fem_optima", fem_optima, fem_optima_figures),
-    Step("recommended design per h_p", "recommended_design", recommended_design, cacheable=False),
+    Step("recommended design per h_p", "recommended_design", recommended_design, recommended_design_figures,
+         cacheable=False),
     Step("analytical maps", "analytical_maps", analytical_maps, maps_figures, cacheable=False),
     Step("FEM maps", "fem_maps", fem_maps, maps_figures),
     Step("FEM width sweep of the original plate", "width_sweep", fem_width_sweep, width_sweep_figures),

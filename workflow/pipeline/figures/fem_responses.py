@@ -9,6 +9,7 @@ import matplotlib
 matplotlib.use("Agg")
 
 import matplotlib.pyplot as plt
+import matplotlib.ticker
 import numpy as np
 
 from workflow.models.fem import FemResult
@@ -69,3 +70,30 @@ def transient_figure(response: TransientResponse):
                label=f"Q/(pi f_r) = {response.expected_time_constant / MS:.3f} ms (expected tau)")
     title = f"switch-on at f_r = {response.frequency / KHZ:.3f} kHz"
     return _finish(figure, ax, "time [ms]", "deflection [µm]", title)
+
+
+def admittance_figure(designs: dict):
+    """|Y| and phase of the electrical admittance of each design (coupled piezoelectric FEM).
+
+    Parameters
+    ----------
+    designs : dict
+        Label -> (frequencies [Hz], admittance [S] complex, f_r [Hz], f_a [Hz]).
+    """
+    figure, (magnitude, phase) = plt.subplots(2, 1, figsize=(6.5, 6), sharex=False, layout="constrained")
+    for label, (frequencies, admittance, resonance, antiresonance) in designs.items():
+        line, = magnitude.semilogy(frequencies / KHZ, np.abs(admittance) * 1e3, label=label)
+        phase.plot(frequencies / KHZ, np.degrees(np.angle(admittance)), color=line.get_color())
+        for f, marker in ((resonance, "v"), (antiresonance, "^")):
+            magnitude.plot(f / KHZ, np.interp(f, frequencies, np.abs(admittance)) * 1e3, marker, color=line.get_color())
+    magnitude.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+    magnitude.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    magnitude.set_ylabel("|Y| [mS]")
+    magnitude.set_title("Electrical admittance of the whole plate (coupled FEM; v f_r, ^ f_a)")
+    phase.set_ylabel("phase of Y [deg]")
+    phase.set_xlabel("frequency [kHz]")
+    for ax in (magnitude, phase):
+        ax.grid(alpha=0.3)
+        ax.set_xlabel("frequency [kHz]")
+    figure.legend(fontsize=8, loc="outside lower center", ncol=3, frameon=False)
+    return figure
