@@ -7,7 +7,7 @@ import pytest
 
 from workflow.models import analytical, materials
 from workflow.models.fem import FemResult, FemSettings, evaluate_fem
-from workflow.models.fem.assembly import assemble_matrices, scatter_matrices
+from workflow.models.fem.assembly import assemble_matrices, assemble_system, scatter_matrices
 from workflow.models.fem.elements import LAGRANGE_27
 from workflow.models.fem.mesh import CERAMIC, brick_mesh, quarter_plate_mesh
 from workflow.models.fem.piezoelectric import (
@@ -45,6 +45,18 @@ def test_without_coupling_the_coupled_model_is_the_eigenstrain_model(eigenstrain
     deflections = [mode.deflection for mode in decoupled.modes]
     assert deflections == pytest.approx([mode.deflection for mode in eigenstrain.modes], rel=1e-5)
     assert decoupled.coupling_factor < 1e-2
+
+
+@pytest.mark.parametrize("name", ["paper", "PZT-4"])
+def test_the_voltage_drive_is_the_eigenstress_of_the_uniform_field(name):
+    # with u held, the potential between the electrodes is linear in z: Gamma V = int e^T E : grad v,
+    # sign included (the coupled model drives the plate the same way as the eigenstrain model)
+    plate = ORIGINAL_PLATE.with_(ceramic=materials.ceramic(name))
+    mesh = quarter_plate_mesh(plate, COARSE)
+    stiffness, mass = assemble_matrices(mesh, plate)
+    coupled_load = assemble_piezo_system(mesh, stiffness, mass, plate.ceramic, 15.0).mechanical.load
+    eigenstrain_load = assemble_system(mesh, plate, 15.0).load
+    assert np.allclose(coupled_load, eigenstrain_load, rtol=0, atol=1e-12 * np.abs(eigenstrain_load).max())
 
 
 def test_the_field_stiffens_every_mode_and_the_working_mode_couples(coupled, eigenstrain):
