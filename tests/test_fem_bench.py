@@ -18,3 +18,8 @@ def test_fast_fem_path_is_fast_and_agrees_with_the_reference():
     assert figures["speedup"] >= 20
     assert figures["max_mode_frequency_rel_diff"] < 1e-8
     assert figures["best_deflection_rel_diff"] < 1e-3
+    accurate = figures["accurate"]
+    if "pardiso" in accurate:  # where pypardiso installs it must be the faster, and agree with SuperLU
+        assert accurate["superlu_over_pardiso"] > 1.0
+        assert accurate["pardiso_vs_superlu_f_rel_diff"] < 1e-8
+    assert accurate["coupled_over_eigenstrain"] < 4.0

@@ -26,7 +26,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as sla
 from scipy.optimize import brentq
 
 from workflow.models import analytical
@@ -36,6 +35,7 @@ from workflow.models.fem.harmonic import probe_modal_model
 from workflow.models.fem.mesh import CERAMIC, BrickMesh, quarter_plate_mesh, symmetry_dofs
 from workflow.models.fem.modes import ShiftedModes, shift_invert_modes
 from workflow.models.fem.probes import antinode_probe_points, probe_matrix
+from workflow.models.fem.solvers import factorise
 from workflow.models.fem.settings import DEFAULT_SETTINGS, FemSettings
 from workflow.models.materials import PiezoMaterial
 from workflow.models.plate import Plate
@@ -182,7 +182,7 @@ def assemble_piezo_system(mesh: BrickMesh, stiffness, mass, ceramic: PiezoMateri
     permittivity_inner = permittivity[inner][:, inner].tocsc()
     coupling_driven = np.asarray(coupling[:, driven].sum(axis=1)).ravel()
     permittivity_inner_driven = np.asarray(permittivity[inner][:, driven].sum(axis=1)).ravel()
-    inner_potential = sla.splu(permittivity_inner).solve(permittivity_inner_driven)  # K_II^-1 k_IH
+    inner_potential = factorise(permittivity_inner).solve(permittivity_inner_driven)  # K_II^-1 k_IH
     drive = coupling_inner @ inner_potential - coupling_driven
     capacitance = float(permittivity[driven][:, driven].sum() - permittivity_inner_driven @ inner_potential)
     mechanical = PlateSystem(
@@ -208,7 +208,7 @@ def coupled_modes(system: PiezoSystem, frequency: float, n_modes: int) -> Couple
         ],
         format="csc",
     )
-    factor = sla.splu(saddle, permc_spec="MMD_AT_PLUS_A")
+    factor = factorise(saddle)
     padding = np.zeros(saddle.shape[0] - n_u)
 
     def solve_short(rhs):
