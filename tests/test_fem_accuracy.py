@@ -100,3 +100,20 @@ def test_an_unmet_accuracy_says_so(small_thin_ladder):
         SMALL_THIN, FemAccuracy(target=1e-4, max_level=10), lambda mesh: small_thin_ladder[mesh.elements_per_ceramic]
     )
     assert result.error.level == 10 and not result.error.met
+
+
+def test_the_fem_optimum_clears_the_limit_on_a_refined_mesh(tmp_path):
+    """Optima that hold: the space-mapping optimum at 1 % accuracy, re-evaluated two levels finer, is above 25 kHz."""
+    from workflow.execution.cache import EvaluationCache
+    from workflow.optimise.fem_model import FemModel
+    from workflow.optimise.fem_optimum import optimise_fem
+    from workflow.optimise.problem import DesignProblem
+
+    problem = DesignProblem(ceramic_thickness=1e-3, width=30e-3)
+    model = FemModel(settings=FemAccuracy(target=0.01), cache=EvaluationCache(tmp_path), scheduler="synchronous")
+    found = optimise_fem(problem, model, "space-mapping")
+    assert found.verified and found.error.met
+    level = found.error.level
+    refined = evaluate_fem(found.optimum.plate, 54.0, 15.0, mesh_for_level(found.optimum.plate, level + 4))
+    assert refined.frequency >= problem.min_frequency
+    assert found.optimum.frequency == pytest.approx(refined.frequency, rel=0.01)

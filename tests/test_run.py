@@ -23,6 +23,8 @@ grid = 9
 fem_grid = 2
 fem_ceramic_thicknesses_mm = [1.0]
 [fem]
+accuracy = 0.05
+survey_accuracy = 0.0
 elements_per_ceramic = 2
 elements_per_layer = 1
 elements_across_half_width = 3
@@ -149,3 +151,15 @@ def test_configuration_error_names_the_key(capsys, tmp_path):
     assert main(["run", "--config", str(path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "maps.grid" in err[0]
+
+
+def test_the_report_states_the_accuracy_of_its_fem_numbers(tiny_run):
+    _, out, _, _ = tiny_run
+    text = (out / "report.md").read_text()
+    original = text.split("## FEM of the original plate")[1].split("\n## ")[0]
+    assert re.search(r"FEM accuracy: estimated error of the working mode's frequency [+-]\d+\.\d\d %", original)
+    assert "target 5 %" in original
+    optima = text.split("## FEM optimum")[1].split("\n## ")[0]
+    assert "f_r error estimate" in optima and re.search(r"\| [+-]\d+\.\d\d % \| (yes|\*\*no\*\*) \|", optima)
+    assert "fixed mesh of the [fem] keys (error not estimated)" in text.split("## Width sweep")[1]
+    assert "FEM accuracy: each FEM frequency above comes from a mesh refined" in text
