@@ -8,6 +8,9 @@ from workflow.damping.posterior import POSTERIOR_FILE, save_posterior
 from workflow.errors import InputFileError
 from workflow.serialise import jsonable
 
+FIT_OUTPUTS = ("posterior*.npz", "fit.json", "*.png")
+"""Glob patterns of the files a fit writes into its folder (:mod:`workflow.pipeline.outputs`)."""
+
 
 def write_fit(fit, out, figures: bool = True, protect=()) -> dict:
     """Write a fit's posterior files, ``fit.json`` and (optionally) its figures into ``out``.

@@ -13,6 +13,7 @@ import numpy as np
 
 from workflow.errors import TactileError
 from workflow.optimise.problem import DesignProblem, optimise_analytical
+from workflow.pipeline.damping_files import FIT_OUTPUTS, write_fit
 from workflow.pipeline.runner import RunContext, Step
 from workflow.units import KHZ, MM, UM
 
@@ -102,8 +103,6 @@ def damping_fit(context: RunContext):
 
 def damping_fit_files(context: RunContext, fit) -> None:
     """The posterior, ``fit.json`` and the fit's figures under ``damping/``."""
-    from workflow.pipeline.damping_files import write_fit
-
     protect = {Path(path).resolve() for path in context.results["logs"]}
     files = write_fit(fit, context.out / "damping", figures=True, protect=protect)
     for path in files["figures"]:
@@ -372,6 +371,9 @@ def width_sweep_figures(context: RunContext, sweep) -> None:
     design_width = context.config["design"]["width_mm"] * MM
     save_figure(width_sweep_figure(sweep, design_width=design_width), context.figure_path("width_sweep_fem.png"))
 
+
+RUN_OUTPUTS = ("report.md", "simulated_campaign.csv", "*.png", *(f"damping/{pattern}" for pattern in FIT_OUTPUTS))
+"""Glob patterns of the files ``tactile run`` writes into its output folder (:mod:`workflow.pipeline.outputs`)."""
 
 STEPS: List[Step] = [
     Step("interferometer logs (simulated campaign unless --logs)", "logs", campaign_logs, cacheable=False),
