@@ -40,6 +40,10 @@ def test_a_user_file_overrides_only_its_keys(tmp_path):
         ('[fem]\nfine_width_step_mm = "one"\n', "fem.fine_width_step_mm"),
         ('[design]\nceramic_thicknesses_mm = [1.0, "two"]\n', "design.ceramic_thicknesses_mm[1]"),
         ("[design\n", "not valid TOML"),
+        ("[damping]\nwalkers = 0\n", "'damping.walkers' = 0 is outside the accepted range 2 to 10000"),
+        ("[damping]\nwalkers = -3\n", "'damping.walkers' = -3 is outside the accepted range 2 to 10000"),
+        ('[damping]\nlaws = ["cubic"]\n', "'damping.laws' holds 'cubic'; accepted: 'quadratic', 'linear'"),
+        ("[damping]\nlaws = []\n", "'damping.laws' is empty"),
     ],
 )
 def test_configuration_errors_name_the_key(tmp_path, text, words):
@@ -48,6 +52,22 @@ def test_configuration_errors_name_the_key(tmp_path, text, words):
     with pytest.raises(InputFileError) as error:
         load_config(path)
     assert words in str(error.value) and str(path) in str(error.value)
+
+
+def test_too_few_walkers_for_the_logs_is_a_configuration_error_before_the_chain(tmp_path):
+    """emcee needs twice the sampled parameters (5 + one resonance per sweep): the step says so, naming
+    the key and the range, before any sampling."""
+    from workflow.damping.synthetic import campaign_csv, simulate_campaign
+    from workflow.pipeline.runner import RunContext
+    from workflow.pipeline.steps import damping_fit
+
+    log = tmp_path / "campaign.csv"
+    log.write_text(campaign_csv(simulate_campaign(seed=1, voltages=(5.0, 10.0, 15.0), points_per_sweep=25)))
+    config = default_config()
+    config["damping"]["walkers"] = 15
+    context = RunContext(config=config, out=tmp_path, results={"logs": [log]})
+    with pytest.raises(InputFileError, match=r"'damping.walkers' = 15 is outside the accepted range 16 to 10000 .* 3 sweeps"):
+        damping_fit(context)
 
 
 def test_missing_configuration_file_is_named(tmp_path):

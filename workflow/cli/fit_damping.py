@@ -5,14 +5,11 @@ from pathlib import Path
 
 from workflow.cli.options import add_force_option, add_json_flag, bounded, limit_text, seed_option
 from workflow.damping.fit import fit_damping, fit_summary
-from workflow.damping.laws import LAWS
+from workflow.damping.laws import SAMPLED_LAWS
 from workflow.damping.logs import drop_short_sweeps, read_logs
 from workflow.pipeline.config import LIMITS
 from workflow.pipeline.damping_files import FIT_OUTPUTS, write_fit
 from workflow.pipeline.outputs import output_folder
-
-SAMPLED_LAWS = tuple(name for name in LAWS if name != "constant")
-"""Laws ``--law`` accepts; the constant-Q baseline is always in the comparison (BIC at the MAP)."""
 
 
 def register(subparsers) -> None:

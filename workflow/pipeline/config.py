@@ -11,6 +11,7 @@ from dataclasses import MISSING, fields
 from importlib import resources
 from pathlib import Path
 
+from workflow.damping.laws import SAMPLED_LAWS
 from workflow.errors import InputFileError
 from workflow.models import materials
 from workflow.models.plate import ORIGINAL_PLATE
@@ -29,13 +30,18 @@ LIMITS = {
     "campaign.seed": (0, 2**32 - 1),
     "damping.seed": (0, 2**32 - 1),
     "damping.max_steps": (1, 1_000_000),
+    "damping.walkers": (2, 10_000),
     "damping.posterior_draws": (1, 10_000),
     "fem.width_points": (2, 1000),
 }
 """Accepted range of numeric keys, shared with the command-line options of the same quantity: drive
 amplitude [V peak across the ceramics], quality factor [-], map points per axis, random seeds, chain length
-(a million steps is about an hour per law), posterior draws propagated, widths of the FEM sweep.
-Every other number must be finite."""
+(a million steps is about an hour per law), emcee walkers (also at least twice the parameters sampled:
+checked when the logs are read, :func:`~workflow.damping.fit.minimum_walkers`), posterior draws propagated,
+widths of the FEM sweep.  Every other number must be finite."""
+
+CHOICES = {"damping.laws": SAMPLED_LAWS}
+"""Accepted values of the items of list keys (a list that must not be empty)."""
 
 
 def default_config() -> dict:
@@ -168,6 +174,10 @@ def _check_range(value, name: str, source: str) -> None:
         if name in LIMITS and not LIMITS[name][0] <= item <= LIMITS[name][1]:
             raise InputFileError(f"{source}: '{name}' = {item!r} is outside the accepted range "
                                  f"{LIMITS[name][0]} to {LIMITS[name][1]}")
+        if name in CHOICES and item not in CHOICES[name]:
+            raise InputFileError(f"{source}: '{name}' holds {item!r}; accepted: {', '.join(map(repr, CHOICES[name]))}")
+    if name in CHOICES and not value:
+        raise InputFileError(f"{source}: '{name}' is empty; accepted: one or more of {', '.join(map(repr, CHOICES[name]))}")
 
 
 def _checked(value, default, name: str, source: str):

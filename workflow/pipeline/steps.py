@@ -11,7 +11,7 @@ from typing import Any, Dict, List, Optional
 
 import numpy as np
 
-from workflow.errors import TactileError
+from workflow.errors import InputFileError, TactileError
 from workflow.optimise.problem import DesignProblem, optimise_analytical
 from workflow.pipeline.damping_files import FIT_OUTPUTS, write_fit
 from workflow.pipeline.runner import RunContext, Step
@@ -84,13 +84,21 @@ def campaign_logs(context: RunContext) -> List[Path]:
 
 def damping_fit(context: RunContext):
     """Q(v) fitted to the logs with emcee (:func:`workflow.damping.fit.fit_damping`)."""
-    from workflow.damping.fit import fit_damping
+    from workflow.damping.fit import fit_damping, minimum_walkers
     from workflow.damping.logs import drop_short_sweeps, read_logs
+    from workflow.pipeline.config import LIMITS
 
     damping = context.config["damping"]
     log = drop_short_sweeps(read_logs(context.results["logs"]))
     for warning in log.warnings:
         print(f"warning: {warning}", file=sys.stderr)
+    fewest = minimum_walkers(damping["laws"], log.n_sweeps)
+    if damping["walkers"] < fewest:
+        raise InputFileError(
+            f"configuration: 'damping.walkers' = {damping['walkers']} is outside the accepted range {fewest} to "
+            f"{LIMITS['damping.walkers'][1]} for these logs (emcee needs twice the {fewest // 2} parameters "
+            f"sampled with {log.n_sweeps} sweeps)"
+        )
     return fit_damping(
         log,
         laws=tuple(damping["laws"]),
