@@ -44,6 +44,14 @@ def test_a_user_file_overrides_only_its_keys(tmp_path):
         ("[damping]\nwalkers = -3\n", "'damping.walkers' = -3 is outside the accepted range 2 to 10000"),
         ('[damping]\nlaws = ["cubic"]\n', "'damping.laws' holds 'cubic'; accepted: 'quadratic', 'linear'"),
         ("[damping]\nlaws = []\n", "'damping.laws' is empty"),
+        ("[design]\nceramic_thicknesses_mm = [0.7]\n", "'design.ceramic_thicknesses_mm' holds 0.7; accepted: 0.5, 1.0, 2.0"),
+        ("[design]\nmin_frequency_khz = -5.0\n", "'design.min_frequency_khz' = -5.0 is outside the accepted range"),
+        ("[design]\nwavelength_min_mm = 40.0\nwavelength_max_mm = 15.0\n", "'design.wavelength_min_mm' = 40.0 must be below"),
+        ("[simulator]\nrelative_noise = -0.1\n", "'simulator.relative_noise' = -0.1 is outside the accepted range 0.0 to 1.0"),
+        ("[simulator]\nlow_velocity_q = 40.0\n", "'simulator.working_q' = 54.0 must be below 'simulator.low_velocity_q'"),
+        ("[campaign]\nvoltages_v = []\n", "'campaign.voltages_v' is empty"),
+        ("[fem]\nn_modes = 0\n", "[fem] FEM settings must be positive integers"),
+        ('[fem]\nelement = "hex99"\n', "[fem] unknown FEM element 'hex99'"),
     ],
 )
 def test_configuration_errors_name_the_key(tmp_path, text, words):

@@ -35,7 +35,7 @@ MAX_LINE_LENGTH = 10_000
 _MAX_LINE_BYTES = 4 * MAX_LINE_LENGTH + 8
 """Bytes read at most for one line: any line of :data:`MAX_LINE_LENGTH` UTF-8 characters and its line end."""
 MAX_ROWS = 1_000_000
-"""Most data rows accepted in one log (a campaign is a few hundred; 200 000 read in about 3 s)."""
+"""Most data rows accepted in one log (a campaign is a few hundred; 200 000 are read in 2.4 to 5 s)."""
 MAX_VELOCITY = 10.0
 """Largest accepted velocity amplitude [m/s]: above any vibrometer decoder's range and any plate
 (10 m/s is 64 µm at 25 kHz); a larger value is a unit or transcription error."""
