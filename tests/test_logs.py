@@ -129,6 +129,16 @@ def write_rows(path, rows: int, rows_per_sweep: int = 1000):
     return path
 
 
+def peak_memory(function, *args) -> int:
+    """Peak of Python allocations [bytes] during ``function(*args)``."""
+    tracemalloc.start()
+    try:
+        function(*args)
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
 @pytest.fixture(scope="module")
 def log_200k(tmp_path_factory):
     return write_rows(tmp_path_factory.mktemp("limits") / "200k.csv", 200_000)
@@ -147,25 +157,14 @@ def test_reading_holds_one_line_of_text_at_a_time():
     """Peak memory of a 20 000-row log (1.2 MB of text): the rows' numbers, not the text (the reader
     once held the whole text and its lines: 10 MB here)."""
     with tempfile.TemporaryDirectory() as folder:
-        path = write_rows(Path(folder) / "20k.csv", 20_000)
-        tracemalloc.start()
-        try:
-            read_log(path)
-            _, peak = tracemalloc.get_traced_memory()
-        finally:
-            tracemalloc.stop()
+        peak = peak_memory(read_log, write_rows(Path(folder) / "20k.csv", 20_000))
     assert peak < 3e6, peak
 
 
 @pytest.mark.slow
 def test_a_200000_row_log_is_read_in_bounded_memory(log_200k):
     """15 MB measured by tracemalloc (docs/log-format.md); the bound leaves room for other Python versions."""
-    tracemalloc.start()
-    try:
-        read_log(log_200k)
-        _, peak = tracemalloc.get_traced_memory()
-    finally:
-        tracemalloc.stop()
+    peak = peak_memory(read_log, log_200k)
     assert peak < 40e6, peak
 
 

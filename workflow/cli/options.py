@@ -10,7 +10,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from workflow.damping.posterior import load_posterior
-from workflow.errors import GeometryError, InputFileError, TactileError
+from workflow.errors import GeometryError, TactileError
 from workflow.models import materials
 from workflow.models.plate import ORIGINAL_PLATE, Plate, check_design_space
 from workflow.optimise.problem import DesignProblem
