@@ -179,3 +179,21 @@ def test_help_states_the_ranges(capsys):
     assert status == 0
     text = " ".join(out.split())
     assert "0.001 to 1000 V" in text and "1 to 100000" in text
+
+
+@pytest.mark.slow
+def test_fem_space_mapping_at_the_top_of_the_voltage_range_finds_the_design_voltage_geometry(capsys, tmp_path, monkeypatch):
+    """The issue's ``optimize --model fem --method space-mapping --hp-mm 1 --voltage 1e4`` is refused by the
+    range; at its top, 1000 V, the search runs and the plate is the one found at 15 V (the FEM is linear:
+    the deflection scales with V). About 20 s with a cold FEM cache."""
+    monkeypatch.setenv("TACTILE_CACHE", str(tmp_path / "cache"))
+    records = {}
+    for voltage in ("15", "1000"):
+        status, out, err = run_cli(capsys, "optimize", "--model", "fem", "--method", "space-mapping", "--hp-mm", "1",
+                                   "--voltage", voltage, "--json")
+        assert status == 0, err
+        records[voltage] = json.loads(out.strip().splitlines()[-1])
+    low, high = records["15"], records["1000"]
+    assert high["lambda_mm"] == pytest.approx(low["lambda_mm"], abs=1e-3)
+    assert high["h_i_mm"] == pytest.approx(low["h_i_mm"], abs=1e-3)
+    assert high["w_dyn_um"] == pytest.approx(low["w_dyn_um"] * 1000 / 15, rel=1e-3)

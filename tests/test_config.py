@@ -40,6 +40,18 @@ def test_a_user_file_overrides_only_its_keys(tmp_path):
         ('[fem]\nfine_width_step_mm = "one"\n', "fem.fine_width_step_mm"),
         ('[design]\nceramic_thicknesses_mm = [1.0, "two"]\n', "design.ceramic_thicknesses_mm[1]"),
         ("[design\n", "not valid TOML"),
+        ("[damping]\nwalkers = 0\n", "'damping.walkers' = 0 is outside the accepted range 2 to 10000"),
+        ("[damping]\nwalkers = -3\n", "'damping.walkers' = -3 is outside the accepted range 2 to 10000"),
+        ('[damping]\nlaws = ["cubic"]\n', "'damping.laws' holds 'cubic'; accepted: 'quadratic', 'linear'"),
+        ("[damping]\nlaws = []\n", "'damping.laws' is empty"),
+        ("[design]\nceramic_thicknesses_mm = [0.7]\n", "'design.ceramic_thicknesses_mm' holds 0.7; accepted: 0.5, 1.0, 2.0"),
+        ("[design]\nmin_frequency_khz = -5.0\n", "'design.min_frequency_khz' = -5.0 is outside the accepted range"),
+        ("[design]\nwavelength_min_mm = 40.0\nwavelength_max_mm = 15.0\n", "'design.wavelength_min_mm' = 40.0 must be below"),
+        ("[simulator]\nrelative_noise = -0.1\n", "'simulator.relative_noise' = -0.1 is outside the accepted range 0.0 to 1.0"),
+        ("[simulator]\nlow_velocity_q = 40.0\n", "'simulator.working_q' = 54.0 must be below 'simulator.low_velocity_q'"),
+        ("[campaign]\nvoltages_v = []\n", "'campaign.voltages_v' is empty"),
+        ("[fem]\nn_modes = 0\n", "[fem] FEM settings must be positive integers"),
+        ('[fem]\nelement = "hex99"\n', "[fem] unknown FEM element 'hex99'"),
     ],
 )
 def test_configuration_errors_name_the_key(tmp_path, text, words):
@@ -50,6 +62,32 @@ def test_configuration_errors_name_the_key(tmp_path, text, words):
     assert words in str(error.value) and str(path) in str(error.value)
 
 
+def test_too_few_walkers_for_the_logs_is_a_configuration_error_before_the_chain(tmp_path):
+    """emcee needs twice the sampled parameters (5 + one resonance per sweep): the step says so, naming
+    the key and the range, before any sampling."""
+    from workflow.damping.synthetic import campaign_csv, simulate_campaign
+    from workflow.pipeline.runner import RunContext
+    from workflow.pipeline.steps import damping_fit
+
+    log = tmp_path / "campaign.csv"
+    log.write_text(campaign_csv(simulate_campaign(seed=1, voltages=(5.0, 10.0, 15.0), points_per_sweep=25)))
+    config = default_config()
+    config["damping"]["walkers"] = 15
+    context = RunContext(config=config, out=tmp_path, results={"logs": [log]})
+    with pytest.raises(InputFileError, match=r"'damping.walkers' = 15 is outside the accepted range 16 to 10000 .* 3 sweeps"):
+        damping_fit(context)
+
+
 def test_missing_configuration_file_is_named(tmp_path):
     with pytest.raises(InputFileError, match="no such configuration file"):
         load_config(tmp_path / "absent.toml")
+
+
+def test_an_unknown_material_record_is_refused_at_load(tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_text('[design]\nceramic = "PZT-99"\n', encoding="utf-8")
+    with pytest.raises(InputFileError, match=r"\[design\] ceramic: unknown ceramic 'PZT-99'; choose one of paper"):
+        load_config(path)
+    path.write_text('[design]\nresonator = "PZT-5H"\nglue_um = 20.0\n[fem]\npiezo = "coupled"\n', encoding="utf-8")
+    with pytest.raises(InputFileError, match="resonator"):
+        load_config(path)

@@ -17,6 +17,7 @@ from workflow.damping.likelihood import fit_data, log_probability, log_probabili
 from workflow.damping.posterior import load_posterior
 from workflow.damping.synthetic import TRUE_LAW, campaign_csv, simulate_campaign
 from workflow.errors import InputFileError
+from workflow.pipeline.outputs import RECORD
 
 SMALL = dict(voltages=(3.0, 9.0, 15.0, 18.0), points_per_sweep=30)
 
@@ -116,6 +117,8 @@ def test_cli_writes_posterior_figures_and_leaves_the_log_alone(tmp_path, capsys)
     posterior = load_posterior(out_dir)
     assert isinstance(posterior.median_law(), QuadraticLoss)
     assert posterior.median_law().q0 == pytest.approx(summary["parameters"]["q0"]["median"])
+    written = {path.name for path in out_dir.iterdir() if path.name != RECORD}
+    assert set(json.loads((out_dir / RECORD).read_text())["files"]) == written  # a rerun may overwrite them all
 
 
 def test_cli_shows_the_chain_progress_towards_convergence_on_a_piped_stderr(tmp_path, capsys, monkeypatch):

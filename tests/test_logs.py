@@ -1,10 +1,15 @@
 """The interferometer-log reader: valid logs, tolerated problems and refused input."""
 
 import os
+import tempfile
+import time
+import tracemalloc
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from workflow.damping import logs
 from workflow.damping.logs import drop_short_sweeps, read_log, read_logs
 from workflow.damping.synthetic import campaign_csv, simulate_campaign
 from workflow.errors import InputFileError
@@ -105,3 +110,76 @@ def test_short_sweeps_are_dropped_with_a_warning(tmp_path):
     assert "ignored 1 sweep(s)" in log.warnings[-1]
     with pytest.raises(InputFileError, match="no sweep has 5"):
         drop_short_sweeps(read_log(write(tmp_path, HEADER + "31000,5,0.1\n", "short.csv")))
+
+
+# --- limits (docs/log-format.md, "Limits") -------------------------------------------------------------
+
+def write_rows(path, rows: int, rows_per_sweep: int = 1000):
+    """A log of ``rows`` data rows: sweeps of ``rows_per_sweep`` points, each a Lorentzian resonance."""
+    index = np.arange(rows)
+    sweep, point = np.divmod(index, rows_per_sweep)
+    frequency = np.linspace(31_300.0, 32_900.0, rows_per_sweep)[point]
+    voltage = 1.0 + 0.1 * (sweep % 150)
+    velocity = 1e-3 * voltage / (1 + ((frequency - 32_100.0) / 300.0) ** 2)
+    table = np.column_stack([frequency, voltage, velocity, sweep, 0.1 * index])
+    with open(path, "w", encoding="utf-8") as stream:
+        stream.write("# tactile interferometer log\n# format_version: 1\n")
+        stream.write("frequency_hz,drive_voltage_v,velocity_m_s,sweep,timestamp_s\n")
+        np.savetxt(stream, table, fmt=["%.6f", "%.6f", "%.9e", "%d", "%.3f"], delimiter=",")
+    return path
+
+
+def peak_memory(function, *args) -> int:
+    """Peak of Python allocations [bytes] during ``function(*args)``."""
+    tracemalloc.start()
+    try:
+        function(*args)
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+@pytest.fixture(scope="module")
+def log_200k(tmp_path_factory):
+    return write_rows(tmp_path_factory.mktemp("limits") / "200k.csv", 200_000)
+
+
+def test_a_200000_row_log_is_read_within_the_time_budget(log_200k):
+    """2.4 to 5 s on the development machine (docs/log-format.md); 20 s leaves room for a slow CI machine."""
+    start = time.perf_counter()
+    log = read_log(log_200k)
+    seconds = time.perf_counter() - start
+    assert len(log.velocity) == 200_000 and log.n_sweeps == 200
+    assert seconds < 20.0, seconds
+
+
+def test_reading_holds_one_line_of_text_at_a_time():
+    """Peak memory of a 20 000-row log (1.2 MB of text): the rows' numbers, not the text (the reader
+    once held the whole text and its lines: 10 MB here)."""
+    with tempfile.TemporaryDirectory() as folder:
+        peak = peak_memory(read_log, write_rows(Path(folder) / "20k.csv", 20_000))
+    assert peak < 3e6, peak
+
+
+@pytest.mark.slow
+def test_a_200000_row_log_is_read_in_bounded_memory(log_200k):
+    """15 MB measured by tracemalloc (docs/log-format.md); the bound leaves room for other Python versions."""
+    peak = peak_memory(read_log, log_200k)
+    assert peak < 40e6, peak
+
+
+def test_rows_beyond_the_limit_are_refused_with_their_line(tmp_path, monkeypatch):
+    monkeypatch.setattr(logs, "MAX_ROWS", 1500)
+    path = write_rows(tmp_path / "long.csv", 1501)
+    with pytest.raises(InputFileError, match=r"long.csv, line 1504: more than the 1500 data rows accepted"):
+        read_log(path)
+    assert len(read_log(write_rows(tmp_path / "limit.csv", 1500)).velocity) == 1500
+
+
+def test_a_line_over_the_length_limit_is_refused_with_its_line(tmp_path):
+    path = write_rows(tmp_path / "wide.csv", 30)
+    lines = path.read_text().splitlines(keepends=True)
+    lines[10] = lines[10].rstrip("\n") + "," + "9" * logs.MAX_LINE_LENGTH + "\n"
+    path.write_text("".join(lines))
+    with pytest.raises(InputFileError, match=rf"wide.csv, line 11: .*longer than the {logs.MAX_LINE_LENGTH}"):
+        read_log(path)

@@ -12,6 +12,7 @@ from workflow import progress
 from workflow.cli import main
 from workflow.errors import TactileError
 from workflow.pipeline.config import default_config, tomllib
+from workflow.pipeline.outputs import RECORD
 from workflow.pipeline.steps import STEPS, sweep_widths
 from workflow.units import MM
 
@@ -64,6 +65,14 @@ def test_a_rerun_reuses_the_cached_steps(tiny_run, capsys, monkeypatch):
     record = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert "Q(v) fit (emcee)" in record["from_cache"]
     assert (out / "report.md").is_file()
+
+
+def test_the_run_records_every_file_it_wrote(tiny_run):
+    """So that a rerun into the folder may overwrite them all without --force (test_outputs.py)."""
+    _, out, _, _ = tiny_run
+    written = {path.relative_to(out).as_posix() for path in out.rglob("*") if path.is_file() and path.name != RECORD}
+    assert "report.md" in written and "damping/fit.json" in written
+    assert set(json.loads((out / RECORD).read_text())["files"]) == written
 
 
 def test_tiny_run_writes_a_report(tiny_run):

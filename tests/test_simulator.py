@@ -55,6 +55,21 @@ def test_generator_program_lines_with_semicolons_and_unknown_headers():
     assert generator.handle_line("SYST:ERR?").startswith("-113")
 
 
+@pytest.mark.parametrize("line, error", [
+    ("*RST?", "-113"), ("*CLS?", "-113"), ("*IDN", "-113"), ("SYST:ERR", "-113"),
+    ("*RST 1", "-108"), ("FREQ? 1000", "-108"), ("FREQ", "-109"),
+])
+def test_a_header_in_a_form_it_does_not_have_is_an_error_and_changes_nothing(line, error):
+    """As a 33500: a query form of a command that has none (``*RST?``) is an undefined header, not a reset."""
+    generator = GeneratorDevice(peak_voltage_limit=5.0)
+    generator.handle_line("FREQ 31000;:VOLT 2;:OUTP ON")
+    before = generator.state
+    assert generator.handle_line(line) is None
+    assert generator.state == before
+    assert generator.handle_line("SYST:ERR?").startswith(error + ",")
+    assert generator.handle_line("SYST:ERR?") == '+0,"No error"'
+
+
 def test_simulated_generator_refuses_beyond_its_limit_and_keeps_the_previous_output():
     generator = GeneratorDevice(peak_voltage_limit=1.5)  # 30 V across the ceramics through a gain of 20
     generator.handle_line("OUTP:LOAD INF")  # High Z: the stated levels are the terminal levels

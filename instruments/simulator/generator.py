@@ -108,6 +108,23 @@ def _channel(suffix: str | None) -> None:
         raise CommandError(-114, "Header suffix out of range")
 
 
+QUERY_ONLY = frozenset({"query"})
+"""Forms of a header that is only a query (``*IDN?``): its command form is an undefined header."""
+EVENT = frozenset({"event"})
+"""Forms of a command without a parameter and without a query (``*RST``): ``*RST?`` is an undefined header."""
+SETTING = frozenset({"setting", "query"})
+"""Forms of a setting: ``FREQ 1000`` (a parameter is required) and ``FREQ?``."""
+
+
+def _form_error(form: str, forms: frozenset) -> CommandError:
+    """The 33500's error for a header used in a ``form`` it does not have (-113, -108 or -109)."""
+    if form == "query" or forms == QUERY_ONLY:
+        return CommandError(-113, "Undefined header")
+    if form == "setting":
+        return CommandError(-108, "Parameter not allowed")
+    return CommandError(-109, "Missing parameter")
+
+
 class GeneratorDevice:
     """The generator's command interpreter and state.
 
@@ -123,20 +140,20 @@ class GeneratorDevice:
         self.state = GeneratorState()
         self.errors: list[str] = []
         self._commands = [
-            (header_regex(pattern), handler)
-            for pattern, handler in (
-                ("*IDN", self._identify),
-                ("*RST", self._reset),
-                ("*CLS", self._clear),
-                ("*OPC", self._operation_complete),
-                ("SYSTem:ERRor[:NEXT]", self._next_error),
-                ("[SOURce#:]FUNCtion[:SHAPe]", self._function),
-                ("[SOURce#:]FREQuency[:CW]", self._frequency),
-                ("[SOURce#:]VOLTage:UNIT", self._unit),
-                ("[SOURce#:]VOLTage[:LEVel][:IMMediate]:OFFSet", self._offset),
-                ("[SOURce#:]VOLTage[:LEVel][:IMMediate][:AMPLitude]", self._amplitude),
-                ("OUTPut#:LOAD", self._load),
-                ("OUTPut#[:STATe]", self._output),
+            (header_regex(pattern), handler, forms)
+            for pattern, handler, forms in (
+                ("*IDN", self._identify, QUERY_ONLY),
+                ("*RST", self._reset, EVENT),
+                ("*CLS", self._clear, EVENT),
+                ("*OPC", self._operation_complete, EVENT | {"query"}),
+                ("SYSTem:ERRor[:NEXT]", self._next_error, QUERY_ONLY),
+                ("[SOURce#:]FUNCtion[:SHAPe]", self._function, SETTING),
+                ("[SOURce#:]FREQuency[:CW]", self._frequency, SETTING),
+                ("[SOURce#:]VOLTage:UNIT", self._unit, SETTING),
+                ("[SOURce#:]VOLTage[:LEVel][:IMMediate]:OFFSet", self._offset, SETTING),
+                ("[SOURce#:]VOLTage[:LEVel][:IMMediate][:AMPLitude]", self._amplitude, SETTING),
+                ("OUTPut#:LOAD", self._load, SETTING),
+                ("OUTPut#[:STATe]", self._output, SETTING),
             )
         ]
 
@@ -154,16 +171,17 @@ class GeneratorDevice:
         return ";".join(replies) if replies else None
 
     def _dispatch(self, header: str, argument: str):
-        for regex, handler in self._commands:
+        for regex, handler, forms in self._commands:
             match = regex.fullmatch(header)
             if match:
                 *suffixes, query = match.groups()
-                for suffix in suffixes:
-                    _channel(suffix)
+                form = "query" if query else "setting" if argument else "event"
+                if form not in forms:
+                    raise _form_error(form, forms)
                 if query and argument:
                     raise CommandError(-108, "Parameter not allowed")
-                if not query and not argument and handler not in (self._reset, self._clear, self._operation_complete):
-                    raise CommandError(-109, "Missing parameter")
+                for suffix in suffixes:
+                    _channel(suffix)
                 return handler(argument if not query else None)
         raise CommandError(-113, "Undefined header")
 
@@ -188,7 +206,7 @@ class GeneratorDevice:
         self.state = candidate
 
     def _identify(self, argument):
-        return IDENTITY if argument is None else None
+        return IDENTITY
 
     def _reset(self, argument):
         self.state = GeneratorState()

@@ -3,15 +3,13 @@
 import sys
 from pathlib import Path
 
-from workflow.cli.options import add_json_flag, bounded, limit_text, output_folder, seed_option
+from workflow.cli.options import add_force_option, add_json_flag, bounded, limit_text, seed_option
 from workflow.damping.fit import fit_damping, fit_summary
-from workflow.damping.laws import LAWS
+from workflow.damping.laws import SAMPLED_LAWS
 from workflow.damping.logs import drop_short_sweeps, read_logs
 from workflow.pipeline.config import LIMITS
-from workflow.pipeline.damping_files import write_fit
-
-SAMPLED_LAWS = tuple(name for name in LAWS if name != "constant")
-"""Laws ``--law`` accepts; the constant-Q baseline is always in the comparison (BIC at the MAP)."""
+from workflow.pipeline.damping_files import FIT_OUTPUTS, write_fit
+from workflow.pipeline.outputs import output_folder
 
 
 def register(subparsers) -> None:
@@ -26,6 +24,7 @@ def register(subparsers) -> None:
     )
     parser.add_argument("logs", nargs="+", metavar="LOG.csv", help="interferometer log(s) (docs/log-format.md)")
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
+    add_force_option(parser)
     parser.add_argument(
         "--law",
         choices=SAMPLED_LAWS + ("all",),
@@ -44,11 +43,11 @@ def run(args) -> dict:
     log = drop_short_sweeps(read_logs(args.logs))
     for warning in log.warnings:
         print(f"tactile fit-damping: warning: {warning}", file=sys.stderr)
-    out = output_folder(args.out)
     input_paths = {Path(p).resolve() for p in args.logs}
     laws = SAMPLED_LAWS if args.law == "all" else (args.law,)
-    fit = fit_damping(log, laws=laws, seed=args.seed, max_steps=args.max_steps, progress=True)
-    summary = dict(fit_summary(fit), files=write_fit(fit, out, figures=not args.no_figures, protect=input_paths))
+    with output_folder(args.out, FIT_OUTPUTS, force=args.force) as out:
+        fit = fit_damping(log, laws=laws, seed=args.seed, max_steps=args.max_steps, progress=True)
+        summary = dict(fit_summary(fit), files=write_fit(fit, out, figures=not args.no_figures, protect=input_paths))
     if not args.json:
         _print_human(summary)
     return summary

@@ -12,6 +12,7 @@ from workflow.cli.options import (
     add_damping_option,
     add_drive_options,
     add_fem_options,
+    add_force_option,
     add_hi_min_option,
     add_json_flag,
     add_model_option,
@@ -22,7 +23,6 @@ from workflow.cli.options import (
     fem_accuracy,
     limit_text,
     load_damping,
-    output_folder,
 )
 from workflow.errors import TactileError
 from workflow.execution.cache import EvaluationCache
@@ -32,11 +32,15 @@ from workflow.optimise.fem_optimum import optimise_fem
 from workflow.optimise.maps import design_map, width_sweep
 from workflow.optimise.problem import analytical_model, optimise_analytical
 from workflow.pipeline.config import LIMITS
+from workflow.pipeline.outputs import output_folder
 from workflow.pipeline.records import damped_optimum_record, fem_damping_record
 from workflow.units import KHZ, MM, UM
 
 DEFAULT_GRID = {"analytical": 81, "fem": 12}
 """Grid points per axis when --grid is not given."""
+
+OUTPUTS = ("*.png",)
+"""Glob patterns of the files the command writes into --out (:mod:`workflow.pipeline.outputs`)."""
 
 
 def register(subparsers) -> None:
@@ -70,6 +74,7 @@ def register(subparsers) -> None:
         "(the widths of tactile run)",
     )
     parser.add_argument("--out", type=Path, default=Path("reports"), help="folder for the PNG figures (default: reports/)")
+    add_force_option(parser)
     add_json_flag(parser)
     parser.set_defaults(handler=run)
 
@@ -80,7 +85,22 @@ def run(args) -> dict:
         raise TactileError("maps: --width-sweep needs --model fem (the beam model does not depend on b)")
     problem = design_problem(args, args.hp_mm * MM)
     posterior = load_damping(args)
-    output_folder(args.out)
+    with output_folder(args.out, OUTPUTS, force=args.force):
+        record = _maps(args, problem, posterior, points)
+    if not args.json:
+        o = record["optimum"]
+        damping = "" if posterior is None else f" with {posterior.law_name} Q(v)"
+        voltage = "" if posterior is None else f", {o['required_voltage_v']['p50']:.3g} V for the target"
+        print(
+            f"{args.model} map {points}x{points}{damping}, h_p {args.hp_mm:g} mm: optimum lambda {o['lambda_mm']:.3f} mm, "
+            f"h_i {o['h_i_mm']:.3f} mm, w_dyn {o['w_dyn_um']:.3f} µm at {o['f_r_khz']:.2f} kHz{voltage}; figures: "
+            + ", ".join(record["figures"])
+        )
+    return record
+
+
+def _maps(args, problem, posterior, points: int) -> dict:
+    """The maps' record, their figures written into --out."""
     if args.model == "analytical":
         model = analytical_model(args.q, args.voltage)
     else:
@@ -98,7 +118,6 @@ def run(args) -> dict:
         record = _constant_q_record(args, problem, model, points)
     else:
         record = _damped_record(args, problem, model, points, posterior)
-    figures = record["figures"]
     if args.width_sweep:
         from workflow.pipeline.config import default_config
         from workflow.pipeline.figures.maps import width_sweep_figure
@@ -106,22 +125,14 @@ def run(args) -> dict:
 
         plate = build_plate(args)
         sweep = width_sweep(model, plate, sweep_widths(default_config()["fem"], plate.width))
-        figures.append(_save(width_sweep_figure(sweep, design_width=args.b_mm * MM), args.out / "width_sweep_fem.png"))
+        figure = width_sweep_figure(sweep, design_width=args.b_mm * MM)
+        record["figures"].append(_save(figure, args.out / "width_sweep_fem.png"))
         record["width_sweep"] = {
             "b_mm": (sweep.width / MM).tolist(),
             "w_dyn_um": (sweep.deflection / UM).tolist(),
             "f_r_khz": (sweep.frequency / KHZ).tolist(),
             "transverse": sweep.transverse.tolist(),
         }
-    if not args.json:
-        o = record["optimum"]
-        damping = "" if posterior is None else f" with {posterior.law_name} Q(v)"
-        voltage = "" if posterior is None else f", {o['required_voltage_v']['p50']:.3g} V for the target"
-        print(
-            f"{args.model} map {points}x{points}{damping}, h_p {args.hp_mm:g} mm: optimum lambda {o['lambda_mm']:.3f} mm, "
-            f"h_i {o['h_i_mm']:.3f} mm, w_dyn {o['w_dyn_um']:.3f} µm at {o['f_r_khz']:.2f} kHz{voltage}; figures: "
-            + ", ".join(figures)
-        )
     return record
 
 

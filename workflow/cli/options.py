@@ -6,12 +6,11 @@ The one module that command modules share: no command module imports another.
 import argparse
 import math
 import signal
-import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 
 from workflow.damping.posterior import load_posterior
-from workflow.errors import GeometryError, InputFileError, TactileError
+from workflow.errors import GeometryError, TactileError
 from workflow.models import materials
 from workflow.models.fem.accuracy import ACCURACY_RANGE, DEFAULT_ACCURACY, FemAccuracy
 from workflow.models.fem.settings import PIEZO_MODELS
@@ -80,26 +79,14 @@ def seed_option(parser, default: int, help: str) -> None:
                         help=f"{help}, {limit_text('campaign.seed')} (default {default})")
 
 
-def output_folder(path, option: str = "--out") -> Path:
-    """The folder ``path`` for a command's outputs, created if missing and checked writable before any work.
-
-    Raises
-    ------
-    InputFileError
-        ``path`` is an existing file, lies under a file, or cannot be created or written to, naming ``option``.
-    """
-    path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise InputFileError(
-            f"{option} {path}: exists and is not a folder (give a folder, or a path that does not exist)"
-        )
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=path):
-            pass
-    except OSError as error:
-        raise InputFileError(f"{option} {path}: cannot write a folder there ({error.strerror or error})") from None
-    return path
+def add_force_option(parser: argparse.ArgumentParser) -> None:
+    """``--force``: overwrite files in --out that tactile did not write (docs/cli.md, "Output folders")."""
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="overwrite files in --out that tactile did not write (or that changed since); without it the "
+        "command refuses them before any work",
+    )
 
 
 def add_model_option(parser: argparse.ArgumentParser) -> None:

@@ -3,12 +3,13 @@
 import sys
 from pathlib import Path
 
-from workflow.cli.options import add_fem_options, add_json_flag, output_folder, override_config
+from workflow.cli.options import add_fem_options, add_force_option, add_json_flag, override_config
 from workflow.execution.cache import EvaluationCache
 from workflow.pipeline.config import load_config, to_toml
+from workflow.pipeline.outputs import output_folder
 from workflow.pipeline.report import write_report
 from workflow.pipeline.runner import RunContext, run_steps
-from workflow.pipeline.steps import STEPS
+from workflow.pipeline.steps import RUN_OUTPUTS, STEPS
 
 
 def register(subparsers) -> None:
@@ -21,6 +22,7 @@ def register(subparsers) -> None:
     )
     parser.add_argument("--config", type=Path, help="TOML file overriding the embedded defaults")
     parser.add_argument("--out", type=Path, default=Path("reports"), help="output folder (default: reports/)")
+    add_force_option(parser)
     parser.add_argument("--logs", type=Path, nargs="+", help="interferometer logs to fit instead of a simulated campaign")
     parser.add_argument("--scheduler", help="tcp://host:port of a Dask scheduler (default: local cores)")
     parser.add_argument("--print-config", action="store_true", help="print the effective configuration and exit")
@@ -34,19 +36,20 @@ def run(args):
     if args.print_config:
         print(to_toml(config), end="")
         return None
-    context = RunContext(
-        config=config,
-        out=output_folder(args.out),
-        scheduler=args.scheduler or config["run"]["scheduler"] or None,
-        logs=list(args.logs or config["campaign"]["logs"]),
-        cache=EvaluationCache() if config["run"]["cache"] else None,
-    )
-    if context.scheduler is not None:
-        from workflow.execution.parallel import connect
+    with output_folder(args.out, RUN_OUTPUTS, force=args.force) as out:
+        context = RunContext(
+            config=config,
+            out=out,
+            scheduler=args.scheduler or config["run"]["scheduler"] or None,
+            logs=list(args.logs or config["campaign"]["logs"]),
+            cache=EvaluationCache() if config["run"]["cache"] else None,
+        )
+        if context.scheduler is not None:
+            from workflow.execution.parallel import connect
 
-        connect(context.scheduler).close()  # fail before any step, not in the middle of the run
-    run_steps(context, STEPS)
-    report = write_report(context)
+            connect(context.scheduler).close()  # fail before any step, not in the middle of the run
+        run_steps(context, STEPS)
+        report = write_report(context)
     print(f"report: {report}", file=sys.stderr if args.json else sys.stdout)
     return {
         "report": str(report),

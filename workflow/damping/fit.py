@@ -23,7 +23,7 @@ import numpy as np
 from scipy import optimize
 
 from workflow.damping.laws import LAWS
-from workflow.damping.likelihood import FitData, fit_data, log_probability, pointwise_log_likelihood
+from workflow.damping.likelihood import FitData, ParameterLayout, fit_data, log_probability, pointwise_log_likelihood
 from workflow.damping.logs import CampaignLog, drop_short_sweeps
 from workflow.damping.posterior import DampingPosterior
 from workflow.progress import Progress
@@ -404,6 +404,12 @@ def map_fit(log: CampaignLog, law_name: str, sweeps: Optional[SweepEstimates] = 
     start, scale = initial_guess(data, sweeps or sweep_estimates(log))
     theta = maximum_a_posteriori(data, start, scale)
     return data, theta, scale, float(pointwise_log_likelihood(theta, data).sum())
+
+
+def minimum_walkers(laws: Sequence[str], n_sweeps: int) -> int:
+    """Fewest walkers emcee's differential-evolution moves accept for ``laws`` fitted to ``n_sweeps``
+    sweeps: twice the largest number of sampled parameters (law, gain, one resonance per sweep, noise)."""
+    return 2 * max(ParameterLayout(name, n_sweeps).dimension for name in laws)
 
 
 def fit_law(

@@ -82,6 +82,8 @@ class ConstantQ:
 
 LAWS = {law.name: law for law in (QuadraticLoss, LinearLoss, ConstantQ)}
 """The Q(v) laws by name."""
+SAMPLED_LAWS = tuple(name for name in LAWS if name != "constant")
+"""Laws whose posterior can be sampled; the constant Q is the baseline of the comparison (BIC at the MAP)."""
 
 
 def parameter_names(law_class) -> tuple:

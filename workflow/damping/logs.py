@@ -11,6 +11,7 @@ writer interrupted mid-row) is ignored.
 import codecs
 import csv
 import math
+from array import array
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence, Tuple
@@ -31,6 +32,10 @@ _MISSING = {"", "nan", "NaN", "NAN"}
 
 MAX_LINE_LENGTH = 10_000
 """Longest accepted line [characters]; a data row is under 200."""
+_MAX_LINE_BYTES = 4 * MAX_LINE_LENGTH + 8
+"""Bytes read at most for one line: any line of :data:`MAX_LINE_LENGTH` UTF-8 characters and its line end."""
+MAX_ROWS = 1_000_000
+"""Most data rows accepted in one log (a campaign is a few hundred; 200 000 are read in 2.4 to 5 s)."""
 MAX_VELOCITY = 10.0
 """Largest accepted velocity amplitude [m/s]: above any vibrometer decoder's range and any plate
 (10 m/s is 64 µm at 25 kHz); a larger value is a unit or transcription error."""
@@ -131,7 +136,7 @@ def read_logs(paths: Sequence) -> CampaignLog:
 
 
 def read_log(path) -> CampaignLog:
-    """Read one interferometer log.
+    """Read one interferometer log, line by line (memory: the rows' numbers, about 50 bytes a row).
 
     Without a ``sweep`` column, a new sweep starts wherever the drive voltage changes
     between consecutive rows.
@@ -139,47 +144,56 @@ def read_log(path) -> CampaignLog:
     Raises
     ------
     InputFileError
-        Unreadable, empty, binary or non-UTF-8 file; no header or no data rows; a
-        required column missing, duplicated or given in an unknown unit; a row with the
-        wrong number of fields; a non-numeric or non-physical value.
+        Unreadable, empty, binary or non-UTF-8 file; no header or no data rows; more than
+        :data:`MAX_ROWS` data rows or a line over :data:`MAX_LINE_LENGTH`; a required column
+        missing, duplicated or given in an unknown unit; a row with the wrong number of
+        fields; a non-numeric or non-physical value.
     """
     path = Path(path)
-    lines, warnings = _text_lines(path)
-    body = [(number, line) for number, line in lines if line.strip() and not line.lstrip().startswith("#")]
-    if not body:
-        raise InputFileError(f"{path}: no header row (expected columns {', '.join(logformat.REQUIRED_COLUMNS)})")
-    header_number, header_line = body[0]
-    header = [name.strip() for name in _fields(path, header_number, header_line)]
-    separator = next((mark for mark in ";\t" if len(header) == 1 and mark in header[0]), None)
-    if separator:
-        raise InputFileError(
-            f"{path}, line {header_number}: fields separated by {separator!r}; a log separates them by ','"
-        )
-    columns = _column_indices(path, header_number, header)
-    rows = body[1:]
+    warnings = []
+    try:
+        stream = open(path, "rb")
+    except OSError as error:
+        raise InputFileError(f"{path}: cannot read ({error.strerror or error})") from None
+    with stream:
+        lines = _content_lines(path, stream, warnings)
+        header_number, header_line = next(lines, (None, None))
+        if header_line is None:
+            raise InputFileError(f"{path}: no header row (expected columns {', '.join(logformat.REQUIRED_COLUMNS)})")
+        header = [name.strip() for name in _fields(path, header_number, header_line)]
+        separator = next((mark for mark in ";\t" if len(header) == 1 and mark in header[0]), None)
+        if separator:
+            raise InputFileError(
+                f"{path}, line {header_number}: fields separated by {separator!r}; a log separates them by ','"
+            )
+        columns = _column_indices(path, header_number, header)
+        table = {name: array("d") for name in columns}
+        line_numbers, rows, dropouts = array("q"), 0, 0
+        for number, line in lines:
+            rows += 1
+            if rows > MAX_ROWS:
+                raise InputFileError(f"{path}, line {number}: more than the {MAX_ROWS} data rows accepted in one log")
+            cells = _fields(path, number, line)
+            if len(cells) != len(header):
+                raise InputFileError(f"{path}, line {number}: expected {len(header)} fields, got {len(cells)}")
+            values = {name: _number(path, number, name, cells[index]) for name, index in columns.items()}
+            if math.isnan(values[logformat.VELOCITY]):
+                dropouts += 1
+                continue
+            line_numbers.append(number)
+            for name, value in values.items():
+                table[name].append(value)
     if not rows:
         raise InputFileError(f"{path}: header only, no data rows")
-    table = {name: [] for name in columns}
-    line_numbers, dropouts = [], 0
-    for number, line in rows:
-        cells = _fields(path, number, line)
-        if len(cells) != len(header):
-            raise InputFileError(f"{path}, line {number}: expected {len(header)} fields, got {len(cells)}")
-        values = {name: _number(path, number, name, cells[index]) for name, index in columns.items()}
-        if math.isnan(values[logformat.VELOCITY]):
-            dropouts += 1
-            continue
-        line_numbers.append(number)
-        for name, value in values.items():
-            table[name].append(value)
     if dropouts:
         warnings.append(f"{path}: dropped {dropouts} row(s) without a velocity reading (vibrometer dropouts)")
     if not table[logformat.VELOCITY]:
         raise InputFileError(f"{path}: no data row has a velocity reading")
-    arrays = {name: np.asarray(values, dtype=float) for name, values in table.items()}
-    _check_physical(path, arrays, np.asarray(line_numbers))
+    arrays = {name: np.frombuffer(values, dtype=float) for name, values in table.items()}
+    line_numbers = np.frombuffer(line_numbers, dtype=np.int64)
+    _check_physical(path, arrays, line_numbers)
     sweep = _sweep_index(path, arrays)
-    _check_peaks(path, arrays[logformat.VELOCITY], sweep, np.asarray(line_numbers))
+    _check_peaks(path, arrays[logformat.VELOCITY], sweep, line_numbers)
     return CampaignLog(
         frequency=arrays[logformat.FREQUENCY],
         drive_voltage=arrays[logformat.DRIVE_VOLTAGE],
@@ -190,38 +204,48 @@ def read_log(path) -> CampaignLog:
     )
 
 
-def _text_lines(path: Path):
-    """(line number, text) pairs of a UTF-8 file, and the warnings about it."""
-    try:
-        raw = path.read_bytes()
-    except OSError as error:
-        raise InputFileError(f"{path}: cannot read ({error.strerror or error})") from None
-    if not raw.strip():
-        raise InputFileError(f"{path}: empty file")
-    if raw.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
+def _content_lines(path: Path, stream, warnings: list):
+    """(line number, text) of the header and data lines of a UTF-8 file read from ``stream``, one line
+    in memory at a time: comments and blank lines skipped, an incomplete last data line dropped (with a
+    warning appended to ``warnings``)."""
+    head = stream.peek(_MAX_LINE_BYTES)  # the file's first block: a binary file is named so even if its first line is not UTF-8
+    if head.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
         raise InputFileError(f"{path}: UTF-16 text, not UTF-8 (save the log as UTF-8)")
-    if b"\x00" in raw:
+    if b"\x00" in head:
         raise InputFileError(f"{path}: binary data (NUL bytes), not a CSV log")
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as error:
-        line = raw[: error.start].count(b"\n") + 1
-        raise InputFileError(
-            f"{path}, line {line}: not UTF-8 (byte 0x{raw[error.start]:02x} at offset {error.start})"
-        ) from None
-    lines = list(enumerate(text.split("\n"), start=1))
-    for number, line in lines:
-        if len(line) > MAX_LINE_LENGTH:
+    number, offset, seen_text, header_seen = 0, 0, False, False
+    while True:
+        raw = stream.readline(_MAX_LINE_BYTES)
+        if not raw:
+            break
+        number += 1
+        if b"\x00" in raw:
+            raise InputFileError(f"{path}, line {number}: binary data (NUL bytes), not a CSV log")
+        complete = raw.endswith(b"\n")
+        if not complete and len(raw) == _MAX_LINE_BYTES:
+            raise InputFileError(f"{path}, line {number}: longer than the {MAX_LINE_LENGTH} characters accepted per line")
+        try:
+            line = raw.decode("utf-8-sig" if number == 1 else "utf-8")
+        except UnicodeDecodeError as error:
             raise InputFileError(
-                f"{path}, line {number}: {len(line)} characters, longer than the {MAX_LINE_LENGTH} accepted per line"
-            )
-    warnings = []
-    if lines and lines[-1][1] == "":
-        lines.pop()
-    elif not text.endswith("\n") and _is_data_line(lines):
-        number, _ = lines.pop()
-        warnings.append(f"{path}, line {number}: ignored an incomplete last line (no newline; interrupted writer?)")
-    return [(number, line.rstrip("\r")) for number, line in lines], warnings
+                f"{path}, line {number}: not UTF-8 (byte 0x{raw[error.start]:02x} at offset {offset + error.start})"
+            ) from None
+        offset += len(raw)
+        line = line[:-1] if complete else line
+        if len(line) > MAX_LINE_LENGTH:
+            raise InputFileError(f"{path}, line {number}: {len(line)} characters, longer than the "
+                                 f"{MAX_LINE_LENGTH} accepted per line")
+        seen_text = seen_text or bool(line.strip())
+        line = line.rstrip("\r")
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        if not complete and header_seen:  # the last line, cut short
+            warnings.append(f"{path}, line {number}: ignored an incomplete last line (no newline; interrupted writer?)")
+            return
+        header_seen = True
+        yield number, line
+    if not seen_text:
+        raise InputFileError(f"{path}: empty file")
 
 
 def _fields(path: Path, number: int, line: str) -> list:
@@ -234,12 +258,6 @@ def _fields(path: Path, number: int, line: str) -> list:
         return next(csv.reader([line]))
     except csv.Error as error:
         raise InputFileError(f"{path}, line {number}: not a CSV row ({error})") from None
-
-
-def _is_data_line(lines) -> bool:
-    """Whether the last line comes after a header (so it is a row, not the header)."""
-    content = [line for _, line in lines if line.strip() and not line.lstrip().startswith("#")]
-    return len(content) >= 2 and content[-1] == lines[-1][1]
 
 
 def _column_indices(path: Path, line: int, header) -> dict:

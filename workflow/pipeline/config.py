@@ -11,6 +11,7 @@ from dataclasses import MISSING, fields
 from importlib import resources
 from pathlib import Path
 
+from workflow.damping.laws import SAMPLED_LAWS
 from workflow.errors import InputFileError
 from workflow.models import materials
 from workflow.models.plate import ORIGINAL_PLATE
@@ -21,14 +22,40 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
+def _mm(bounds) -> tuple:
+    """A range in metres as millimetres, rounded as the configuration writes them."""
+    return tuple(round(x / MM, 9) for x in bounds)
+
+
 LIMITS = {
     "design.voltage_v": (1e-3, 1000.0),
     "design.q": (1.0, 1e5),
+    "design.wavelength_min_mm": _mm(materials.WAVELENGTH_RANGE),
+    "design.wavelength_max_mm": _mm(materials.WAVELENGTH_RANGE),
+    "design.hi_min_mm": _mm(materials.RESONATOR_THICKNESS_RANGE),
+    "design.hi_max_mm": _mm(materials.RESONATOR_THICKNESS_RANGE),
+    "design.width_mm": _mm(materials.WIDTH_RANGE),
+    "design.min_frequency_khz": (1.0, 1000.0),
+    "design.target_deflection_um": (1e-3, 1000.0),
+    "campaign.voltages_v": (1e-3, 1000.0),
+    "campaign.span_hz": (1e-3, 1e6),
+    "simulator.low_velocity_q": (1.0, 1e5),
+    "simulator.working_q": (1.0, 1e5),
+    "simulator.amplifier_gain": (0.1, 1000.0),
+    "simulator.ceramic_voltage_limit_v": (1e-3, 1000.0),
+    "simulator.relative_noise": (0.0, 1.0),
+    "simulator.floor_fraction": (0.0, 1.0),
+    "simulator.phase_noise_deg": (0.0, 180.0),
+    "fem.width_min_mm": _mm(materials.WIDTH_RANGE),
+    "fem.width_max_mm": _mm(materials.WIDTH_RANGE),
+    "fem.fine_width_min_mm": _mm(materials.WIDTH_RANGE),
+    "fem.fine_width_max_mm": _mm(materials.WIDTH_RANGE),
     "maps.grid": (2, 400),
     "maps.fem_grid": (2, 400),
     "campaign.seed": (0, 2**32 - 1),
     "damping.seed": (0, 2**32 - 1),
     "damping.max_steps": (1, 1_000_000),
+    "damping.walkers": (2, 10_000),
     "damping.posterior_draws": (1, 10_000),
     "fem.width_points": (2, 1000),
     "design.glue_um": (0.0, 500.0),
@@ -37,9 +64,30 @@ LIMITS = {
 }
 """Accepted range of numeric keys, shared with the command-line options of the same quantity: drive
 amplitude [V peak across the ceramics], quality factor [-], map points per axis, random seeds, chain length
-(a million steps is about an hour per law), posterior draws propagated, widths of the FEM sweep, FEM accuracy
-targets (relative frequency error; 0 means the fixed mesh of the [fem] mesh keys).
-Every other number must be finite."""
+(a million steps is about an hour per law), emcee walkers (also at least twice the parameters sampled:
+checked when the logs are read, :func:`~workflow.damping.fit.minimum_walkers`), posterior draws propagated,
+widths of the FEM sweep, FEM accuracy targets (relative frequency error; 0 means the fixed mesh of the
+[fem] mesh keys); the design space of Table 1 [mm], frequency [kHz], deflection [um], the
+campaign's drive [V] and span [Hz], the simulated bench.  Every other number must be finite."""
+
+CHOICES = {
+    "damping.laws": SAMPLED_LAWS,
+    "design.ceramic_thicknesses_mm": _mm(materials.CERAMIC_THICKNESSES),
+    "maps.fem_ceramic_thicknesses_mm": _mm(materials.CERAMIC_THICKNESSES),
+}
+"""Accepted values of the items of list keys."""
+
+NOT_EMPTY = ("damping.laws", "design.ceramic_thicknesses_mm", "campaign.voltages_v")
+"""List keys that need at least one item."""
+
+ORDERED = (
+    ("design.wavelength_min_mm", "design.wavelength_max_mm"),
+    ("design.hi_min_mm", "design.hi_max_mm"),
+    ("fem.width_min_mm", "fem.width_max_mm"),
+    ("fem.fine_width_min_mm", "fem.fine_width_max_mm"),
+    ("simulator.working_q", "simulator.low_velocity_q"),
+)
+"""Pairs of keys (low, high) where low must be below high (the law's Q falls from its low-velocity value)."""
 
 
 def default_config() -> dict:
@@ -150,6 +198,7 @@ def merge(defaults: dict, user: dict, source: str = "configuration") -> dict:
                 )
             merged[section][key] = _checked(value, defaults[section][key], f"{section}.{key}", source)
             _check_range(merged[section][key], f"{section}.{key}", source)
+    _check_consistency(merged, source)
     _check_campaign_size(merged["campaign"], source)
     return merged
 
@@ -174,6 +223,33 @@ def _check_range(value, name: str, source: str) -> None:
         if name in LIMITS and not LIMITS[name][0] <= item <= LIMITS[name][1]:
             raise InputFileError(f"{source}: '{name}' = {item!r} is outside the accepted range "
                                  f"{LIMITS[name][0]} to {LIMITS[name][1]}")
+        if name in CHOICES and item not in CHOICES[name]:
+            raise InputFileError(f"{source}: '{name}' holds {item!r}; accepted: {', '.join(map(repr, CHOICES[name]))}")
+    if name in NOT_EMPTY and not value:
+        raise InputFileError(f"{source}: '{name}' is empty; it needs at least one value")
+
+
+def _check_consistency(config: dict, source: str) -> None:
+    """Refuse a low bound not below its high bound (:data:`ORDERED`), FEM mesh keys the FEM refuses and
+    material records that do not exist."""
+    from workflow.errors import TactileError
+    from workflow.models.fem import FemSettings
+
+    for low, high in ORDERED:
+        (section, low_key), (_, high_key) = low.split("."), high.split(".")
+        if not config[section][low_key] < config[section][high_key]:
+            raise InputFileError(f"{source}: '{low}' = {config[section][low_key]!r} must be below "
+                                 f"'{high}' = {config[section][high_key]!r}")
+    mesh = {name: config["fem"][name] for name in FemSettings().as_dict()}
+    try:
+        FemSettings(**mesh)
+    except TactileError as error:
+        raise InputFileError(f"{source}: [fem] {error}") from None
+    for kind, lookup in (("ceramic", materials.ceramic), ("resonator", materials.resonator)):
+        try:
+            lookup(config["design"][kind])
+        except TactileError as error:
+            raise InputFileError(f"{source}: [design] {kind}: {error}") from None
 
 
 def _checked(value, default, name: str, source: str):

@@ -6,7 +6,11 @@ from pathlib import Path
 from workflow.damping.fit import fit_summary
 from workflow.damping.posterior import POSTERIOR_FILE, save_posterior
 from workflow.errors import InputFileError
+from workflow.pipeline.outputs import writable_folder
 from workflow.serialise import jsonable
+
+FIT_OUTPUTS = ("posterior*.npz", "fit.json", "*.png")
+"""Glob patterns of the files a fit writes into its folder (:mod:`workflow.pipeline.outputs`)."""
 
 
 def write_fit(fit, out, figures: bool = True, protect=()) -> dict:
@@ -26,8 +30,7 @@ def write_fit(fit, out, figures: bool = True, protect=()) -> dict:
     dict
         {"posterior": path of posterior.npz, "figures": [paths]}.
     """
-    out = output_folder(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = writable_folder(out)
     outputs = {POSTERIOR_FILE: fit.best, **{f"posterior_{name}.npz": law_fit for name, law_fit in fit.fits.items()}}
     for name, law_fit in outputs.items():
         _refuse_overwriting_input(out / name, protect)
@@ -36,13 +39,6 @@ def write_fit(fit, out, figures: bool = True, protect=()) -> dict:
     _refuse_overwriting_input(out / "fit.json", protect)
     (out / "fit.json").write_text(json.dumps(dict(fit_summary(fit), files=files), indent=2, default=jsonable) + "\n")
     return files
-
-
-def output_folder(out) -> Path:
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise InputFileError(f"--out {out}: exists and is not a folder")
-    return out
 
 
 def _write_figures(fit, out: Path, input_paths) -> list:

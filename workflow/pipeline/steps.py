@@ -11,8 +11,9 @@ from typing import Any, Dict, List, Optional
 
 import numpy as np
 
-from workflow.errors import TactileError
+from workflow.errors import InputFileError, TactileError
 from workflow.optimise.problem import DesignProblem, optimise_analytical
+from workflow.pipeline.damping_files import FIT_OUTPUTS, write_fit
 from workflow.pipeline.runner import RunContext, Step
 from workflow.units import KHZ, MM, UM
 
@@ -100,13 +101,21 @@ def campaign_logs(context: RunContext) -> List[Path]:
 
 def damping_fit(context: RunContext):
     """Q(v) fitted to the logs with emcee (:func:`workflow.damping.fit.fit_damping`)."""
-    from workflow.damping.fit import fit_damping
+    from workflow.damping.fit import fit_damping, minimum_walkers
     from workflow.damping.logs import drop_short_sweeps, read_logs
+    from workflow.pipeline.config import LIMITS
 
     damping = context.config["damping"]
     log = drop_short_sweeps(read_logs(context.results["logs"]))
     for warning in log.warnings:
         print(f"warning: {warning}", file=sys.stderr)
+    fewest = minimum_walkers(damping["laws"], log.n_sweeps)
+    if damping["walkers"] < fewest:
+        raise InputFileError(
+            f"configuration: 'damping.walkers' = {damping['walkers']} is outside the accepted range {fewest} to "
+            f"{LIMITS['damping.walkers'][1]} for these logs (emcee needs twice the {fewest // 2} parameters "
+            f"sampled with {log.n_sweeps} sweeps)"
+        )
     return fit_damping(
         log,
         laws=tuple(damping["laws"]),
@@ -119,8 +128,6 @@ def damping_fit(context: RunContext):
 
 def damping_fit_files(context: RunContext, fit) -> None:
     """The posterior, ``fit.json`` and the fit's figures under ``damping/``."""
-    from workflow.pipeline.damping_files import write_fit
-
     protect = {Path(path).resolve() for path in context.results["logs"]}
     files = write_fit(fit, context.out / "damping", figures=True, protect=protect)
     for path in files["figures"]:
@@ -400,6 +407,9 @@ def width_sweep_figures(context: RunContext, sweep) -> None:
     design_width = context.config["design"]["width_mm"] * MM
     save_figure(width_sweep_figure(sweep, design_width=design_width), context.figure_path("width_sweep_fem.png"))
 
+
+RUN_OUTPUTS = ("report.md", "simulated_campaign.csv", "*.png", *(f"damping/{pattern}" for pattern in FIT_OUTPUTS))
+"""Glob patterns of the files ``tactile run`` writes into its output folder (:mod:`workflow.pipeline.outputs`)."""
 
 STEPS: List[Step] = [
     Step("interferometer logs (simulated campaign unless --logs)", "logs", campaign_logs, cacheable=False),
