@@ -102,18 +102,36 @@ def test_an_unmet_accuracy_says_so(small_thin_ladder):
     assert result.error.level == 10 and not result.error.met
 
 
-def test_the_fem_optimum_clears_the_limit_on_a_refined_mesh(tmp_path):
-    """Optima that hold: the space-mapping optimum at 1 % accuracy, re-evaluated two levels finer, is above 25 kHz."""
+def _optimum_and_refined(tmp_path, target: float, refine_by: int):
     from workflow.execution.cache import EvaluationCache
     from workflow.optimise.fem_model import FemModel
     from workflow.optimise.fem_optimum import optimise_fem
     from workflow.optimise.problem import DesignProblem
 
     problem = DesignProblem(ceramic_thickness=1e-3, width=30e-3)
-    model = FemModel(settings=FemAccuracy(target=0.01), cache=EvaluationCache(tmp_path), scheduler="synchronous")
+    model = FemModel(settings=FemAccuracy(target=target), cache=EvaluationCache(tmp_path), scheduler="synchronous")
     found = optimise_fem(problem, model, "space-mapping")
+    plate = found.optimum.plate
+    refined = evaluate_fem(plate, 54.0, 15.0, mesh_for_level(plate, LEVELS[LEVELS.index(found.error.level) + refine_by]))
+    return problem, found, refined
+
+
+def test_the_optimum_of_a_coarse_search_clears_the_limit_on_a_finer_mesh(tmp_path, monkeypatch):
+    """Optima that hold, cheaply: the search on level 4 corrected by the accurate levels (6 against 4) at 3 %."""
+    from workflow.optimise import fem_optimum
+
+    monkeypatch.setattr(fem_optimum, "SEARCH_LEVEL", 4)
+    problem, found, refined = _optimum_and_refined(tmp_path, 0.03, 2)
+    assert found.verified and found.error.met and found.verification_evaluations >= 2
+    margin = fem_optimum.margin_frequency(problem.min_frequency, found.error.frequency)
+    assert margin * (1 - 1e-4) <= found.optimum.frequency <= margin * (1 + 5e-4)
+    assert refined.frequency >= problem.min_frequency
+
+
+@pytest.mark.slow
+def test_the_fem_optimum_clears_the_limit_on_a_refined_mesh(tmp_path):
+    """Optima that hold: the space-mapping optimum at 1 % accuracy, re-evaluated two levels finer, is above 25 kHz."""
+    problem, found, refined = _optimum_and_refined(tmp_path, 0.01, 2)
     assert found.verified and found.error.met
-    level = found.error.level
-    refined = evaluate_fem(found.optimum.plate, 54.0, 15.0, mesh_for_level(found.optimum.plate, level + 4))
     assert refined.frequency >= problem.min_frequency
     assert found.optimum.frequency == pytest.approx(refined.frequency, rel=0.01)
