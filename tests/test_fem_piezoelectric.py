@@ -153,3 +153,29 @@ def test_a_free_thin_bar_in_its_length_mode_follows_the_k31_relations(name):
     assert abs(errors[-1]) < 1e-3
     # what remains is the bar's finite width (the relations are one-dimensional): it goes as (b / L)^2
     assert 3 < errors[0] / errors[1] < 5.5
+
+
+@pytest.mark.parametrize("name", ["PZT-5H", "PZT-8"])
+def test_element_matrices_give_the_energies_of_uniform_fields_with_full_anisotropy(name):
+    # u = eps x and phi = -E . x are in the element's space: u^T K u = V gamma^T c gamma,
+    # u^T K_u phi phi = -V E . (e gamma) and phi^T K_phi phi phi = V E . eps^S E (gamma: Voigt, engineering shears)
+    ceramic, brick = materials.ceramic(name), LAGRANGE_27
+    sizes = np.array([[1.0e-3, 2.0e-3, 0.5e-3]])
+    volume = np.prod(sizes)
+    points = brick.local_nodes / 2 * sizes[0]
+    rng = np.random.default_rng(1)
+    strain = rng.normal(size=(3, 3)) * 1e-4
+    strain = (strain + strain.T) / 2
+    field = rng.normal(size=3) * 1e4
+    u = (points @ strain.T).ravel()
+    phi = -points @ field
+    gamma = np.array([strain[0, 0], strain[1, 1], strain[2, 2], 2 * strain[1, 2], 2 * strain[0, 2], 2 * strain[0, 1]])
+    stiffness = brick.box_stiffness(sizes, ceramic.stiffness_matrix())[0]
+    coupling = brick.box_piezo_coupling(sizes, ceramic.piezo_matrix())[0]
+    permittivity = brick.box_permittivity(sizes, ceramic.permittivity_matrix())[0]
+    assert u @ stiffness @ u == pytest.approx(volume * gamma @ ceramic.stiffness_matrix() @ gamma, rel=1e-10)
+    assert u @ coupling @ phi == pytest.approx(-volume * field @ (ceramic.piezo_matrix() @ gamma), rel=1e-10)
+    assert phi @ permittivity @ phi == pytest.approx(volume * field @ ceramic.permittivity_matrix() @ field, rel=1e-10)
+    # and the eigenstress load does the work of sigma* on the strain: u^T f = V sigma* . gamma
+    stress = rng.normal(size=(1, 6)) * 1e6
+    assert u @ brick.box_prestress_load(sizes, stress)[0] == pytest.approx(volume * stress[0] @ gamma, rel=1e-10)

@@ -20,12 +20,6 @@ VOIGT = voigt_index()
 """Voigt index of each tensor index pair (i, j), shape (3, 3)."""
 
 
-def lame_constants(youngs_modulus, poisson_ratio):
-    """Lame constants (lambda, mu) of an isotropic material [Pa]."""
-    lam = youngs_modulus * poisson_ratio / ((1 + poisson_ratio) * (1 - 2 * poisson_ratio))
-    return lam, youngs_modulus / (2 * (1 + poisson_ratio))
-
-
 @dataclass(frozen=True, eq=False)
 class ReferenceBrick:
     """A nodal quadratic brick on the unit cube.

@@ -18,12 +18,11 @@ from skfem import (
     MeshHex,
     asm,
 )
-from skfem.helpers import dot
-from skfem.models.elasticity import linear_elasticity
+from skfem.helpers import ddot, dot, sym_grad
 
 from workflow.models import analytical
 from workflow.models.fem.assembly import PlateSystem
-from workflow.models.fem.elements import lame_constants
+from workflow.models.fem.elements import VOIGT
 from workflow.models.fem.evaluate import FemResult, ModeResult
 from workflow.models.fem.mesh import CERAMIC, BrickMesh, quarter_plate_mesh
 from workflow.models.fem.probes import antinode_probe_points, mean_deflection, transverse_indicator
@@ -62,12 +61,22 @@ def _mass_form(density):
     return mass
 
 
-def _eigenstrain_form(lame_lambda, lame_mu, strain):
-    in_plane, normal = 2 * (lame_lambda + lame_mu) * strain, 2 * lame_lambda * strain
+def _elasticity_form(stiffness):
+    tensor = np.asarray(stiffness)[VOIGT[:, :, None, None], VOIGT[None, None, :, :]]  # C_ijkl
+
+    @BilinearForm
+    def elasticity(u, v, w):
+        return ddot(np.einsum("ijkl,kl...->ij...", tensor, sym_grad(u)), sym_grad(v))
+
+    return elasticity
+
+
+def _eigenstress_form(stress):
+    tensor = np.asarray(stress)[VOIGT]
 
     @LinearForm
     def load(v, w):
-        return in_plane * (v.grad[0][0] + v.grad[1][1]) + normal * v.grad[2][2]
+        return ddot(tensor[:, :, None, None], v.grad)
 
     return load
 
@@ -78,15 +87,13 @@ def reference_system(mesh: BrickMesh, plate: Plate, voltage: float, quadrature_o
     stiffness, mass = 0, 0
     for material_id, material in ((0, plate.resonator), (CERAMIC, plate.ceramic)):
         sub = basis.with_elements(np.flatnonzero(mesh.material == material_id))
-        lam, mu = lame_constants(material.youngs_modulus, material.poisson_ratio)
-        stiffness = stiffness + asm(linear_elasticity(lam, mu), sub)
+        stiffness = stiffness + asm(_elasticity_form(material.stiffness_matrix()), sub)
         mass = mass + asm(_mass_form(material.density), sub)
-    lam, mu = lame_constants(plate.ceramic.youngs_modulus, plate.ceramic.poisson_ratio)
     load = 0
     for sign in (1.0, -1.0):
         sub = basis.with_elements(np.flatnonzero((mesh.material == CERAMIC) & (mesh.polarity == sign)))
-        strain = sign * plate.ceramic.d31 * voltage / float(plate.ceramic_thickness)
-        load = load + asm(_eigenstrain_form(lam, mu, strain), sub)
+        field = sign * voltage / float(plate.ceramic_thickness)
+        load = load + asm(_eigenstress_form(field * plate.ceramic.piezo_matrix()[2]), sub)
     constrained = np.concatenate(
         [
             basis.get_dofs(lambda x: np.isclose(x[0], 0.0)).all("u^1"),
