@@ -37,9 +37,12 @@ def coarse_fem(monkeypatch, tmp_path):
     import workflow.optimise.fem_model as fem_evaluations
 
     monkeypatch.setenv("TACTILE_CACHE", str(tmp_path / "cache"))
-    monkeypatch.setattr(
-        fem_evaluations, "FemModel", functools.partial(fem_evaluations.FemModel, settings=COARSE, scheduler="synchronous")
-    )
+    model = fem_evaluations.FemModel
+
+    def coarse(**options):  # the commands ask for their --accuracy: the coarse mesh replaces it
+        return model(**{**options, "settings": COARSE, "scheduler": "synchronous"})
+
+    monkeypatch.setattr(fem_evaluations, "FemModel", coarse)
     return functools.partial(fem_evaluations.FemModel, cache=EvaluationCache(tmp_path / "cache"))
 
 

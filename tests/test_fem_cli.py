@@ -25,7 +25,8 @@ def test_fem_evaluate_marks_the_working_mode(capsys):
     status, out, _ = run_cli(capsys, "evaluate", "--model", "fem", "--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "1", "--b-mm", "55")
     assert status == 0
     assert_readable(out)
-    first, *modes = out.strip().splitlines()
+    first, accuracy, *modes = out.strip().splitlines()
+    assert accuracy.startswith("  FEM accuracy: f_r ") and "target 0.2 % met" in accuracy
     reported = re.search(r"w_dyn ([\d.]+) µm at f_r ([\d.]+) kHz", first).groups()[::-1]
     marked = [line for line in modes if "working mode" in line]
     assert len(modes) == 6 and len(marked) == 1
