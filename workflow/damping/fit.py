@@ -22,7 +22,7 @@ import emcee
 import numpy as np
 from scipy import optimize
 
-from workflow.damping.laws import LAWS
+from workflow.damping.laws import LAWS, MonotoneSpline, parameter_names
 from workflow.damping.likelihood import FitData, ParameterLayout, fit_data, log_probability, pointwise_log_likelihood
 from workflow.damping.logs import CampaignLog, drop_short_sweeps
 from workflow.damping.posterior import DampingPosterior
@@ -133,10 +133,9 @@ class LawFit:
 
     def posterior(self) -> DampingPosterior:
         """The law's parameters' samples in natural units, for design and for the posterior file."""
-        law = self.laws()
-        return DampingPosterior(
-            self.law_name, {name: np.ravel(getattr(law, name)) for name in self.data.layout.law_parameters}
-        )
+        law, shape = self.laws(), (len(self.samples), 1)
+        names = parameter_names(LAWS[self.law_name])
+        return DampingPosterior(self.law_name, {name: np.ravel(np.broadcast_to(getattr(law, name), shape)) for name in names})
 
     def quality_factor_quantiles(self, velocity, quantiles=(0.05, 0.5, 0.95)) -> np.ndarray:
         """Posterior quantiles of Q at each velocity [m/s] -> array (len(quantiles), len(velocity))."""
@@ -203,8 +202,9 @@ def initial_guess(data: FitData, sweeps: SweepEstimates) -> Tuple[np.ndarray, np
     """A starting point and a scale per coordinate, from the model-free estimates.
 
     The law is a least-squares line of 1/Q against v^2 (quadratic), v (linear) or a mean
-    (constant) through the per-sweep (peak velocity, half-power Q) points; the gain is
-    v_peak / (2 pi f_peak Q V).
+    (constant) through the per-sweep (peak velocity, half-power Q) points; the threshold
+    law starts from that quadratic line with v_t at 10 % of the largest velocity, the
+    flexible law from its increments between knots; the gain is v_peak / (2 pi f_peak Q V).
     """
     layout = data.layout
     ok = np.isfinite(sweeps.quality_factor)
@@ -212,7 +212,7 @@ def initial_guess(data: FitData, sweeps: SweepEstimates) -> Tuple[np.ndarray, np
     velocity = sweeps.peak_velocity[ok] if ok.any() else np.array([np.max(data.velocity)])
     loss = 1 / q
     start, scale = {}, {}
-    exponent = {"quadratic": 2, "linear": 1}.get(layout.law_name)
+    exponent = {"quadratic": 2, "linear": 1, "threshold": 2, "flexible": 2}.get(layout.law_name)
     alpha_upper = data.upper[layout.names.index("alpha")] if "alpha" in layout.names else 0.0
     if exponent is None or len(q) < 2:
         intercept, slope = float(np.mean(loss)), 0.01 * alpha_upper
@@ -222,6 +222,11 @@ def initial_guess(data: FitData, sweeps: SweepEstimates) -> Tuple[np.ndarray, np
             intercept, slope = 0.5 * float(np.min(loss)), 0.5 * float(np.mean(loss)) / float(np.mean(velocity**exponent))
     start["ln_q0"], scale["ln_q0"] = np.log(1 / intercept), 0.1
     start["alpha"], scale["alpha"] = slope, max(0.1 * slope, 1e-4 * alpha_upper)
+    v_max = float(np.max(data.velocity))
+    start["v_t"], scale["v_t"] = 0.1 * v_max, 0.05 * v_max
+    knots = np.linspace(0.0, v_max, len(MonotoneSpline.INCREMENTS) + 1)
+    for name, rise in zip(MonotoneSpline.INCREMENTS, slope * np.diff(knots**2)):
+        start[name], scale[name] = max(rise, 1e-6), max(0.1 * rise, 1e-5)
     peak_q = np.where(np.isfinite(sweeps.quality_factor), sweeps.quality_factor, np.median(q))
     gains = sweeps.peak_velocity / (2 * np.pi * sweeps.peak_frequency * peak_q * np.maximum(sweeps.voltage, 1e-12))
     start["ln_gain"], scale["ln_gain"] = np.log(np.median(gains)), 0.1

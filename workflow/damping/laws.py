@@ -80,7 +80,98 @@ class ConstantQ:
         return np.asarray(self.q0) + np.zeros_like(np.asarray(velocity, dtype=float))
 
 
-LAWS = {law.name: law for law in (QuadraticLoss, LinearLoss, ConstantQ)}
+def _softplus(x):
+    """ln(1 + e^x), evaluated without overflow [-]."""
+    return np.logaddexp(0.0, x)
+
+
+@dataclass(frozen=True)
+class ThresholdLoss:
+    """Q flat at Q0 below a threshold velocity v_t and falling above it, with a smooth onset.
+
+    1/Q(v) = 1/Q0 + alpha (s softplus((|v| - v_t) / s))^2,  s = ONSET v_t,
+
+    softplus(x) = ln(1 + e^x).  Far above v_t the extra loss is alpha (|v| - v_t)^2 (the
+    quadratic law shifted to start at v_t); far below it is nil; the onset is spread over
+    about ``s`` = 0.2 v_t.  v_t -> 0 gives back :class:`QuadraticLoss`.
+
+    Attributes
+    ----------
+    q0 : float or array
+        Quality factor below the threshold [-].
+    alpha : float or array
+        Loss coefficient above the threshold [s^2/m^2], >= 0.
+    v_t : float or array
+        Threshold velocity amplitude [m/s], > 0.
+    """
+
+    q0: float
+    alpha: float
+    v_t: float
+    name: ClassVar[str] = "threshold"
+    ONSET: ClassVar[float] = 0.2
+    """Width of the onset relative to the threshold, s / v_t [-]."""
+
+    def quality_factor(self, velocity):
+        """Q at the peak velocity amplitude ``velocity`` [m/s] -> [-]."""
+        return 1.0 / self.loss(velocity)
+
+    def loss(self, velocity):
+        """Loss factor 1/Q at ``velocity`` [m/s] -> [-]."""
+        width = self.ONSET * np.maximum(np.asarray(self.v_t, dtype=float), 1e-300)
+        excess = width * _softplus((np.abs(velocity) - np.asarray(self.v_t)) / width)
+        return 1.0 / np.asarray(self.q0) + np.asarray(self.alpha) * np.square(excess)
+
+
+@dataclass(frozen=True)
+class MonotoneSpline:
+    """1/Q(v) a monotone non-decreasing linear spline in |v|: the flexible law.
+
+    Knots u_j = j v_top / K, j = 0 .. K (K = 5 segments); 1/Q(0) = 1/Q0 and 1/Q rises by
+    d_j >= 0 over segment j, linearly, so
+
+    1/Q(v) = 1/Q0 + sum_j d_j clip(|v| K / v_top - (j - 1), 0, 1),
+
+    with the last segment's slope continued above v_top.  Any non-increasing Q(v) is
+    followed up to the knot spacing; the fit puts v_top at the largest measured velocity
+    and a random-walk prior on the increments (:mod:`workflow.damping.likelihood`).
+
+    Attributes
+    ----------
+    q0 : float or array
+        Quality factor at v = 0 [-].
+    d1 .. d5 : float or array
+        Rise of 1/Q over each segment [-], >= 0.
+    v_top : float or array
+        Velocity of the last knot [m/s], > 0 (fixed by the data, not fitted).
+    """
+
+    q0: float
+    d1: float
+    d2: float
+    d3: float
+    d4: float
+    d5: float
+    v_top: float
+    name: ClassVar[str] = "flexible"
+    INCREMENTS: ClassVar[tuple] = ("d1", "d2", "d3", "d4", "d5")
+
+    def quality_factor(self, velocity):
+        """Q at the peak velocity amplitude ``velocity`` [m/s] -> [-]."""
+        return 1.0 / self.loss(velocity)
+
+    def loss(self, velocity):
+        """Loss factor 1/Q at ``velocity`` [m/s] -> [-]."""
+        n = len(self.INCREMENTS)
+        position = np.abs(velocity) * n / np.asarray(self.v_top)
+        loss = 1.0 / np.asarray(self.q0)
+        for j, name in enumerate(self.INCREMENTS):
+            ramp = np.clip(position - j, 0.0, None if j == n - 1 else 1.0)
+            loss = loss + np.asarray(getattr(self, name)) * ramp
+        return loss
+
+
+LAWS = {law.name: law for law in (QuadraticLoss, LinearLoss, ThresholdLoss, MonotoneSpline, ConstantQ)}
 """The Q(v) laws by name."""
 SAMPLED_LAWS = tuple(name for name in LAWS if name != "constant")
 """Laws whose posterior can be sampled; the constant Q is the baseline of the comparison (BIC at the MAP)."""

@@ -9,13 +9,18 @@ solved self-consistently (:func:`~workflow.damping.harmonic.self_consistent_ampl
 bench simulator's solve), and the vibrometer reads the velocity amplitude v = 2 pi f w.
 Parameters, in the order of :attr:`ParameterLayout.names`:
 
-- the law's parameters: ``ln_q0`` = ln Q0, and ``alpha`` (>= 0) for the velocity-dependent laws;
+- the law's parameters: ``ln_q0`` = ln Q0, ``alpha`` (>= 0) for the velocity-dependent laws,
+  ``v_t`` [m/s] for the threshold law, ``d1`` .. ``d5`` (>= 0) for the flexible law (whose
+  last knot ``v_top`` is fixed at the largest measured velocity, :attr:`ParameterLayout.fixed`);
 - ``ln_gain``: ln g, g the quasi-static deflection per volt [m/V];
 - ``f_r_<k>``: one resonance frequency per sweep [Hz] (drift between sweeps is free);
 - ``ln_sigma_rel``, ``ln_sigma_abs``: the noise, Gaussian with variance
   (sigma_rel v_model)^2 + sigma_abs^2 (sigma_abs in m/s).
 
-Priors are flat on these coordinates within :attr:`FitData.lower` .. :attr:`FitData.upper`.
+Priors are flat on these coordinates within :attr:`FitData.lower` .. :attr:`FitData.upper`;
+the flexible law's increments have in addition a Gaussian random-walk prior,
+d_{j+1} - d_j ~ N(0, :data:`RANDOM_WALK_SCALE`^2) (:func:`log_prior`), which keeps 1/Q(v)
+smooth where the data do not say otherwise.
 Every function here is module-level and takes arrays, so emcee can pickle it.
 """
 
@@ -25,11 +30,11 @@ from typing import Tuple
 import numpy as np
 
 from workflow.damping.harmonic import self_consistent_amplitude
-from workflow.damping.laws import LAWS, parameter_names
+from workflow.damping.laws import LAWS, MonotoneSpline, ThresholdLoss, parameter_names
 from workflow.damping.logs import CampaignLog
 
-SAMPLED_LAW_PARAMETERS = {"q0": "ln_q0", "alpha": "alpha"}
-"""Law parameter -> the coordinate it is sampled in (Q0 in log, alpha linear >= 0)."""
+SAMPLED_LAW_PARAMETERS = {"q0": "ln_q0", "alpha": "alpha", "v_t": "v_t", **{d: d for d in MonotoneSpline.INCREMENTS}}
+"""Law parameter -> the coordinate it is sampled in (Q0 in log, the others linear)."""
 
 Q0_RANGE = (1.0, 1e5)
 """Prior range of Q0 [-]."""
@@ -41,6 +46,11 @@ SIGMA_REL_RANGE = (1e-4, 1.0)
 """Prior range of the relative noise [-]."""
 SIGMA_ABS_RANGE = (1e-7, 1.0)
 """Prior range of the absolute noise, relative to the largest measured velocity [-]."""
+THRESHOLD_RANGE = (0.02, 0.9)
+"""Prior range of the threshold law's v_t, relative to the largest measured velocity [-]."""
+RANDOM_WALK_SCALE = 0.01
+"""Standard deviation of the step between consecutive increments of the flexible law's 1/Q [-]:
+weak for plates with Q above ~20 (1/Q changing by 0.01 or less between knots)."""
 
 
 @dataclass(frozen=True)
@@ -49,11 +59,13 @@ class ParameterLayout:
 
     law_name: str
     n_sweeps: int
+    fixed: Tuple[Tuple[str, float], ...] = ()
+    """Values of the law parameters that are not sampled (name, value): the flexible law's ``v_top`` [m/s]."""
 
     @property
     def law_parameters(self) -> Tuple[str, ...]:
-        """The law's own parameter names (``q0``, ``alpha``)."""
-        return parameter_names(LAWS[self.law_name])
+        """The law's sampled parameter names (``q0``, ``alpha``, ...)."""
+        return tuple(name for name in parameter_names(LAWS[self.law_name]) if name in SAMPLED_LAW_PARAMETERS)
 
     @property
     def names(self) -> Tuple[str, ...]:
@@ -77,7 +89,7 @@ class ParameterLayout:
     def law(self, theta: np.ndarray):
         """The Q(v) law with one parameter row per walker: parameters of shape (W, 1)."""
         theta = np.atleast_2d(theta)
-        values = {}
+        values = dict(self.fixed)
         for i, name in enumerate(self.law_parameters):
             column = theta[:, i : i + 1]
             values[name] = np.exp(column) if SAMPLED_LAW_PARAMETERS[name].startswith("ln_") else column
@@ -121,8 +133,8 @@ class FitData:
 
 def fit_data(log: CampaignLog, law_name: str) -> FitData:
     """The :class:`FitData` of a campaign for a law, with its prior box."""
-    layout = ParameterLayout(law_name, log.n_sweeps)
     v_max = float(np.max(log.velocity))
+    layout = ParameterLayout(law_name, log.n_sweeps, (("v_top", v_max),) if law_name == MonotoneSpline.name else ())
     exponent = {"quadratic": 2, "linear": 1}
     bounds = {
         "ln_q0": np.log(Q0_RANGE),
@@ -132,6 +144,12 @@ def fit_data(log: CampaignLog, law_name: str) -> FitData:
     }
     if law_name in exponent:
         bounds["alpha"] = (0.0, 1.0 / MIN_Q_AT_MAX_VELOCITY / v_max ** exponent[law_name])
+    if law_name == ThresholdLoss.name:
+        onset = (1 - THRESHOLD_RANGE[1]) * v_max
+        bounds["alpha"] = (0.0, 1.0 / MIN_Q_AT_MAX_VELOCITY / onset**2)
+        bounds["v_t"] = tuple(np.asarray(THRESHOLD_RANGE) * v_max)
+    for name in MonotoneSpline.INCREMENTS:
+        bounds[name] = (0.0, 1.0 / MIN_Q_AT_MAX_VELOCITY)
     for k in range(log.n_sweeps):
         f = log.frequency[log.sweep == k]
         span = max(f.max() - f.min(), 0.01 * f.mean())
@@ -181,6 +199,15 @@ def in_prior(theta, data: FitData) -> np.ndarray:
     return np.all((theta >= data.lower) & (theta <= data.upper), axis=1)
 
 
+def log_prior(theta, layout: ParameterLayout) -> np.ndarray:
+    """ln of the prior's non-flat part, shape (W,): the flexible law's random walk on its increments."""
+    theta = np.atleast_2d(theta)
+    if layout.law_name != MonotoneSpline.name:
+        return np.zeros(len(theta))
+    increments = theta[:, [layout.names.index(name) for name in MonotoneSpline.INCREMENTS]]
+    return -0.5 * np.sum(np.square(np.diff(increments, axis=1) / RANDOM_WALK_SCALE), axis=1)
+
+
 def log_probability(theta, data: FitData) -> np.ndarray:
     """Log-posterior (up to a constant) of each walker, shape (W,); -inf outside the prior.
 
@@ -191,7 +218,7 @@ def log_probability(theta, data: FitData) -> np.ndarray:
     result = np.full(len(theta), -np.inf)
     inside = in_prior(theta, data)
     if inside.any():
-        total = pointwise_log_likelihood(theta[inside], data).sum(axis=1)
+        total = pointwise_log_likelihood(theta[inside], data).sum(axis=1) + log_prior(theta[inside], data.layout)
         result[inside] = np.where(np.isfinite(total), total, -np.inf)
     return result
 
