@@ -6,8 +6,13 @@ finite-difference evaluation; a finite-difference Hessian there gives a Laplace
 covariance from which the walkers start; emcee (vectorised log-probability, seeded) then
 runs in chunks until the chain is at least 50 integrated autocorrelation times long and
 the tau estimate changed by less than 1 % since the previous check (emcee's documented
-criterion), or until the step cap.  Laws are compared with WAIC (from the posterior) and
-BIC (at the MAP); lower is better for both.
+criterion), or until the step cap.
+
+:func:`fit_damping` screens the laws at their MAP (AIC within :data:`SCREEN_AIC` of the
+best are sampled), compares the sampled laws by PSIS-LOO (:mod:`workflow.damping.comparison`),
+checks the best law's misfit (:mod:`workflow.damping.checks`) and picks the answer the
+design uses: the best law, the stacking mixture when laws are close, or the flexible law
+when the best law fails its checks.  BIC at the MAP is also given for every law.
 
 Moves: differential evolution (80 %) and its snooker variant (20 %), as the emcee
 documentation suggests for roughly Gaussian posteriors; on the synthetic campaign their
@@ -18,25 +23,37 @@ import time
 from dataclasses import dataclass, field
 from typing import Dict, Optional, Sequence, Tuple
 
+import arviz as az
 import emcee
 import numpy as np
 from scipy import optimize
 
-from workflow.damping.laws import LAWS, MonotoneSpline, parameter_names
+from workflow.damping.checks import MisfitCheck, misfit_check
+from workflow.damping.comparison import CRITERION, LawComparison, compare_laws
+from workflow.damping.inference_data import law_inference_data
+from workflow.damping.laws import LAWS, SAMPLED_LAWS, MonotoneSpline, parameter_names
 from workflow.damping.likelihood import FitData, ParameterLayout, fit_data, log_probability, pointwise_log_likelihood
 from workflow.damping.logs import CampaignLog, drop_short_sweeps
-from workflow.damping.posterior import DampingPosterior
+from workflow.damping.posterior import DampingPosterior, stacked_posterior
 from workflow.progress import Progress
 
-DEFAULT_LAWS = ("quadratic", "linear")
-"""The laws sampled by default; every law of :data:`~workflow.damping.laws.LAWS` gets a MAP and a BIC."""
-CRITERION = (
-    "WAIC (widely applicable information criterion, deviance scale, from the posterior samples; "
-    "lower is better); BIC at the MAP is also given"
-)
+DEFAULT_LAWS = SAMPLED_LAWS
+"""The laws screened and sampled by default; every law of :data:`~workflow.damping.laws.LAWS` gets a MAP and a BIC."""
+FALLBACK_LAW = MonotoneSpline.name
+"""The law the answer falls back to when the best law fails its misfit checks."""
+SCREEN_AIC = 10.0
+"""Laws whose AIC at the MAP is more than this above the best law's are not sampled [-]."""
 CHAIN_TAUS = 50
 """A converged chain is at least this many autocorrelation times long [-]."""
-CONVERGENCE_RULE = f"n_steps >= {CHAIN_TAUS} tau_max and every tau changed < 1 % since the previous check"
+STACKED_DRAWS = 4000
+"""Draws of a stacked (model-averaged) posterior [-]."""
+
+
+def convergence_rule(chain_taus: float = CHAIN_TAUS) -> str:
+    """The convergence rule in words."""
+    return f"n_steps >= {chain_taus:g} tau_max and every tau changed < 1 % since the previous check"
+
+
 _FD_STEP = 1e-4
 """Finite-difference step in standardised coordinates."""
 
@@ -75,9 +92,11 @@ class ChainDiagnostics:
     acceptance : float
         Mean acceptance fraction [-].
     converged : bool
-        Whether :data:`CONVERGENCE_RULE` held before the step cap.
+        Whether :func:`convergence_rule` held before the step cap.
     seconds : float
         Wall time of the sampling [s].
+    chain_taus : float
+        The chain length the rule asked for, in autocorrelation times [-].
     """
 
     tau: np.ndarray
@@ -88,6 +107,7 @@ class ChainDiagnostics:
     acceptance: float
     converged: bool
     seconds: float
+    chain_taus: float = CHAIN_TAUS
 
     @property
     def tau_max(self) -> float:
@@ -107,10 +127,13 @@ class LawFit:
         The MAP.
     log_likelihood_map : float
     diagnostics : ChainDiagnostics
-    waic, p_waic, bic : float
-        Information criteria (lower is better) and WAIC's effective number of parameters.
+    bic : float
+        BIC at the MAP (lower is better).
     trace : numpy.ndarray (S, W, D)
         The whole chain, subsampled to at most a few hundred steps, for trace plots.
+    inference_data : arviz.InferenceData
+        The posterior with its log-likelihood, for LOO and ``posterior.nc``
+        (:mod:`workflow.damping.inference_data`).
     """
 
     data: FitData
@@ -118,10 +141,9 @@ class LawFit:
     theta_map: np.ndarray
     log_likelihood_map: float
     diagnostics: ChainDiagnostics
-    waic: float
-    p_waic: float
     bic: float
     trace: np.ndarray = field(repr=False)
+    inference_data: az.InferenceData = field(repr=False)
 
     @property
     def law_name(self) -> str:
@@ -153,9 +175,18 @@ class DampingFit:
     fits : dict
         Law name -> :class:`LawFit` for the sampled laws.
     map_criteria : dict
-        Law name -> {"log_likelihood": ..., "n_parameters": ..., "bic": ...} at the MAP, every law.
+        Law name -> {"log_likelihood", "n_parameters", "aic", "bic", "sampled"} at the MAP, every law.
     preferred : str
-        The sampled law with the lowest WAIC.
+        The sampled law with the highest elpd_loo.
+    comparison : LawComparison
+    checks : dict
+        Law name -> :class:`~workflow.damping.checks.MisfitCheck` of each sampled law.
+    selection : str
+        What the design uses: ``"best"`` (the preferred law), ``"stacking"`` (the
+        stacking-weighted mixture) or ``"fallback"`` (the flexible law, the preferred law
+        having failed its checks).
+    answer : DampingPosterior
+        The posterior the design uses (``posterior.npz``).
     """
 
     log: CampaignLog
@@ -163,10 +194,23 @@ class DampingFit:
     fits: Dict[str, LawFit]
     map_criteria: Dict[str, dict]
     preferred: str
+    comparison: LawComparison
+    checks: Dict[str, MisfitCheck]
+    selection: str
+    answer: DampingPosterior
 
     @property
     def best(self) -> LawFit:
         return self.fits[self.preferred]
+
+    @property
+    def warning(self) -> Optional[str]:
+        """One line when the preferred law failed its misfit checks, else None."""
+        check = self.checks[self.preferred]
+        if check.passed:
+            return None
+        fallback = FALLBACK_LAW if self.selection == "fallback" else self.answer.law_name
+        return f"the {self.preferred} law fails its misfit checks ({check.reasons[0]}); the answer uses the {fallback} law"
 
 
 def sweep_estimates(log: CampaignLog) -> SweepEstimates:
@@ -332,11 +376,12 @@ def sample_posterior(
     max_seconds: Optional[float] = None,
     progress: bool = False,
     description: str = "emcee",
+    chain_taus: float = CHAIN_TAUS,
 ):
-    """Run emcee in chunks until :data:`CONVERGENCE_RULE` holds or a cap is reached.
+    """Run emcee in chunks until :func:`convergence_rule` (``chain_taus``) holds or a cap is reached.
 
     With ``progress``, the steps run are shown on stderr against the chain length the rule
-    needs (:data:`CHAIN_TAUS` tau_max, revised as tau is estimated), not against the cap.
+    needs (``chain_taus`` tau_max, revised as tau is estimated), not against the cap.
 
     Returns
     -------
@@ -356,15 +401,15 @@ def sample_posterior(
             chunk = min(check_every, max_steps - sampler.iteration)
             state = sampler.run_mcmc(state, chunk, progress=False)
             tau = sampler.get_autocorr_time(tol=0)
-            needed = CHAIN_TAUS * np.max(tau)
+            needed = chain_taus * np.max(tau)
             if np.all(np.isfinite(tau)) and needed <= sampler.iteration and np.all(np.abs(previous - tau) < 0.01 * tau):
                 converged = True
                 shown.update(chunk, total=sampler.iteration, note="converged")
                 break
             if np.isfinite(needed) and needed > sampler.iteration:
-                shown.update(chunk, total=int(np.ceil(needed)), note=f"tau {np.max(tau):.0f}, {CHAIN_TAUS} tau needed")
+                shown.update(chunk, total=int(np.ceil(needed)), note=f"tau {np.max(tau):.0f}, {chain_taus:g} tau needed")
             elif np.isfinite(needed):
-                shown.update(chunk, total=sampler.iteration + check_every, note=f"{CHAIN_TAUS} tau reached, tau still settling")
+                shown.update(chunk, total=sampler.iteration + check_every, note=f"{chain_taus:g} tau reached, tau still settling")
             else:
                 shown.update(chunk)
             previous = tau
@@ -384,18 +429,9 @@ def sample_posterior(
         acceptance=float(np.mean(sampler.acceptance_fraction)),
         converged=converged,
         seconds=seconds,
+        chain_taus=chain_taus,
     )
     return sampler, diagnostics
-
-
-def waic(samples: np.ndarray, data: FitData, max_draws: int = 1000, chunk: int = 250) -> Tuple[float, float]:
-    """WAIC = -2 (lppd - p_waic) and p_waic from up to ``max_draws`` posterior samples."""
-    index = np.linspace(0, len(samples) - 1, min(max_draws, len(samples))).astype(int)
-    pointwise = np.vstack([pointwise_log_likelihood(samples[index[i : i + chunk]], data) for i in range(0, len(index), chunk)])
-    peak = pointwise.max(axis=0)
-    lppd = np.sum(peak + np.log(np.mean(np.exp(pointwise - peak), axis=0)))
-    p_waic = float(np.sum(np.var(pointwise, axis=0, ddof=1)))
-    return float(-2 * (lppd - p_waic)), p_waic
 
 
 def bic(log_likelihood: float, n_parameters: int, n_points: int) -> float:
@@ -409,6 +445,11 @@ def map_fit(log: CampaignLog, law_name: str, sweeps: Optional[SweepEstimates] = 
     start, scale = initial_guess(data, sweeps or sweep_estimates(log))
     theta = maximum_a_posteriori(data, start, scale)
     return data, theta, scale, float(pointwise_log_likelihood(theta, data).sum())
+
+
+def aic(log_likelihood: float, n_parameters: int) -> float:
+    """AIC = -2 ln L + 2 k."""
+    return float(-2 * log_likelihood + 2 * n_parameters)
 
 
 def minimum_walkers(laws: Sequence[str], n_sweeps: int) -> int:
@@ -427,6 +468,8 @@ def fit_law(
     check_every: int = 100,
     progress: bool = False,
     sweeps: Optional[SweepEstimates] = None,
+    chain_taus: float = CHAIN_TAUS,
+    start: Optional[tuple] = None,
 ) -> LawFit:
     """MAP, Laplace start and emcee posterior of one Q(v) law.
 
@@ -443,8 +486,13 @@ def fit_law(
         Caps on the chain and the convergence-check interval [steps, s, steps].
     progress : bool
         Show the chain's progress towards convergence on stderr.
+    sweeps : SweepEstimates, optional
+    chain_taus : float
+        Chain length the convergence rule asks for, in autocorrelation times [-].
+    start : tuple, optional
+        The law's :func:`map_fit` result, when already computed.
     """
-    data, theta_map, scale, log_likelihood = map_fit(log, law_name, sweeps)
+    data, theta_map, scale, log_likelihood = start or map_fit(log, law_name, sweeps)
     rng = np.random.default_rng(seed)
     n_dim = data.layout.dimension
     n_walkers = n_walkers or max(32, 4 * n_dim)
@@ -452,22 +500,20 @@ def fit_law(
     covariance = laplace_covariance(data, theta_map, scale)
     walkers = initial_walkers(data, theta_map, covariance, n_walkers, rng)
     sampler, diagnostics = sample_posterior(
-        data, walkers, int(rng.integers(2**31)), check_every, max_steps, max_seconds, progress, f"emcee, {law_name} law"
+        data, walkers, int(rng.integers(2**31)), check_every, max_steps, max_seconds, progress, f"emcee, {law_name} law",
+        chain_taus,
     )
-    samples = sampler.get_chain(discard=diagnostics.burn_in, thin=diagnostics.thin, flat=True)
+    kept = sampler.get_chain(discard=diagnostics.burn_in, thin=diagnostics.thin)
     chain = sampler.get_chain()
-    trace = chain[:: max(1, len(chain) // 400)]
-    criterion, p_waic = waic(samples, data)
     return LawFit(
         data=data,
-        samples=samples,
+        samples=kept.reshape(-1, n_dim),
         theta_map=theta_map,
         log_likelihood_map=log_likelihood,
         diagnostics=diagnostics,
-        waic=criterion,
-        p_waic=p_waic,
         bic=bic(log_likelihood, n_dim, len(data.velocity)),
-        trace=trace,
+        trace=chain[:: max(1, len(chain) // 400)],
+        inference_data=law_inference_data(kept, sampler.get_log_prob(discard=diagnostics.burn_in, thin=diagnostics.thin), data),
     )
 
 
@@ -479,8 +525,10 @@ def fit_damping(
     max_seconds: Optional[float] = None,
     progress: bool = False,
     n_walkers: Optional[int] = None,
+    stated_noise: Optional[float] = None,
+    chain_taus: float = CHAIN_TAUS,
 ) -> DampingFit:
-    """Fit the sampled ``laws`` to the campaign; MAP and BIC for every known law.
+    """Screen, sample and compare the ``laws``, check the best one and choose the answer.
 
     Parameters
     ----------
@@ -488,7 +536,8 @@ def fit_damping(
         From :func:`~workflow.damping.logs.read_logs`; sweeps too short to locate their
         resonance are dropped (:func:`~workflow.damping.logs.drop_short_sweeps`).
     laws : sequence of str
-        Laws to sample (keys of :data:`~workflow.damping.laws.LAWS`).
+        Candidate laws (keys of :data:`~workflow.damping.laws.LAWS`); those within
+        :data:`SCREEN_AIC` of the best AIC at the MAP are sampled.
     seed : int
     max_steps : int
         Cap on each chain [steps].
@@ -497,38 +546,56 @@ def fit_damping(
     progress : bool
     n_walkers : int, optional
         Walkers per chain (default max(32, 4 D)).
+    stated_noise : float, optional
+        The instrument's relative velocity noise [-], for the misfit check.
+    chain_taus : float
+        Chain length in autocorrelation times (:func:`convergence_rule`) [-].
 
     Returns
     -------
     DampingFit
-        ``preferred`` is the sampled law with the lowest WAIC.
+        ``preferred`` has the highest elpd_loo; ``answer`` is the preferred law, the
+        stacking mixture (a law within :data:`~workflow.damping.comparison.CLOSE_DSE` dse) or,
+        when the preferred law fails :func:`~workflow.damping.checks.misfit_check`, the
+        flexible law (sampled then if it was not).
     """
     log = drop_short_sweeps(log)
     sweeps = sweep_estimates(log)
-    fits = {
-        name: fit_law(
-            log, name, seed, n_walkers, max_steps, max_seconds, progress=progress, sweeps=sweeps
-        )
-        for name in laws
-    }
+    maps = {name: map_fit(log, name, sweeps) for name in dict.fromkeys((*laws, *LAWS))}
     criteria = {}
-    for name in LAWS:
-        if name in fits:
-            log_likelihood, n_parameters = fits[name].log_likelihood_map, fits[name].data.layout.dimension
-        else:
-            data, _, _, log_likelihood = map_fit(log, name, sweeps)
-            n_parameters = data.layout.dimension
-        criteria[name] = {
-            "log_likelihood": log_likelihood,
-            "n_parameters": n_parameters,
-            "bic": bic(log_likelihood, n_parameters, len(log.velocity)),
-        }
-    preferred = min(fits, key=lambda name: fits[name].waic)
-    return DampingFit(log=log, sweeps=sweeps, fits=fits, map_criteria=criteria, preferred=preferred)
+    for name, (data, _, _, log_likelihood) in maps.items():
+        k = data.layout.dimension
+        criteria[name] = {"log_likelihood": log_likelihood, "n_parameters": k, "aic": aic(log_likelihood, k),
+                          "bic": bic(log_likelihood, k, len(log.velocity))}
+    lowest = min(criteria[name]["aic"] for name in laws)
+    screened = [name for name in laws if criteria[name]["aic"] <= lowest + SCREEN_AIC]
+
+    def sample(name):
+        return fit_law(log, name, seed, n_walkers, max_steps, max_seconds, progress=progress, sweeps=sweeps,
+                       chain_taus=chain_taus, start=maps[name])
+
+    fits = {name: sample(name) for name in screened}
+    checks = {name: misfit_check(f.samples, f.data, stated_noise, seed) for name, f in fits.items()}
+    comparison = compare_laws({name: f.inference_data for name, f in fits.items()})
+    if not checks[comparison.best].passed and FALLBACK_LAW not in fits:
+        fits[FALLBACK_LAW] = sample(FALLBACK_LAW)
+        checks[FALLBACK_LAW] = misfit_check(fits[FALLBACK_LAW].samples, fits[FALLBACK_LAW].data, stated_noise, seed)
+        comparison = compare_laws({name: f.inference_data for name, f in fits.items()})
+    for name in criteria:
+        criteria[name]["sampled"] = name in fits
+    preferred = comparison.best
+    if not checks[preferred].passed and preferred != FALLBACK_LAW:
+        selection, answer = "fallback", fits[FALLBACK_LAW].posterior()
+    elif comparison.selection == "stacking":
+        posteriors = {name: f.posterior() for name, f in fits.items()}
+        selection, answer = "stacking", stacked_posterior(posteriors, comparison.weights, STACKED_DRAWS, seed)
+    else:
+        selection, answer = "best", fits[preferred].posterior()
+    return DampingFit(log, sweeps, fits, criteria, preferred, comparison, checks, selection, answer)
 
 
-_UNITS = {"q0": "-", "gain": "m/V", "sigma_rel": "-", "sigma_abs": "m/s"}
-_ALPHA_UNITS = {"quadratic": "s^2/m^2", "linear": "s/m"}
+_UNITS = {"q0": "-", "gain": "m/V", "sigma_rel": "-", "sigma_abs": "m/s", "v_t": "m/s", **{d: "-" for d in MonotoneSpline.INCREMENTS}}
+_ALPHA_UNITS = {"quadratic": "s^2/m^2", "linear": "s/m", "threshold": "s^2/m^2"}
 
 
 def parameter_unit(law_name: str, name: str) -> str:
@@ -559,7 +626,7 @@ def diagnostics_summary(law_fit: LawFit) -> dict:
         "n_samples": len(law_fit.samples),
         "acceptance": d.acceptance,
         "converged": d.converged,
-        "rule": CONVERGENCE_RULE,
+        "rule": convergence_rule(d.chain_taus),
         "seconds": d.seconds,
     }
 
@@ -570,25 +637,29 @@ def velocity_grid(log: CampaignLog, n: int = 50) -> np.ndarray:
 
 
 def fit_summary(fit: DampingFit) -> dict:
-    """The JSON of ``tactile fit-damping`` (docs/cli.md) for the preferred law."""
+    """The JSON of ``tactile fit-damping`` (docs/cli.md): the answer, the preferred law, the comparison and the checks."""
     best = fit.best
     velocity = velocity_grid(fit.log)
-    q05, q50, q95 = best.quality_factor_quantiles(velocity)
+    q05, q50, q95 = np.quantile(fit.answer.law_from_samples().quality_factor(velocity[:, None]), (0.05, 0.5, 0.95), axis=1)
     comparison = {
         "criterion": CRITERION,
         "preferred": fit.preferred,
-        "laws": {
-            name: dict(
-                fit.map_criteria[name],
-                **({"waic": fit.fits[name].waic, "p_waic": fit.fits[name].p_waic} if name in fit.fits else {}),
-            )
-            for name in fit.map_criteria
-        },
+        "selection": fit.selection,
+        "weights": fit.comparison.weights,
+        "loo": fit.comparison.laws,
+        "pareto_k_warning": fit.comparison.pareto_warning,
+        "screen": f"laws with AIC at the MAP within {SCREEN_AIC:g} of the best are sampled",
+        "laws": fit.map_criteria,
     }
     return {
         "law": fit.preferred,
+        "selection": fit.selection,
+        "design_law": fit.answer.law_name,
+        "weights": fit.comparison.weights,
+        "warning": fit.warning,
+        "checks": {name: check.summary() for name, check in fit.checks.items()},
         "parameters": parameter_summary(best),
-        "q_of_v": {"v_m_s": velocity, "q_p05": q05, "q_p50": q50, "q_p95": q95},
+        "q_of_v": {"v_m_s": velocity, "q_p05": q05, "q_p50": q50, "q_p95": q95, "law": fit.answer.law_name},
         "diagnostics": diagnostics_summary(best),
         "comparison": comparison,
         "other_laws": {

@@ -6,7 +6,7 @@ walker, shape (n, 1)) that broadcast against the velocities.  Every law is
 non-increasing in |v|, which the harmonic solve relies on.
 """
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, make_dataclass
 from typing import ClassVar
 
 import numpy as np
@@ -175,6 +175,48 @@ LAWS = {law.name: law for law in (QuadraticLoss, LinearLoss, ThresholdLoss, Mono
 """The Q(v) laws by name."""
 SAMPLED_LAWS = tuple(name for name in LAWS if name != "constant")
 """Laws whose posterior can be sampled; the constant Q is the baseline of the comparison (BIC at the MAP)."""
+
+
+STACKED_COMPONENTS = SAMPLED_LAWS
+"""The laws a stacked (model-averaged) posterior may mix, in the order of its ``component`` index."""
+
+
+def _stacked_quality_factor(self, velocity):
+    """Q of each draw's own law at ``velocity`` [m/s] -> [-] (``component`` selects the law)."""
+    component = np.asarray(self.component)
+    result = None
+    for index, law in enumerate(self.components()):
+        q = law.quality_factor(velocity)
+        result = q if result is None else np.where(component == index, q, result)
+    return result
+
+
+def _stacked_components(self) -> tuple:
+    """One law per name of :data:`STACKED_COMPONENTS`, with this object's parameter arrays."""
+    return tuple(
+        LAWS[name](**{p: getattr(self, f"{name}_{p}") for p in parameter_names(LAWS[name])}) for name in STACKED_COMPONENTS
+    )
+
+
+StackedLaws = make_dataclass(
+    "StackedLaws",
+    [("component", float)]
+    + [(f"{name}_{p}", float) for name in STACKED_COMPONENTS for p in (f.name for f in fields(LAWS[name]))],
+    namespace={
+        "name": "stacking",
+        "quality_factor": _stacked_quality_factor,
+        "components": _stacked_components,
+        "__doc__": """Posterior draws of several laws mixed by stacking weights (a model-averaged Q(v)).
+
+    Each draw i is a draw of the law ``STACKED_COMPONENTS[component_i]``; its parameters are the
+    columns ``<law>_<parameter>`` (the other laws' columns of that draw hold a valid draw of
+    theirs and are not used).  Non-increasing in |v| like every component.""",
+    },
+    frozen=True,
+)
+StackedLaws.__module__ = __name__
+POSTERIOR_LAWS = {**LAWS, StackedLaws.name: StackedLaws}
+"""The laws a posterior file may hold: every law of :data:`LAWS` and the stacked mixture."""
 
 
 def parameter_names(law_class) -> tuple:

@@ -1,8 +1,10 @@
 """The Q(v) posterior as a file: what ``tactile fit-damping`` writes and ``--damping`` reads.
 
 ``posterior.npz`` (numpy, no pickles) holds the law's name, its parameters' posterior
-samples in natural units (``q0`` [-], ``alpha`` [s^2/m^2 or s/m]), and the full sampled
-coordinates for reference.
+samples in natural units (``q0`` [-], ``alpha`` [s^2/m^2 or s/m], ...), and the full sampled
+coordinates for reference.  A stacked (model-averaged) posterior has the law ``stacking``
+(:class:`~workflow.damping.laws.StackedLaws`): a ``component`` column and every mixed law's
+parameters.
 """
 
 import zipfile
@@ -13,7 +15,7 @@ from typing import Dict
 
 import numpy as np
 
-from workflow.damping.laws import LAWS, parameter_names
+from workflow.damping.laws import LAWS, POSTERIOR_LAWS, STACKED_COMPONENTS, StackedLaws, parameter_names
 from workflow.damping.likelihood import Q0_RANGE
 from workflow.errors import InputFileError
 
@@ -31,7 +33,7 @@ class DampingPosterior:
     Attributes
     ----------
     law_name : str
-        A key of :data:`~workflow.damping.laws.LAWS`.
+        A key of :data:`~workflow.damping.laws.POSTERIOR_LAWS`.
     parameters : dict
         Parameter name -> samples (M,), natural units.
     source : str
@@ -47,18 +49,57 @@ class DampingPosterior:
         return len(next(iter(self.parameters.values())))
 
     def median_law(self):
-        """The law at the marginal posterior medians of its parameters."""
-        return LAWS[self.law_name](**{name: float(np.median(v)) for name, v in self.parameters.items()})
+        """The law at the marginal posterior medians of its parameters; for a stacked posterior, the
+        median law of its most frequent component."""
+        if self.law_name != StackedLaws.name:
+            return LAWS[self.law_name](**{name: float(np.median(v)) for name, v in self.parameters.items()})
+        component = self.parameters["component"]
+        index = int(np.argmax(np.bincount(component.astype(int), minlength=len(STACKED_COMPONENTS))))
+        name, mine = STACKED_COMPONENTS[index], component == index
+        return LAWS[name](**{p: float(np.median(self.parameters[f"{name}_{p}"][mine])) for p in parameter_names(LAWS[name])})
 
     def draws(self, n: int, seed: int = 0):
         """``n`` posterior draws (without replacement when possible) as one law with (n,) parameters."""
         rng = np.random.default_rng(seed)
         index = rng.choice(self.n_samples, size=n, replace=n > self.n_samples)
-        return LAWS[self.law_name](**{name: v[index] for name, v in self.parameters.items()})
+        return POSTERIOR_LAWS[self.law_name](**{name: v[index] for name, v in self.parameters.items()})
 
     def law_from_samples(self):
         """All samples as one law with (M,) parameters."""
-        return LAWS[self.law_name](**self.parameters)
+        return POSTERIOR_LAWS[self.law_name](**self.parameters)
+
+
+NEUTRAL_PARAMETERS = {"q0": 1e3, "alpha": 0.0, "v_t": 1.0, "v_top": 1.0}
+"""Placeholder values (a constant Q of 1000; increments 0) for the columns of a law a stacked posterior does not mix."""
+
+
+def stacked_posterior(posteriors: Dict[str, DampingPosterior], weights: Dict[str, float], n: int, seed: int = 0) -> DampingPosterior:
+    """A model-averaged posterior: ``n`` draws, each from law k with probability ``weights[k]``.
+
+    Parameters
+    ----------
+    posteriors : dict
+        Law name -> its :class:`DampingPosterior` (names from
+        :data:`~workflow.damping.laws.STACKED_COMPONENTS`).
+    weights : dict
+        Law name -> stacking weight [-] (normalised here).
+    n : int
+        Number of draws.
+    seed : int
+    """
+    rng = np.random.default_rng(seed)
+    names = [name for name in STACKED_COMPONENTS if name in posteriors]
+    probability = np.array([max(weights.get(name, 0.0), 0.0) for name in names])
+    component = rng.choice(len(names), size=n, p=probability / probability.sum())
+    columns = {"component": np.array([STACKED_COMPONENTS.index(names[i]) for i in component], dtype=float)}
+    for name in STACKED_COMPONENTS:
+        for p in parameter_names(LAWS[name]):
+            if name in posteriors:
+                samples = posteriors[name].parameters[p]
+                columns[f"{name}_{p}"] = samples[rng.integers(len(samples), size=n)]
+            else:
+                columns[f"{name}_{p}"] = np.full(n, NEUTRAL_PARAMETERS.get(p, 0.0))
+    return DampingPosterior(StackedLaws.name, columns)
 
 
 def save_posterior(posterior: DampingPosterior, path, sampled: np.ndarray, sampled_names) -> Path:
@@ -99,16 +140,17 @@ def load_posterior(path) -> DampingPosterior:
             f"{path}: empty, truncated or not a posterior written by 'tactile fit-damping' "
             "(expected its posterior.npz or its --out folder)"
         ) from None
-    if law_name not in LAWS:
-        raise InputFileError(f"{path}: unknown Q(v) law {law_name!r}; expected one of {', '.join(LAWS)}")
-    expected = list(parameter_names(LAWS[law_name]))
+    if law_name not in POSTERIOR_LAWS:
+        raise InputFileError(f"{path}: unknown Q(v) law {law_name!r}; expected one of {', '.join(POSTERIOR_LAWS)}")
+    expected = list(parameter_names(POSTERIOR_LAWS[law_name]))
     if sorted(names) != sorted(expected) or samples.ndim != 2 or samples.shape[1] != len(names) or len(samples) == 0:
         raise InputFileError(f"{path}: parameters {names} do not match the {law_name} law ({expected})")
     if not np.all(np.isfinite(samples)):
         raise InputFileError(f"{path}: non-finite posterior samples")
-    ranges = {"q0": Q0_RANGE, "alpha": (0.0, MAX_ALPHA)}
+    ranges = {"q0": Q0_RANGE, "alpha": (0.0, MAX_ALPHA), "component": (0, len(STACKED_COMPONENTS) - 1)}
     for i, name in enumerate(names):
-        low, high = ranges.get(name, (-np.inf, np.inf))
+        own = name.split("_", 1)[1] if law_name == StackedLaws.name and name != "component" else name
+        low, high = ranges.get(own, (-np.inf, np.inf))
         if not np.all((samples[:, i] >= low) & (samples[:, i] <= high)):
             raise InputFileError(f"{path}: posterior samples of {name} outside the accepted range {low:g} to {high:g}")
     return DampingPosterior(law_name, {name: samples[:, i] for i, name in enumerate(names)}, source=str(path))

@@ -24,7 +24,7 @@ from typing import Dict, Optional, Sequence
 import numpy as np
 
 from workflow.damping.harmonic import self_consistent_amplitude, self_consistent_deflection
-from workflow.damping.laws import LAWS, law_parameters
+from workflow.damping.laws import POSTERIOR_LAWS, law_parameters
 from workflow.damping.posterior import DampingPosterior
 from workflow.models import analytical, materials
 from workflow.models.plate import ORIGINAL_PLATE, Plate
@@ -189,7 +189,7 @@ class DrawTask:
 
 def optimise_draw(task: DrawTask) -> tuple:
     """(lambda [m], h_i [m], deflection [m], frequency [Hz], required voltage [V]) of one draw's beam optimum."""
-    law = LAWS[task.law_name](*task.parameters)
+    law = POSTERIOR_LAWS[task.law_name](*task.parameters)
     optimum = maximise_deflection(damped_model(law, task.problem.voltage), task.problem)
     voltage = float(required_voltage(optimum.plate, law, task.target))
     return (
@@ -370,7 +370,7 @@ def damped_maps(
     interval = None
     if draws:
         drawn = posterior.draws(draws, seed)
-        on_axis = LAWS[posterior.law_name](**{k: np.reshape(v, (-1, 1, 1)) for k, v in law_parameters(drawn).items()})
+        on_axis = POSTERIOR_LAWS[posterior.law_name](**{k: np.reshape(v, (-1, 1, 1)) for k, v in law_parameters(drawn).items()})
         interval = np.quantile(required_voltage(plate, on_axis, target), QUANTILES, axis=0)
     return _damped_maps(
         problem,
