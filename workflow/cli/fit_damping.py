@@ -8,7 +8,7 @@ from workflow.damping.fit import fit_damping, fit_summary
 from workflow.damping.laws import SAMPLED_LAWS
 from workflow.damping.logs import drop_short_sweeps, read_logs
 from workflow.pipeline.config import LIMITS
-from workflow.pipeline.damping_files import FIT_OUTPUTS, write_fit
+from workflow.pipeline.damping_files import FIT_OUTPUTS, stated_noise, write_fit
 from workflow.pipeline.outputs import output_folder
 
 
@@ -18,9 +18,10 @@ def register(subparsers) -> None:
         help="fit Q(v) to interferometer logs with emcee",
         description="Infer the amplitude-dependent quality factor Q(v) from frequency sweeps at several "
         "drive voltages (interferometer logs, format in docs/log-format.md), with the resonance of each sweep, the "
-        "drive-to-deflection gain and the noise as nuisance parameters.  Laws are compared with WAIC "
-        "(BIC at the MAP also reported).  Writes posterior.npz (what --damping reads), fit.json and "
-        "figures into --out.",
+        "drive-to-deflection gain and the noise as nuisance parameters.  Laws are screened at the MAP, "
+        "compared by PSIS-LOO and checked for misfit; the design uses the best law, the stacking mixture "
+        "or the flexible law (docs/damping.md).  Writes posterior.npz (what --damping reads), posterior.nc "
+        "(ArviZ), fit.json and figures into --out.",
     )
     parser.add_argument("logs", nargs="+", metavar="LOG.csv", help="interferometer log(s) (docs/log-format.md)")
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
@@ -29,7 +30,7 @@ def register(subparsers) -> None:
         "--law",
         choices=SAMPLED_LAWS + ("all",),
         default="all",
-        help=f"Q(v) law to sample; 'all' samples {', '.join(SAMPLED_LAWS)} and keeps the best by WAIC (default: all)",
+        help=f"Q(v) law to fit; 'all' screens {', '.join(SAMPLED_LAWS)} and compares them by PSIS-LOO (default: all)",
     )
     seed_option(parser, 0, "random seed of the walkers and the sampler")
     parser.add_argument("--max-steps", type=bounded(int, *LIMITS["damping.max_steps"]), default=20000,
@@ -46,8 +47,11 @@ def run(args) -> dict:
     input_paths = {Path(p).resolve() for p in args.logs}
     laws = SAMPLED_LAWS if args.law == "all" else (args.law,)
     with output_folder(args.out, FIT_OUTPUTS, force=args.force) as out:
-        fit = fit_damping(log, laws=laws, seed=args.seed, max_steps=args.max_steps, progress=True)
+        noise = stated_noise(args.logs)
+        fit = fit_damping(log, laws=laws, seed=args.seed, max_steps=args.max_steps, progress=True, stated_noise=noise)
         summary = dict(fit_summary(fit), files=write_fit(fit, out, figures=not args.no_figures, protect=input_paths))
+    if fit.warning:
+        print(f"tactile fit-damping: warning: {fit.warning}", file=sys.stderr)
     if not args.json:
         _print_human(summary)
     return summary
@@ -63,9 +67,18 @@ def _print_human(summary: dict) -> None:
         f"  chain: {d['n_steps']} steps x {d['n_walkers']} walkers, tau_max {d['tau_max']:.1f}, "
         f"acceptance {d['acceptance']:.2f}, {'converged' if d['converged'] else 'NOT converged'} ({d['seconds']:.1f} s)"
     )
+    loo = summary["comparison"]["loo"]
     for name, c in summary["comparison"]["laws"].items():
-        waic = f"WAIC {c['waic']:.1f}, " if "waic" in c else ""
-        print(f"  {name:10s} {waic}BIC {c['bic']:.1f}")
-    print(f"  preferred by WAIC: {summary['comparison']['preferred']}; posterior: {summary['files']['posterior']}")
+        sampled = (
+            f"elpd_loo {loo[name]['elpd_loo']:.1f} (se {loo[name]['se']:.1f}, diff {loo[name]['elpd_diff']:.1f} "
+            f"dse {loo[name]['dse']:.1f}), weight {loo[name]['weight']:.2f}, Pareto k > 0.7: {loo[name]['n_pareto_k_bad']}, "
+            if name in loo else "not sampled (screened at the MAP), "
+        )
+        print(f"  {name:10s} {sampled}AIC {c['aic']:.1f}, BIC {c['bic']:.1f}")
+    for name, check in summary["checks"].items():
+        print(f"  checks {name:10s} {'passed' if check['passed'] else 'FAILED'}: binned chi2 p {check['binned_chi2_p']:.2g}, "
+              f"runs p {check['runs_test_combined_p']:.2g}; " + "; ".join(check["notes"]))
+    print(f"  preferred by PSIS-LOO: {summary['law']}; design uses: {summary['selection']} ({summary['design_law']}); "
+          f"posterior: {summary['files']['posterior']}")
 
 

@@ -495,7 +495,7 @@ def fit_law(
     data, theta_map, scale, log_likelihood = start or map_fit(log, law_name, sweeps)
     rng = np.random.default_rng(seed)
     n_dim = data.layout.dimension
-    n_walkers = n_walkers or max(32, 4 * n_dim)
+    n_walkers = max(n_walkers, 2 * n_dim) if n_walkers else max(32, 4 * n_dim)
     n_walkers += n_walkers % 2
     covariance = laplace_covariance(data, theta_map, scale)
     walkers = initial_walkers(data, theta_map, covariance, n_walkers, rng)

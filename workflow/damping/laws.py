@@ -162,12 +162,11 @@ class MonotoneSpline:
 
     def loss(self, velocity):
         """Loss factor 1/Q at ``velocity`` [m/s] -> [-]."""
-        n = len(self.INCREMENTS)
-        position = np.abs(velocity) * n / np.asarray(self.v_top)
-        loss = 1.0 / np.asarray(self.q0)
-        for j, name in enumerate(self.INCREMENTS):
-            ramp = np.clip(position - j, 0.0, None if j == n - 1 else 1.0)
-            loss = loss + np.asarray(getattr(self, name)) * ramp
+        position = np.abs(velocity) * len(self.INCREMENTS) / np.asarray(self.v_top)
+        rises = [np.asarray(getattr(self, name)) for name in self.INCREMENTS]
+        loss = 1.0 / np.asarray(self.q0) + rises[0] * position
+        for j in range(1, len(rises)):  # the slope changes by d_j - d_(j-1) at knot j
+            loss = loss + (rises[j] - rises[j - 1]) * np.maximum(position - j, 0.0)
         return loss
 
 

@@ -3,14 +3,41 @@
 import json
 from pathlib import Path
 
+from workflow import logformat
 from workflow.damping.fit import fit_summary
+from workflow.damping.inference_data import save_inference_data
 from workflow.damping.posterior import POSTERIOR_FILE, save_posterior
 from workflow.errors import InputFileError
 from workflow.pipeline.outputs import writable_folder
 from workflow.serialise import jsonable
 
-FIT_OUTPUTS = ("posterior*.npz", "fit.json", "*.png")
+FIT_OUTPUTS = ("posterior*.npz", "posterior*.nc", "fit.json", "*.png")
 """Glob patterns of the files a fit writes into its folder (:mod:`workflow.pipeline.outputs`)."""
+INFERENCE_DATA_FILE = "posterior.nc"
+"""ArviZ InferenceData (netCDF) of the preferred law, next to ``posterior.npz``."""
+STATED_NOISE_KEYS = ("velocity_noise_relative", "simulator_relative_noise")
+"""Log metadata keys giving the vibrometer's relative velocity noise [-] (a real bench's, then the simulator's)."""
+
+
+def stated_noise(paths):
+    """The instrument's relative velocity noise [-] stated in the logs' metadata, or None.
+
+    Reads the leading ``# key: value`` lines of each log (docs/log-format.md) for
+    :data:`STATED_NOISE_KEYS`; the largest stated value over the logs is returned.
+    """
+    values = []
+    for path in paths:
+        with open(path, encoding="utf-8", errors="replace") as stream:
+            for line in stream:
+                if not line.startswith(logformat.METADATA_PREFIX):
+                    break
+                key, _, value = line[len(logformat.METADATA_PREFIX) :].partition(":")
+                if key.strip() in STATED_NOISE_KEYS:
+                    try:
+                        values.append(float(value))
+                    except ValueError:
+                        raise InputFileError(f"{path}: metadata {key.strip()}: expected a number, got {value.strip()!r}") from None
+    return max(values) if values else None
 
 
 def write_fit(fit, out, figures: bool = True, protect=()) -> dict:
@@ -28,14 +55,26 @@ def write_fit(fit, out, figures: bool = True, protect=()) -> dict:
     Returns
     -------
     dict
-        {"posterior": path of posterior.npz, "figures": [paths]}.
+        {"posterior": path of posterior.npz (the answer the design uses), "inference_data":
+        path of posterior.nc (the preferred law), "figures": [paths]}.
     """
     out = writable_folder(out)
-    outputs = {POSTERIOR_FILE: fit.best, **{f"posterior_{name}.npz": law_fit for name, law_fit in fit.fits.items()}}
-    for name, law_fit in outputs.items():
-        _refuse_overwriting_input(out / name, protect)
-        save_posterior(law_fit.posterior(), out / name, law_fit.samples, law_fit.data.layout.names)
-    files = {"posterior": str(out / POSTERIOR_FILE), "figures": _write_figures(fit, out, protect) if figures else []}
+    for name, law_fit in fit.fits.items():
+        _refuse_overwriting_input(out / f"posterior_{name}.npz", protect)
+        save_posterior(law_fit.posterior(), out / f"posterior_{name}.npz", law_fit.samples, law_fit.data.layout.names)
+        _refuse_overwriting_input(out / f"posterior_{name}.nc", protect)
+        save_inference_data(law_fit.inference_data, out / f"posterior_{name}.nc")
+    _refuse_overwriting_input(out / POSTERIOR_FILE, protect)
+    answer_fit = fit.fits.get(fit.answer.law_name)
+    sampled = (answer_fit.samples, answer_fit.data.layout.names) if answer_fit else (fit.best.samples, fit.best.data.layout.names)
+    save_posterior(fit.answer, out / POSTERIOR_FILE, *sampled)
+    _refuse_overwriting_input(out / INFERENCE_DATA_FILE, protect)
+    save_inference_data(fit.best.inference_data, out / INFERENCE_DATA_FILE)
+    files = {
+        "posterior": str(out / POSTERIOR_FILE),
+        "inference_data": str(out / INFERENCE_DATA_FILE),
+        "figures": _write_figures(fit, out, protect) if figures else [],
+    }
     _refuse_overwriting_input(out / "fit.json", protect)
     (out / "fit.json").write_text(json.dumps(dict(fit_summary(fit), files=files), indent=2, default=jsonable) + "\n")
     return files

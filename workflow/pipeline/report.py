@@ -331,6 +331,7 @@ def _relative(context: RunContext, path) -> str:
 
 
 def _damping_fit(context: RunContext, fit) -> str:
+    from workflow.damping.comparison import CLOSE_DSE
     from workflow.damping.fit import fit_summary
 
     summary = fit_summary(fit)
@@ -340,25 +341,60 @@ def _damping_fit(context: RunContext, fit) -> str:
         if not name.startswith("f_r_")
     ]
     d = summary["diagnostics"]
-    laws = summary["comparison"]["laws"]
+    loo = summary["comparison"]["loo"]
     comparison = [
-        (name, f"{c['waic']:.1f}" if "waic" in c else "not sampled", f"{c['bic']:.1f}", c["n_parameters"])
-        for name, c in laws.items()
+        (
+            name,
+            f"{loo[name]['elpd_loo']:.1f} ± {loo[name]['se']:.1f}" if name in loo else "not sampled (screened at MAP)",
+            f"{loo[name]['elpd_diff']:.1f} ± {loo[name]['dse']:.1f}" if name in loo else "",
+            f"{loo[name]['weight']:.2f}" if name in loo else "",
+            loo[name]["n_pareto_k_bad"] if name in loo else "",
+            f"{c['aic']:.1f}",
+            f"{c['bic']:.1f}",
+            c["n_parameters"],
+        )
+        for name, c in summary["comparison"]["laws"].items()
     ]
+    checks = [
+        (
+            name,
+            "passed" if c["passed"] else "**FAILED**",
+            f"{c['binned_chi2_p']:.2g}",
+            f"{c['runs_test_combined_p']:.2g}",
+            f"{c['sigma_rel_fitted']:.3g}",
+            "not stated" if c["sigma_rel_stated"] is None else f"{c['sigma_rel_stated']:.3g}",
+        )
+        for name, c in summary["checks"].items()
+    ]
+    choice = {
+        "best": f"the preferred law alone (every other law is more than {CLOSE_DSE:g} dse behind)",
+        "stacking": "the stacking-weighted mixture of the laws (a law is within "
+        f"{CLOSE_DSE:g} dse of the preferred one), weights "
+        + ", ".join(f"{name} {w:.2f}" for name, w in summary["weights"].items()),
+        "fallback": "the flexible law, because the preferred law failed its misfit checks",
+    }[summary["selection"]]
+    warning = f"**Warning: {summary['warning']}.**\n\n" if summary["warning"] else ""
     figures = [figure(context, name, caption) for name, caption in _DAMPING_FIGURES if name in context.figures]
     return (
         "## Damping: Q(v) fitted to the logs\n\n"
-        f"Preferred law: **{summary['law']}**. Criterion: {summary['comparison']['criterion']}. "
+        + warning
+        + f"Preferred law by PSIS-LOO: **{summary['law']}**. The design uses **{choice}** "
+        f"(selection `{summary['selection']}`). Criterion: {summary['comparison']['criterion']}; "
+        f"{summary['comparison']['screen']}. "
         f"{summary['n_points']} points in {summary['n_sweeps']} sweeps; the resonance of each sweep, the "
         "drive-to-deflection gain and the noise are nuisance parameters.\n\n"
         + table(["parameter", "median", "90 % interval", "unit"], parameters)
         + "\n\n"
-        + table(["law", "WAIC", "BIC at MAP", "parameters"], comparison)
+        + table(["law", "elpd_loo ± se", "elpd_diff ± dse", "stacking weight", "Pareto k > 0.7", "AIC at MAP",
+                 "BIC at MAP", "parameters"], comparison)
+        + "\n\nMisfit checks (posterior predictive, per sweep; docs/damping.md):\n\n"
+        + table(["law", "checks", "binned χ² p", "runs test p", "fitted σ_rel", "stated σ_rel"], checks)
         + "\n\n"
         f"Convergence: {d['n_steps']} steps x {d['n_walkers']} walkers, integrated autocorrelation time "
         f"tau_max = {d['tau_max']:.1f} ({d['n_steps'] / d['tau_max']:.0f} tau), acceptance {d['acceptance']:.2f}, "
         f"**{'converged' if d['converged'] else 'NOT converged'}** (rule: {d['rule']}). "
-        "Posterior samples: [damping/posterior.npz](damping/posterior.npz), summary: [damping/fit.json](damping/fit.json).\n\n"
+        "Posterior samples the design uses: [damping/posterior.npz](damping/posterior.npz); the preferred law as "
+        "ArviZ InferenceData: [damping/posterior.nc](damping/posterior.nc); summary: [damping/fit.json](damping/fit.json).\n\n"
         + "\n\n".join(figures)
     )
 
@@ -370,6 +406,10 @@ _DAMPING_FIGURES = [
     ("damping/trace_quadratic.png", "chains of the quadratic law (trace plot)"),
     ("damping/corner_linear.png", "posterior of the linear law (corner plot)"),
     ("damping/trace_linear.png", "chains of the linear law (trace plot)"),
+    ("damping/corner_threshold.png", "posterior of the threshold law (corner plot)"),
+    ("damping/trace_threshold.png", "chains of the threshold law (trace plot)"),
+    ("damping/corner_flexible.png", "posterior of the flexible law (corner plot)"),
+    ("damping/trace_flexible.png", "chains of the flexible law (trace plot)"),
 ]
 
 

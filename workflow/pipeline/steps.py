@@ -13,7 +13,7 @@ import numpy as np
 
 from workflow.errors import InputFileError, TactileError
 from workflow.optimise.problem import DesignProblem, optimise_analytical
-from workflow.pipeline.damping_files import FIT_OUTPUTS, write_fit
+from workflow.pipeline.damping_files import FIT_OUTPUTS, stated_noise, write_fit
 from workflow.pipeline.runner import RunContext, Step
 from workflow.units import KHZ, MM, UM
 
@@ -116,14 +116,18 @@ def damping_fit(context: RunContext):
             f"{LIMITS['damping.walkers'][1]} for these logs (emcee needs twice the {fewest // 2} parameters "
             f"sampled with {log.n_sweeps} sweeps)"
         )
-    return fit_damping(
+    fit = fit_damping(
         log,
         laws=tuple(damping["laws"]),
         seed=damping["seed"],
         max_steps=damping["max_steps"],
         n_walkers=damping["walkers"],
         progress=True,
+        stated_noise=stated_noise(context.results["logs"]),
     )
+    if fit.warning:
+        print(f"warning: {fit.warning}", file=sys.stderr)
+    return fit
 
 
 def damping_fit_files(context: RunContext, fit) -> None:
@@ -140,7 +144,7 @@ def damped_design(context: RunContext):
     from workflow.optimise.damped import damped_maps, design_with_damping
 
     damping, design = context.config["damping"], context.config["design"]
-    posterior = context.results["damping_fit"].best.posterior()
+    posterior = context.results["damping_fit"].answer
     problems = design_problems(context.config)
     target = design["target_deflection_um"] * UM
     result = design_with_damping(
@@ -294,7 +298,7 @@ def recommended_design(context: RunContext):
     )
 
     damping, design = context.config["damping"], context.config["design"]
-    posterior = context.results["damping_fit"].best.posterior()
+    posterior = context.results["damping_fit"].answer
     draws = posterior.draws(damping["posterior_draws"], damping["seed"])
     target = design["target_deflection_um"] * UM
     fem_optima = context.results.get("fem_optima", {})

@@ -90,6 +90,10 @@ def q_of_v_figure(fit: DampingFit, draws: int = 200, seed: int = 0):
                             zorder=order)
         bottom.plot(velocity, 100 * np.transpose([q05 / q50 - 1, q95 / q50 - 1]), color=line.get_color(), lw=1, zorder=order)
         lines[name] = (line, q95 - q05, (q95 - q05) / q50)
+    if fit.selection == "stacking":
+        q05, q50, q95 = np.quantile(fit.answer.law_from_samples().quality_factor(velocity[:, None]), (0.05, 0.5, 0.95), axis=1)
+        top.plot(velocity, q50, "k:", lw=2, label="stacking mixture (what the design uses): median")
+        top.plot(velocity, np.transpose([q05, q95]), "k:", lw=1)
     best = fit.best
     model_curves = dataclasses.replace(fit.log, velocity=np.median(_predicted_rows(best, fit.log, draws, seed), axis=0))
     estimated = sweep_estimates(model_curves)
@@ -104,7 +108,7 @@ def q_of_v_figure(fit: DampingFit, draws: int = 200, seed: int = 0):
         for name, (line, band, relative) in lines.items()
     ] + top.get_legend_handles_labels()[0]
     return _finish_band_figure(
-        figure, handles, 1, f"Q(v): preferred law {fit.preferred} (lowest WAIC)",
+        figure, handles, 1, f"Q(v): preferred law {fit.preferred} (PSIS-LOO); the design uses: {fit.selection} ({fit.answer.law_name})",
         ("quality factor Q [-]", "90 % band\n/ median - 1 [%]"), "peak velocity v [m/s]",
     )
 

@@ -1,0 +1,151 @@
+"""The threshold and flexible Q(v) laws, PSIS-LOO comparison, stacking, misfit checks and posterior.nc."""
+
+import numpy as np
+import pytest
+
+from workflow.damping.checks import misfit_check, runs_test
+from workflow.damping.comparison import compare_laws
+from workflow.damping.fit import fit_damping, fit_law, fit_summary, map_fit, sweep_estimates
+from workflow.damping.inference_data import load_inference_data, save_inference_data
+from workflow.damping.laws import STACKED_COMPONENTS, MonotoneSpline, QuadraticLoss, StackedLaws, ThresholdLoss
+from workflow.damping.posterior import DampingPosterior, load_posterior, save_posterior, stacked_posterior
+from workflow.damping.synthetic import TRUE_LAW, simulate_campaign
+from workflow.errors import InputFileError
+
+THRESHOLD_TRUTH = ThresholdLoss(q0=140.0, alpha=0.45, v_t=0.1)
+FLEXIBLE_TRUTH = MonotoneSpline(q0=160.0, d1=0.0005, d2=0.001, d3=0.003, d4=0.004, d5=0.004, v_top=0.27)
+NOISE = 0.02
+
+
+def coverage(law_fit_or_posterior, truth, velocity):
+    """Fraction of ``velocity`` where the truth lies in the 90 % band."""
+    law = law_fit_or_posterior.law_from_samples()
+    q05, q95 = np.quantile(law.quality_factor(velocity[:, None]), (0.05, 0.95), axis=1)
+    true_q = truth.quality_factor(velocity)
+    return float(np.mean((true_q >= q05) & (true_q <= q95)))
+
+
+@pytest.mark.parametrize("law", [THRESHOLD_TRUTH, FLEXIBLE_TRUTH, TRUE_LAW, StackedLaws(
+    component=np.array([0, 2, 3]), quadratic_q0=150.0, quadratic_alpha=0.2, linear_q0=100.0, linear_alpha=0.0,
+    threshold_q0=np.array([1e3, 120.0, 1e3]), threshold_alpha=0.5, threshold_v_t=0.05, flexible_q0=90.0,
+    flexible_d1=0.001, flexible_d2=0.0, flexible_d3=0.004, flexible_d4=0.0, flexible_d5=0.002, flexible_v_top=0.2)])
+def test_every_law_is_non_increasing_in_speed(law):
+    velocity = np.linspace(-0.5, 0.5, 401)[:, None]
+    q = law.quality_factor(np.abs(velocity))
+    assert np.all(np.diff(q, axis=0) <= 1e-12 * q[:-1])
+    assert np.allclose(law.quality_factor(velocity), q)
+
+
+def test_threshold_law_is_flat_below_and_quadratic_well_above_its_threshold():
+    law = ThresholdLoss(q0=140.0, alpha=0.45, v_t=0.1)
+    assert law.quality_factor(0.02) == pytest.approx(140.0, rel=1e-6)
+    shifted = QuadraticLoss(q0=140.0, alpha=0.45)
+    assert 1 / law.quality_factor(0.5) == pytest.approx(1 / shifted.quality_factor(0.4), rel=1e-6)
+
+
+def test_flexible_law_interpolates_its_knots_and_continues_the_last_slope():
+    law = FLEXIBLE_TRUTH
+    knots = np.linspace(0, law.v_top, 6)
+    rises = np.cumsum([0.0, law.d1, law.d2, law.d3, law.d4, law.d5])
+    assert np.allclose(1 / law.quality_factor(knots), 1 / law.q0 + rises)
+    beyond = law.v_top * 1.2
+    assert 1 / law.quality_factor(beyond) == pytest.approx(1 / law.q0 + rises[-1] + law.d5, rel=1e-12)
+
+
+def test_runs_test_flags_runs_and_passes_alternation():
+    assert runs_test(np.r_[np.ones(20), -np.ones(20)])[1] < 1e-6
+    assert runs_test(np.tile([1.0, -1.0], 20))[1] > 0.99
+
+
+@pytest.fixture(scope="module")
+def threshold_campaign():
+    return simulate_campaign(law=THRESHOLD_TRUTH, relative_noise=NOISE, seed=1)
+
+
+@pytest.fixture(scope="module")
+def threshold_fit(threshold_campaign):
+    return fit_law(threshold_campaign, "threshold", seed=2, max_steps=3000)
+
+
+def test_threshold_law_recovers_its_own_truth(threshold_fit, threshold_campaign):
+    posterior = threshold_fit.posterior()
+    for name in ("q0", "alpha", "v_t"):
+        low, high = np.quantile(posterior.parameters[name], [0.005, 0.995])
+        assert low <= getattr(THRESHOLD_TRUTH, name) <= high, name
+    velocity = np.linspace(0.0, threshold_campaign.velocity.max(), 50)
+    assert coverage(posterior, THRESHOLD_TRUTH, velocity) >= 0.9
+
+
+def test_posterior_nc_reads_back_and_arviz_loo_works_on_it(threshold_fit, tmp_path):
+    import arviz as az
+
+    path = save_inference_data(threshold_fit.inference_data, tmp_path / "posterior.nc")
+    idata = load_inference_data(path)
+    assert {"posterior", "sample_stats", "log_likelihood", "observed_data"} <= set(idata.groups())
+    assert idata.log_likelihood["velocity"].shape[-1] == len(threshold_fit.data.velocity)
+    loo = az.loo(idata)
+    assert np.isfinite(loo.elpd_loo) and loo.se > 0
+    assert idata.posterior["v_t"].median() == pytest.approx(np.median(threshold_fit.posterior().parameters["v_t"]), rel=0.05)
+    (tmp_path / "bad.nc").write_text("not netCDF")
+    with pytest.raises(InputFileError, match="bad.nc"):
+        load_inference_data(tmp_path / "bad.nc")
+
+
+def test_misfit_check_flags_the_quadratic_law_on_a_threshold_campaign_and_passes_the_true_law(threshold_campaign, threshold_fit):
+    quadratic = fit_law(threshold_campaign, "quadratic", seed=2, max_steps=1500)
+    wrong = misfit_check(quadratic.samples, quadratic.data, stated_noise=NOISE)
+    right = misfit_check(threshold_fit.samples, threshold_fit.data, stated_noise=NOISE)
+    assert not wrong.passed and len(wrong.reasons) == 2  # correlated residuals, inflated noise
+    assert right.passed, right.reasons
+    unstated = misfit_check(threshold_fit.samples, threshold_fit.data)
+    assert unstated.passed and "skipped" in unstated.reasons[0]
+
+
+def test_loo_prefers_the_threshold_law_over_the_quadratic_on_a_threshold_campaign(threshold_campaign, threshold_fit):
+    quadratic = fit_law(threshold_campaign, "quadratic", seed=2, max_steps=800)
+    comparison = compare_laws({"quadratic": quadratic.inference_data, "threshold": threshold_fit.inference_data})
+    assert comparison.best == "threshold" and comparison.selection == "best"
+    assert comparison.laws["quadratic"]["elpd_diff"] > 2 * comparison.laws["quadratic"]["dse"]
+    assert sum(comparison.weights.values()) == pytest.approx(1.0)
+
+
+def test_stacked_posterior_mixes_the_laws_by_weight_and_round_trips_through_the_file(threshold_fit, tmp_path):
+    quadratic = QuadraticLoss(q0=np.full(50, 150.0), alpha=np.linspace(0.1, 0.3, 50))
+    posteriors = {
+        "threshold": threshold_fit.posterior(),
+        "quadratic": DampingPosterior("quadratic", {"q0": quadratic.q0, "alpha": quadratic.alpha}),
+    }
+    stacked = stacked_posterior(posteriors, {"threshold": 0.75, "quadratic": 0.25}, 4000, seed=0)
+    share = np.mean(stacked.parameters["component"] == STACKED_COMPONENTS.index("threshold"))
+    assert share == pytest.approx(0.75, abs=0.03)
+    path = save_posterior(stacked, tmp_path / "posterior.npz", np.zeros((1, 1)), ["x"])
+    loaded = load_posterior(path)
+    drawn = loaded.draws(64, seed=1)
+    assert isinstance(drawn, StackedLaws) and drawn.quality_factor(np.array([0.0, 0.1])[:, None]).shape == (2, 64)
+    assert isinstance(loaded.median_law(), ThresholdLoss)
+
+
+def test_a_wrong_only_law_is_flagged_and_the_answer_falls_back_to_the_flexible_law(threshold_campaign):
+    fit = fit_damping(threshold_campaign, laws=("quadratic",), seed=2, max_steps=1500, stated_noise=NOISE)
+    summary = fit_summary(fit)
+    assert fit.selection == "fallback" and fit.answer.law_name == "flexible"
+    assert not summary["checks"]["quadratic"]["passed"] and summary["warning"].startswith("the quadratic law fails")
+    assert summary["design_law"] == "flexible"
+    velocity = np.linspace(0.0, threshold_campaign.velocity.max(), 50)
+    assert coverage(fit.answer, THRESHOLD_TRUTH, velocity) >= 0.9
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("truth", [THRESHOLD_TRUTH, TRUE_LAW, FLEXIBLE_TRUTH], ids=["threshold", "quadratic", "flexible"])
+def test_flexible_law_covers_the_truth_over_the_measured_range(truth):
+    log = simulate_campaign(law=truth, relative_noise=NOISE, seed=4)
+    law_fit = fit_law(log, "flexible", seed=4)
+    velocity = np.linspace(0.0, log.velocity.max(), 50)
+    assert coverage(law_fit.posterior(), truth, velocity) >= 0.9
+
+
+def test_map_screening_finds_the_flexible_law_close_to_the_threshold_truth(threshold_campaign):
+    sweeps = sweep_estimates(threshold_campaign)
+    log_likelihood = {name: map_fit(threshold_campaign, name, sweeps)[3] for name in ("quadratic", "threshold", "flexible")}
+    assert log_likelihood["threshold"] - log_likelihood["quadratic"] > 20
+    assert log_likelihood["flexible"] > log_likelihood["threshold"] - 3
