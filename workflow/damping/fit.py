@@ -517,6 +517,14 @@ def fit_law(
     )
 
 
+def _fit_law_task(task: tuple) -> LawFit:
+    """:func:`fit_law` on (log, law_name, seed, n_walkers, max_steps, max_seconds, progress, sweeps,
+    chain_taus, start), for a process pool."""
+    log, name, seed, n_walkers, max_steps, max_seconds, progress, sweeps, chain_taus, start = task
+    return fit_law(log, name, seed, n_walkers, max_steps, max_seconds, progress=progress, sweeps=sweeps,
+                   chain_taus=chain_taus, start=start)
+
+
 def fit_damping(
     log: CampaignLog,
     laws: Sequence[str] = DEFAULT_LAWS,
@@ -527,6 +535,7 @@ def fit_damping(
     n_walkers: Optional[int] = None,
     stated_noise: Optional[float] = None,
     chain_taus: float = CHAIN_TAUS,
+    workers: Optional[int] = None,
 ) -> DampingFit:
     """Screen, sample and compare the ``laws``, check the best one and choose the answer.
 
@@ -550,6 +559,8 @@ def fit_damping(
         The instrument's relative velocity noise [-], for the misfit check.
     chain_taus : float
         Chain length in autocorrelation times (:func:`convergence_rule`) [-].
+    workers : int, optional
+        Processes sampling laws side by side (default: the cores available; 1: one after the other).
 
     Returns
     -------
@@ -570,15 +581,20 @@ def fit_damping(
     lowest = min(criteria[name]["aic"] for name in laws)
     screened = [name for name in laws if criteria[name]["aic"] <= lowest + SCREEN_AIC]
 
-    def sample(name):
-        return fit_law(log, name, seed, n_walkers, max_steps, max_seconds, progress=progress, sweeps=sweeps,
-                       chain_taus=chain_taus, start=maps[name])
+    def sample(names):
+        from workflow.execution.parallel import map_evaluations
 
-    fits = {name: sample(name) for name in screened}
+        alone = len(names) == 1
+        tasks = [(log, name, seed, n_walkers, max_steps, max_seconds, progress and alone, sweeps, chain_taus, maps[name])
+                 for name in names]
+        return dict(zip(names, map_evaluations(_fit_law_task, tasks, progress=progress and not alone,
+                                               workers=workers, description="laws sampled")))
+
+    fits = sample(screened)
     checks = {name: misfit_check(f.samples, f.data, stated_noise, seed) for name, f in fits.items()}
     comparison = compare_laws({name: f.inference_data for name, f in fits.items()})
     if not checks[comparison.best].passed and FALLBACK_LAW not in fits:
-        fits[FALLBACK_LAW] = sample(FALLBACK_LAW)
+        fits.update(sample([FALLBACK_LAW]))
         checks[FALLBACK_LAW] = misfit_check(fits[FALLBACK_LAW].samples, fits[FALLBACK_LAW].data, stated_noise, seed)
         comparison = compare_laws({name: f.inference_data for name, f in fits.items()})
     for name in criteria:

@@ -48,6 +48,8 @@ SIGMA_ABS_RANGE = (1e-7, 1.0)
 """Prior range of the absolute noise, relative to the largest measured velocity [-]."""
 THRESHOLD_RANGE = (0.02, 0.9)
 """Prior range of the threshold law's v_t, relative to the largest measured velocity [-]."""
+MAX_INCREMENT = 0.2
+"""Prior bound of each increment of the flexible law's 1/Q [-] (five of them: Q down to 1 at the largest velocity)."""
 RANDOM_WALK_SCALE = 0.01
 """Standard deviation of the step between consecutive increments of the flexible law's 1/Q [-]:
 weak for plates with Q above ~20 (1/Q changing by 0.01 or less between knots)."""
@@ -149,7 +151,7 @@ def fit_data(log: CampaignLog, law_name: str) -> FitData:
         bounds["alpha"] = (0.0, 1.0 / MIN_Q_AT_MAX_VELOCITY / onset**2)
         bounds["v_t"] = tuple(np.asarray(THRESHOLD_RANGE) * v_max)
     for name in MonotoneSpline.INCREMENTS:
-        bounds[name] = (0.0, 1.0 / MIN_Q_AT_MAX_VELOCITY)
+        bounds[name] = (0.0, MAX_INCREMENT)
     for k in range(log.n_sweeps):
         f = log.frequency[log.sweep == k]
         span = max(f.max() - f.min(), 0.01 * f.mean())
