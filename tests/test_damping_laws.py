@@ -30,15 +30,15 @@ def coverage(law_fit_or_posterior, truth, velocity):
     threshold_q0=np.array([1e3, 120.0, 1e3]), threshold_alpha=0.5, threshold_v_t=0.05, flexible_q0=90.0,
     flexible_d1=0.001, flexible_d2=0.0, flexible_d3=0.004, flexible_d4=0.0, flexible_d5=0.002, flexible_v_top=0.2)])
 def test_every_law_is_non_increasing_in_speed(law):
-    velocity = np.linspace(-0.5, 0.5, 401)[:, None]
-    q = law.quality_factor(np.abs(velocity))
+    velocity = np.linspace(0.0, 0.5, 401)[:, None]
+    q = law.quality_factor(velocity)
     assert np.all(np.diff(q, axis=0) <= 1e-12 * q[:-1])
-    assert np.allclose(law.quality_factor(velocity), q)
+    assert np.allclose(law.quality_factor(-velocity), q)
 
 
 def test_threshold_law_is_flat_below_and_quadratic_well_above_its_threshold():
     law = ThresholdLoss(q0=140.0, alpha=0.45, v_t=0.1)
-    assert law.quality_factor(0.02) == pytest.approx(140.0, rel=1e-6)
+    assert law.quality_factor(0.02) == pytest.approx(140.0, rel=1e-4)
     shifted = QuadraticLoss(q0=140.0, alpha=0.45)
     assert 1 / law.quality_factor(0.5) == pytest.approx(1 / shifted.quality_factor(0.4), rel=1e-6)
 
@@ -95,7 +95,7 @@ def test_misfit_check_flags_the_quadratic_law_on_a_threshold_campaign_and_passes
     quadratic = fit_law(threshold_campaign, "quadratic", seed=2, max_steps=1500)
     wrong = misfit_check(quadratic.samples, quadratic.data, stated_noise=NOISE)
     right = misfit_check(threshold_fit.samples, threshold_fit.data, stated_noise=NOISE)
-    assert not wrong.passed and len(wrong.reasons) == 2  # correlated residuals, inflated noise
+    assert not wrong.passed and any("absorbed as noise" in reason for reason in wrong.reasons)
     assert right.passed, right.reasons
     unstated = misfit_check(threshold_fit.samples, threshold_fit.data)
     assert unstated.passed and "skipped" in unstated.reasons[0]
@@ -131,6 +131,7 @@ def test_a_wrong_only_law_is_flagged_and_the_answer_falls_back_to_the_flexible_l
     assert fit.selection == "fallback" and fit.answer.law_name == "flexible"
     assert not summary["checks"]["quadratic"]["passed"] and summary["warning"].startswith("the quadratic law fails")
     assert summary["design_law"] == "flexible"
+    assert summary["checks"]["quadratic"]["flexible_law_likelihood_ratio_p"] < 1e-6
     velocity = np.linspace(0.0, threshold_campaign.velocity.max(), 50)
     assert coverage(fit.answer, THRESHOLD_TRUTH, velocity) >= 0.9
 

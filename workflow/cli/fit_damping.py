@@ -77,8 +77,12 @@ def _print_human(summary: dict) -> None:
         print(f"  {name:10s} {sampled}AIC {c['aic']:.1f}, BIC {c['bic']:.1f}")
     for name, check in summary["checks"].items():
         print(f"  checks {name:10s} {'passed' if check['passed'] else 'FAILED'}: binned chi2 p {check['binned_chi2_p']:.2g}, "
-              f"runs p {check['runs_test_combined_p']:.2g}; " + "; ".join(check["notes"]))
+              f"runs p {check['runs_test_combined_p']:.2g}, flexible-law likelihood ratio p "
+              f"{_number(check['flexible_law_likelihood_ratio_p'])}; " + "; ".join(check["notes"]))
     print(f"  preferred by PSIS-LOO: {summary['law']}; design uses: {summary['selection']} ({summary['design_law']}); "
           f"posterior: {summary['files']['posterior']}")
 
 
+def _number(value) -> str:
+    """A p-value in two significant digits, or "not tested"."""
+    return "not tested" if value is None else f"{value:.2g}"

@@ -590,12 +590,20 @@ def fit_damping(
         return dict(zip(names, map_evaluations(_fit_law_task, tasks, progress=progress and not alone,
                                                workers=workers, description="laws sampled")))
 
+    def check(name):
+        flexible = criteria[FALLBACK_LAW]
+        alternative = (
+            None if name == FALLBACK_LAW
+            else (flexible["log_likelihood"] - criteria[name]["log_likelihood"], flexible["n_parameters"] - criteria[name]["n_parameters"])
+        )
+        return misfit_check(fits[name].samples, fits[name].data, stated_noise, seed, alternative)
+
     fits = sample(screened)
-    checks = {name: misfit_check(f.samples, f.data, stated_noise, seed) for name, f in fits.items()}
+    checks = {name: check(name) for name in fits}
     comparison = compare_laws({name: f.inference_data for name, f in fits.items()})
     if not checks[comparison.best].passed and FALLBACK_LAW not in fits:
         fits.update(sample([FALLBACK_LAW]))
-        checks[FALLBACK_LAW] = misfit_check(fits[FALLBACK_LAW].samples, fits[FALLBACK_LAW].data, stated_noise, seed)
+        checks[FALLBACK_LAW] = check(FALLBACK_LAW)
         comparison = compare_laws({name: f.inference_data for name, f in fits.items()})
     for name in criteria:
         criteria[name]["sampled"] = name in fits

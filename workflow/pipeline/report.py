@@ -361,6 +361,7 @@ def _damping_fit(context: RunContext, fit) -> str:
             "passed" if c["passed"] else "**FAILED**",
             f"{c['binned_chi2_p']:.2g}",
             f"{c['runs_test_combined_p']:.2g}",
+            "—" if c["flexible_law_likelihood_ratio_p"] is None else f"{c['flexible_law_likelihood_ratio_p']:.2g}",
             f"{c['sigma_rel_fitted']:.3g}",
             "not stated" if c["sigma_rel_stated"] is None else f"{c['sigma_rel_stated']:.3g}",
         )
@@ -388,7 +389,8 @@ def _damping_fit(context: RunContext, fit) -> str:
         + table(["law", "elpd_loo ± se", "elpd_diff ± dse", "stacking weight", "Pareto k > 0.7", "AIC at MAP",
                  "BIC at MAP", "parameters"], comparison)
         + "\n\nMisfit checks (posterior predictive, per sweep; docs/damping.md):\n\n"
-        + table(["law", "checks", "binned χ² p", "runs test p", "fitted σ_rel", "stated σ_rel"], checks)
+        + table(["law", "checks", "binned χ² p", "runs test p", "flexible law: likelihood ratio p", "fitted σ_rel",
+                 "stated σ_rel"], checks)
         + "\n\n"
         f"Convergence: {d['n_steps']} steps x {d['n_walkers']} walkers, integrated autocorrelation time "
         f"tau_max = {d['tau_max']:.1f} ({d['n_steps'] / d['tau_max']:.0f} tau), acceptance {d['acceptance']:.2f}, "
