@@ -177,7 +177,7 @@ class DampingFit:
     map_criteria : dict
         Law name -> {"log_likelihood", "n_parameters", "aic", "bic", "sampled"} at the MAP, every law.
     preferred : str
-        The sampled law with the highest elpd_loo.
+        The screened law with the highest elpd_loo (before a fallback adds the flexible law).
     comparison : LawComparison
     checks : dict
         Law name -> :class:`~workflow.damping.checks.MisfitCheck` of each sampled law.
@@ -601,13 +601,13 @@ def fit_damping(
     fits = sample(screened)
     checks = {name: check(name) for name in fits}
     comparison = compare_laws({name: f.inference_data for name, f in fits.items()})
-    if not checks[comparison.best].passed and FALLBACK_LAW not in fits:
+    preferred = comparison.best
+    if not checks[preferred].passed and FALLBACK_LAW not in fits:
         fits.update(sample([FALLBACK_LAW]))
         checks[FALLBACK_LAW] = check(FALLBACK_LAW)
         comparison = compare_laws({name: f.inference_data for name, f in fits.items()})
     for name in criteria:
         criteria[name]["sampled"] = name in fits
-    preferred = comparison.best
     if not checks[preferred].passed and preferred != FALLBACK_LAW:
         selection, answer = "fallback", fits[FALLBACK_LAW].posterior()
     elif comparison.selection == "stacking":
