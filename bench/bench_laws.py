@@ -11,12 +11,14 @@ measured ones, the band's median relative width, and the fit time.
 import argparse
 import json
 import time
+from functools import partial
 
 import numpy as np
 
 from workflow.damping.fit import DEFAULT_LAWS, fit_damping, fit_summary
 from workflow.damping.laws import LinearLoss, ThresholdLoss
 from workflow.damping.synthetic import TRUE_LAW, simulate_campaign
+from workflow.execution.parallel import map_evaluations
 
 TRUTHS = {
     "quadratic": TRUE_LAW,
@@ -44,7 +46,8 @@ def main():
     for name in args.truth:
         log = simulate_campaign(law=TRUTHS[name], relative_noise=NOISE, seed=args.seed)
         start = time.perf_counter()
-        fit = fit_damping(log, laws=tuple(args.laws.split(",")), seed=args.seed, stated_noise=NOISE)
+        fit = fit_damping(log, laws=tuple(args.laws.split(",")), seed=args.seed, stated_noise=NOISE,
+                          mapper=partial(map_evaluations, progress=False))
         seconds = time.perf_counter() - start
         summary = fit_summary(fit)
         result = {

@@ -1,12 +1,14 @@
 """``tactile fit-damping``: Bayesian fit of Q(v) to interferometer logs."""
 
 import sys
+from functools import partial
 from pathlib import Path
 
 from workflow.cli.options import add_force_option, add_json_flag, bounded, limit_text, seed_option
 from workflow.damping.fit import fit_damping, fit_summary
 from workflow.damping.laws import SAMPLED_LAWS
 from workflow.damping.logs import drop_short_sweeps, read_logs
+from workflow.execution.parallel import map_evaluations
 from workflow.pipeline.config import LIMITS
 from workflow.pipeline.damping_files import FIT_OUTPUTS, stated_noise, write_fit
 from workflow.pipeline.outputs import output_folder
@@ -48,7 +50,8 @@ def run(args) -> dict:
     laws = SAMPLED_LAWS if args.law == "all" else (args.law,)
     with output_folder(args.out, FIT_OUTPUTS, force=args.force) as out:
         noise = stated_noise(args.logs)
-        fit = fit_damping(log, laws=laws, seed=args.seed, max_steps=args.max_steps, progress=True, stated_noise=noise)
+        fit = fit_damping(log, laws=laws, seed=args.seed, max_steps=args.max_steps, progress=True, stated_noise=noise,
+                          mapper=partial(map_evaluations, description="laws sampled"))
         summary = dict(fit_summary(fit), files=write_fit(fit, out, figures=not args.no_figures, protect=input_paths))
     if fit.warning:
         print(f"tactile fit-damping: warning: {fit.warning}", file=sys.stderr)

@@ -21,7 +21,7 @@ autocorrelation times are about 2.5 times shorter than the default stretch move'
 
 import time
 from dataclasses import dataclass, field
-from typing import Dict, Optional, Sequence, Tuple
+from typing import Callable, Dict, Optional, Sequence, Tuple
 
 import arviz as az
 import emcee
@@ -538,7 +538,7 @@ def fit_damping(
     n_walkers: Optional[int] = None,
     stated_noise: Optional[float] = None,
     chain_taus: float = COMPARISON_TAUS,
-    workers: Optional[int] = None,
+    mapper: Optional[Callable] = None,
 ) -> DampingFit:
     """Screen, sample and compare the ``laws``, check the best one and choose the answer.
 
@@ -562,8 +562,9 @@ def fit_damping(
         The instrument's relative velocity noise [-], for the misfit check.
     chain_taus : float
         Chain length in autocorrelation times (:func:`convergence_rule`) [-].
-    workers : int, optional
-        Processes sampling laws side by side (default: the cores available; 1: one after the other).
+    mapper : callable, optional
+        ``mapper(function, items) -> list`` running the laws' samplers, e.g. side by side with
+        :func:`~workflow.execution.parallel.map_evaluations`; default: one after the other here.
 
     Returns
     -------
@@ -585,13 +586,10 @@ def fit_damping(
     screened = [name for name in laws if criteria[name]["aic"] <= lowest + SCREEN_AIC]
 
     def sample(names):
-        from workflow.execution.parallel import map_evaluations
-
-        alone = len(names) == 1
-        tasks = [(log, name, seed, n_walkers, max_steps, max_seconds, progress and alone, sweeps, chain_taus, maps[name])
-                 for name in names]
-        return dict(zip(names, map_evaluations(_fit_law_task, tasks, progress=progress and not alone,
-                                               workers=workers, description="laws sampled")))
+        shown = progress and (mapper is None or len(names) == 1)  # a chain's own progress, unless several run at once
+        tasks = [(log, name, seed, n_walkers, max_steps, max_seconds, shown, sweeps, chain_taus, maps[name]) for name in names]
+        results = [_fit_law_task(task) for task in tasks] if mapper is None else mapper(_fit_law_task, tasks)
+        return dict(zip(names, results))
 
     def check(name):
         flexible = criteria[FALLBACK_LAW]

@@ -48,11 +48,6 @@ def law_inference_data(chain: np.ndarray, log_prob: np.ndarray, data: FitData) -
     )
 
 
-def draws(idata: az.InferenceData, names) -> np.ndarray:
-    """The posterior draws of ``names`` as an array (chain x draw, len(names))."""
-    return np.column_stack([idata.posterior[name].values.ravel() for name in names])
-
-
 def save_inference_data(idata: az.InferenceData, path) -> Path:
     """Write ``idata`` to ``path`` (netCDF)."""
     path = Path(path)

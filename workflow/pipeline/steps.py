@@ -6,6 +6,7 @@ returns a result; its figure function, if any, writes PNGs into the output folde
 
 import sys
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any, Dict, List, Optional
 
@@ -103,6 +104,7 @@ def damping_fit(context: RunContext):
     """Q(v) fitted to the logs with emcee (:func:`workflow.damping.fit.fit_damping`)."""
     from workflow.damping.fit import fit_damping, minimum_walkers
     from workflow.damping.logs import drop_short_sweeps, read_logs
+    from workflow.execution.parallel import map_evaluations
     from workflow.pipeline.config import LIMITS
 
     damping = context.config["damping"]
@@ -124,6 +126,7 @@ def damping_fit(context: RunContext):
         n_walkers=damping["walkers"],
         progress=True,
         stated_noise=stated_noise(context.results["logs"]),
+        mapper=partial(map_evaluations, scheduler=context.scheduler, description="laws sampled"),
     )
     if fit.warning:
         print(f"warning: {fit.warning}", file=sys.stderr)
