@@ -8,7 +8,7 @@ runs in chunks until the chain is at least 50 integrated autocorrelation times l
 the tau estimate changed by less than 1 % since the previous check (emcee's documented
 criterion), or until the step cap.
 
-:func:`fit_damping` screens the laws at their MAP (AIC within :data:`SCREEN_AIC` of the
+:func:`fit_damping` screens the laws at their MAP (BIC within :data:`SCREEN_BIC` of the
 best are sampled), compares the sampled laws by PSIS-LOO (:mod:`workflow.damping.comparison`),
 checks the best law's misfit (:mod:`workflow.damping.checks`) and picks the answer the
 design uses: the best law, the stacking mixture when laws are close, or the flexible law
@@ -41,8 +41,9 @@ DEFAULT_LAWS = SAMPLED_LAWS
 """The laws screened and sampled by default; every law of :data:`~workflow.damping.laws.LAWS` gets a MAP and a BIC."""
 FALLBACK_LAW = MonotoneSpline.name
 """The law the answer falls back to when the best law fails its misfit checks."""
-SCREEN_AIC = 10.0
-"""Laws whose AIC at the MAP is more than this above the best law's are not sampled [-]."""
+SCREEN_BIC = 10.0
+"""Laws whose BIC at the MAP is more than this above the best law's are not sampled [-]: odds of
+about e^5 = 150 to 1 against them (a law that only adds parameters to a law that fits lands here)."""
 CHAIN_TAUS = 50
 """A converged chain is at least this many autocorrelation times long [-] (one law, :func:`fit_law`)."""
 COMPARISON_TAUS = 25
@@ -549,7 +550,7 @@ def fit_damping(
         resonance are dropped (:func:`~workflow.damping.logs.drop_short_sweeps`).
     laws : sequence of str
         Candidate laws (keys of :data:`~workflow.damping.laws.LAWS`); those within
-        :data:`SCREEN_AIC` of the best AIC at the MAP are sampled.
+        :data:`SCREEN_BIC` of the best BIC at the MAP are sampled.
     seed : int
     max_steps : int
         Cap on each chain [steps].
@@ -582,8 +583,8 @@ def fit_damping(
         k = data.layout.dimension
         criteria[name] = {"log_likelihood": log_likelihood, "n_parameters": k, "aic": aic(log_likelihood, k),
                           "bic": bic(log_likelihood, k, len(log.velocity))}
-    lowest = min(criteria[name]["aic"] for name in laws)
-    screened = [name for name in laws if criteria[name]["aic"] <= lowest + SCREEN_AIC]
+    lowest = min(criteria[name]["bic"] for name in laws)
+    screened = [name for name in laws if criteria[name]["bic"] <= lowest + SCREEN_BIC]
 
     def sample(names):
         shown = progress and (mapper is None or len(names) == 1)  # a chain's own progress, unless several run at once
@@ -673,7 +674,7 @@ def fit_summary(fit: DampingFit) -> dict:
         "weights": fit.comparison.weights,
         "loo": fit.comparison.laws,
         "pareto_k_warning": fit.comparison.pareto_warning,
-        "screen": f"laws with AIC at the MAP within {SCREEN_AIC:g} of the best are sampled",
+        "screen": f"laws with BIC at the MAP within {SCREEN_BIC:g} of the best are sampled",
         "laws": fit.map_criteria,
     }
     return {
