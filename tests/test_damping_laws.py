@@ -13,7 +13,7 @@ from workflow.damping.synthetic import TRUE_LAW, simulate_campaign
 from workflow.errors import InputFileError
 
 THRESHOLD_TRUTH = ThresholdLoss(q0=140.0, alpha=0.45, v_t=0.1)
-FLEXIBLE_TRUTH = MonotoneSpline(q0=160.0, d1=0.0005, d2=0.001, d3=0.003, d4=0.004, d5=0.004, v_top=0.27)
+FLEXIBLE_TRUTH = MonotoneSpline(q0=160.0, d1=0.0005, d2=0.001, d3=0.003, d4=0.004, d5=0.004, d6=0.004, v_top=0.27)
 NOISE = 0.02
 
 
@@ -28,7 +28,7 @@ def coverage(law_fit_or_posterior, truth, velocity):
 @pytest.mark.parametrize("law", [THRESHOLD_TRUTH, FLEXIBLE_TRUTH, TRUE_LAW, StackedLaws(
     component=np.array([0, 2, 3]), quadratic_q0=150.0, quadratic_alpha=0.2, linear_q0=100.0, linear_alpha=0.0,
     threshold_q0=np.array([1e3, 120.0, 1e3]), threshold_alpha=0.5, threshold_v_t=0.05, flexible_q0=90.0,
-    flexible_d1=0.001, flexible_d2=0.0, flexible_d3=0.004, flexible_d4=0.0, flexible_d5=0.002, flexible_v_top=0.2)])
+    flexible_d1=0.001, flexible_d2=0.0, flexible_d3=0.004, flexible_d4=0.0, flexible_d5=0.002, flexible_d6=0.001, flexible_v_top=0.2)])
 def test_every_law_is_non_increasing_in_speed(law):
     velocity = np.linspace(0.0, 0.5, 401)[:, None]
     q = law.quality_factor(velocity)
@@ -45,11 +45,11 @@ def test_threshold_law_is_flat_below_and_quadratic_well_above_its_threshold():
 
 def test_flexible_law_interpolates_its_knots_and_continues_the_last_slope():
     law = FLEXIBLE_TRUTH
-    knots = np.linspace(0, law.v_top, 6)
-    rises = np.cumsum([0.0, law.d1, law.d2, law.d3, law.d4, law.d5])
+    knots = np.linspace(0, law.v_top, 7)
+    rises = np.cumsum([0.0, law.d1, law.d2, law.d3, law.d4, law.d5, law.d6])
     assert np.allclose(1 / law.quality_factor(knots), 1 / law.q0 + rises)
     beyond = law.v_top * 1.2
-    assert 1 / law.quality_factor(beyond) == pytest.approx(1 / law.q0 + rises[-1] + law.d5, rel=1e-12)
+    assert 1 / law.quality_factor(beyond) == pytest.approx(1 / law.q0 + rises[-1] + law.d6, rel=1e-12)
 
 
 def test_runs_test_flags_runs_and_passes_alternation():

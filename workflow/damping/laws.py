@@ -127,7 +127,7 @@ class ThresholdLoss:
 class MonotoneSpline:
     """1/Q(v) a monotone non-decreasing linear spline in |v|: the flexible law.
 
-    Knots u_j = j v_top / K, j = 0 .. K (K = 5 segments); 1/Q(0) = 1/Q0 and 1/Q rises by
+    Knots u_j = j v_top / K, j = 0 .. K (K = 6 segments); 1/Q(0) = 1/Q0 and 1/Q rises by
     d_j >= 0 over segment j, linearly, so
 
     1/Q(v) = 1/Q0 + sum_j d_j clip(|v| K / v_top - (j - 1), 0, 1),
@@ -140,7 +140,7 @@ class MonotoneSpline:
     ----------
     q0 : float or array
         Quality factor at v = 0 [-].
-    d1 .. d5 : float or array
+    d1 .. d6 : float or array
         Rise of 1/Q over each segment [-], >= 0.
     v_top : float or array
         Velocity of the last knot [m/s], > 0 (fixed by the data, not fitted).
@@ -152,9 +152,10 @@ class MonotoneSpline:
     d3: float
     d4: float
     d5: float
+    d6: float
     v_top: float
     name: ClassVar[str] = "flexible"
-    INCREMENTS: ClassVar[tuple] = ("d1", "d2", "d3", "d4", "d5")
+    INCREMENTS: ClassVar[tuple] = ("d1", "d2", "d3", "d4", "d5", "d6")
 
     def quality_factor(self, velocity):
         """Q at the peak velocity amplitude ``velocity`` [m/s] -> [-]."""

@@ -10,7 +10,7 @@ bench simulator's solve), and the vibrometer reads the velocity amplitude v = 2 
 Parameters, in the order of :attr:`ParameterLayout.names`:
 
 - the law's parameters: ``ln_q0`` = ln Q0, ``alpha`` (>= 0) for the velocity-dependent laws,
-  ``v_t`` [m/s] for the threshold law, ``d1`` .. ``d5`` (>= 0) for the flexible law (whose
+  ``v_t`` [m/s] for the threshold law, ``d1`` .. ``d6`` (>= 0) for the flexible law (whose
   last knot ``v_top`` is fixed at the largest measured velocity, :attr:`ParameterLayout.fixed`);
 - ``ln_gain``: ln g, g the quasi-static deflection per volt [m/V];
 - ``f_r_<k>``: one resonance frequency per sweep [Hz] (drift between sweeps is free);
@@ -49,7 +49,7 @@ SIGMA_ABS_RANGE = (1e-7, 1.0)
 THRESHOLD_RANGE = (0.02, 0.9)
 """Prior range of the threshold law's v_t, relative to the largest measured velocity [-]."""
 MAX_INCREMENT = 0.2
-"""Prior bound of each increment of the flexible law's 1/Q [-] (five of them: Q down to 1 at the largest velocity)."""
+"""Prior bound of each increment of the flexible law's 1/Q [-] (six of them: Q down to 1 at the largest velocity)."""
 RANDOM_WALK_SCALE = 0.01
 """Standard deviation of the step between consecutive increments of the flexible law's 1/Q [-]:
 weak for plates with Q above ~20 (1/Q changing by 0.01 or less between knots)."""
