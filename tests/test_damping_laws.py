@@ -48,7 +48,7 @@ def test_flexible_law_interpolates_its_knots_and_continues_the_last_slope():
     knots = np.linspace(0, law.v_top, 7)
     rises = np.cumsum([0.0, law.d1, law.d2, law.d3, law.d4, law.d5, law.d6])
     assert np.allclose(1 / law.quality_factor(knots), 1 / law.q0 + rises)
-    beyond = law.v_top * 1.2
+    beyond = law.v_top * (1 + 1 / 6)  # one segment past the last knot
     assert 1 / law.quality_factor(beyond) == pytest.approx(1 / law.q0 + rises[-1] + law.d6, rel=1e-12)
 
 
