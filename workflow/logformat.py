@@ -27,3 +27,27 @@ COLUMNS = REQUIRED_COLUMNS + OPTIONAL_COLUMNS
 
 METADATA_PREFIX = "# "
 """Metadata lines read ``# key: value``."""
+
+X_POSITION = "x_mm"
+"""Measurement point along the plate's length, from its centre [mm] (column of a scan; metadata when constant)."""
+Y_POSITION = "y_mm"
+"""Measurement point across the plate, from its centre [mm]."""
+SCAN_COLUMNS = COLUMNS + (X_POSITION, Y_POSITION)
+"""The columns of a deflection scan, in this order."""
+
+LAMBDA_MM = "lambda_mm"
+"""Metadata: the built plate's nominal wavelength [mm]."""
+HI_MM = "h_i_mm"
+"""Metadata: nominal resonator thickness [mm]."""
+HP_MM = "h_p_mm"
+"""Metadata: nominal ceramic thickness [mm]."""
+B_MM = "b_mm"
+"""Metadata: nominal width [mm]."""
+CERAMIC = "ceramic"
+"""Metadata: ceramic material record name (optional)."""
+RESONATOR = "resonator"
+"""Metadata: resonator material record name (optional)."""
+GLUE_UM = "glue_um"
+"""Metadata: nominal bond thickness [um] (optional)."""
+BUILT_PLATE_KEYS = (LAMBDA_MM, HI_MM, HP_MM, B_MM)
+"""The metadata keys every built-plate log has."""
