@@ -39,8 +39,9 @@ def simulated_station(settings: BenchSettings, voltage_limit: float | None = Non
 
 
 def simulation_metadata(settings: BenchSettings) -> dict:
-    """Header lines marking a log as simulated, with the simulator's settings."""
-    return {"simulated": "yes", "note": SIMULATED_NOTE, **settings.metadata()}
+    """Header lines marking a log as simulated, with the simulator's settings; a built plate's nominal geometry too."""
+    built = {} if settings.built_plate is None else settings.built_plate.nominal.metadata()
+    return {"simulated": "yes", "note": SIMULATED_NOTE, **built, **settings.metadata()}
 
 
 def simulate_campaign(
