@@ -416,12 +416,9 @@ def resonance_search(station: Station, path, plan: ResonancePlan = ResonancePlan
 
 def logged_plan_value(path: Path, key: str) -> float | None:
     """The ``plan_<key>`` metadata of an existing log (what a resumed procedure was planned with), or None."""
-    from instruments.procedures.logwriter import read_log
-
     if not Path(path).exists():
         return None
-    metadata, _, _ = read_log(Path(path))
-    value = metadata.get(f"plan_{key}")
+    value, _ = logformat.read_metadata(Path(path)).get(f"plan_{key}", (None, None))
     return float(value) if value is not None else None
 
 

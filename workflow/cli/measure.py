@@ -205,7 +205,7 @@ def _check_plan_flags(args) -> None:
         check_sizes({}, len(args.points) if args.points else args.grid[0] * args.grid[1], "scan points")
     elif args.procedure == "campaign":
         check_sizes({"--points": args.points}, args.points * len(args.voltages), "--points x --voltages")
-    else:
+    elif args.procedure == "voltage-sweep":
         check_sizes({}, len(args.voltages), "--voltages")
     if args.procedure in ("resonance", "scan") and not args.start_hz < args.stop_hz:
         raise TactileError(f"--start-hz {args.start_hz:g} must be below --stop-hz {args.stop_hz:g}")

@@ -5,7 +5,7 @@ import os
 import signal
 import sys
 
-from workflow.cli.options import add_bench_arguments, add_json_flag, bench_settings, describe_law
+from workflow.cli.options import add_bench_arguments, add_built_plate_arguments, add_json_flag, bench_settings, describe_law
 from workflow.units import KHZ, PM_PER_V
 
 
@@ -20,6 +20,7 @@ def register(subparsers) -> None:
                         help='serve on pseudo-terminals: print {"generator": PATH, "vibrometer": PATH} and serve until '
                         "interrupted (SIGTERM stops it cleanly)")
     add_bench_arguments(parser)
+    add_built_plate_arguments(parser)
     add_json_flag(parser)
     parser.set_defaults(handler=run)
 

@@ -1,7 +1,7 @@
 """Built plates: the nominal geometry a log names, and how a built plate deviates from it.
 
 A plate built from a design differs from the model by its bond (an epoxy layer), the scatter of
-the material constants, thickness tolerances and the placement of the ceramics (SPEC section 7).
+the material constants, thickness tolerances and the placement of the ceramics (docs/instruments.md, "Built plates").
 :class:`PlateDeviations` holds such deviations and :func:`deviated_plate` applies them to a
 nominal :class:`~workflow.models.plate.Plate`: the plate the FEM solves when the bench simulator
 plays a built plate.  :class:`BuiltPlate` is the nominal geometry a built-plate log names in its

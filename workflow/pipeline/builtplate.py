@@ -1,7 +1,6 @@
 """Built plates on the bench: their logs' metadata, deflection scans, and the FEM they are compared with.
 
-* :func:`read_metadata` and :func:`read_built_plate`: the ``# key: value`` lines of a log and the
-  built plate's nominal geometry they name (:class:`~workflow.models.builtplate.BuiltPlate`);
+* :func:`read_built_plate`: the built plate's nominal geometry a log's metadata names (:class:`~workflow.models.builtplate.BuiltPlate`);
 * :func:`read_scan`: a deflection scan (``x_mm``, ``y_mm`` columns; docs/log-format.md);
 * :func:`built_plate_model`: the FEM of a nominal plate built with deviations, as the bench
   simulator plays it, cached on disk by content (:mod:`workflow.execution.cache`); with no
@@ -22,6 +21,7 @@ from instruments.simulator import builtplate as simulated
 from workflow import logformat
 from workflow.errors import InputFileError
 from workflow.execution.cache import EvaluationCache, content_key, source_version
+from workflow.logformat import read_metadata
 from workflow.models import fem
 from workflow.models.builtplate import BuiltPlate, PlateDeviations
 from workflow.models.fem.accuracy import FemAccuracy
@@ -31,42 +31,9 @@ from workflow.models.materials import PLATE_Q
 from workflow.models.plate import Plate
 from workflow.units import MM
 
-MAX_HEADER_LINES = 10_000
-"""Most metadata lines read before the header row [-]."""
-
-
-def read_metadata(path) -> dict:
-    """key -> (value, line number) of the ``# key: value`` lines before a log's header row.
-
-    Raises
-    ------
-    InputFileError
-        If the file cannot be read, is not UTF-8, or has more than :data:`MAX_HEADER_LINES` lines before its header.
-    """
-    path = Path(path)
-    metadata = {}
-    try:
-        with open(path, encoding="utf-8-sig", newline="") as stream:
-            for number, line in enumerate(stream, start=1):
-                if number > MAX_HEADER_LINES:
-                    raise InputFileError(f"{path}, line {number}: no header row within {MAX_HEADER_LINES} lines")
-                if not line.strip():
-                    continue
-                if not line.lstrip().startswith("#"):
-                    break
-                key, separator, value = line.lstrip()[1:].partition(":")
-                if separator and key.strip():
-                    metadata.setdefault(key.strip(), (value.strip(), number))
-    except OSError as error:
-        raise InputFileError(f"{path}: cannot read ({error.strerror or error})") from None
-    except UnicodeDecodeError as error:
-        raise InputFileError(f"{path}: not UTF-8 (byte {error.start} of a line)") from None
-    return metadata
-
-
 def read_built_plate(path) -> BuiltPlate:
     """The nominal geometry a built-plate log names (``# lambda_mm``, ``# h_i_mm``, ``# h_p_mm``, ``# b_mm``, ...)."""
-    return BuiltPlate.from_metadata(read_metadata(path), str(path))
+    return BuiltPlate.from_metadata(read_metadata(Path(path)), str(path))
 
 
 @dataclass(frozen=True)
