@@ -208,3 +208,16 @@ def test_cli_scan_errors_are_one_line(tmp_path, capsys, argv, message):
     code, _, err = run_cli(capsys, "measure", "scan", "--simulate", "--out", str(tmp_path / "s.csv"), *argv)
     assert code == 2 and err.count("\n") == 1
     assert re.search(message, err)
+
+
+def test_run_configuration_defaults_to_the_demonstration_deviations():
+    from workflow.pipeline.config import default_config
+    from workflow.pipeline.steps import built_plate_deviations
+
+    config = default_config()
+    deviations = built_plate_deviations(config)
+    assert deviations.glue_thickness == pytest.approx(DEMONSTRATION_DEVIATIONS.glue_thickness)
+    assert deviations.resonator_thickness_offset == pytest.approx(DEMONSTRATION_DEVIATIONS.resonator_thickness_offset)
+    assert deviations.ceramic_offset == pytest.approx(DEMONSTRATION_DEVIATIONS.ceramic_offset)
+    config["simulator"]["built_ceramic_factor"] = 0.9
+    assert built_plate_deviations(config).ceramic_modulus_factor == 0.9
