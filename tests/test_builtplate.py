@@ -7,13 +7,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import serial
 
 from instruments.drivers.errors import ConnectionLost, InstrumentError
 from instruments.procedures.logwriter import read_log
 from instruments.procedures.scan import ScanPlan, deflection_scan, grid_points
-from instruments.procedures.simulated import simulated_station, simulation_metadata
-from instruments.procedures.sweeps import ResonancePlan, open_station, resonance_search
+from instruments.procedures.simulated import reopened_station, simulated_station, simulation_metadata
+from instruments.procedures.sweeps import ResonancePlan, resonance_search
 from instruments.simulator import FaultSettings, default_bench_settings
 from instruments.simulator.bench import built_bench_settings
 from instruments.simulator.builtplate import built_plate_model
@@ -140,8 +139,7 @@ def test_interrupted_scan_resumes_without_losing_or_repeating_points(built, tmp_
     assert 0 < len(partial) < 35
     with open(path, "a") as file:  # a crash in the middle of a row
         file.write("23000,5,0.1")
-    ports = [serial.serial_for_url(p.port.port, timeout=1) for p in (station.generator, station.vibrometer)]
-    again = open_station(*ports, station.amplifier, station.voltage_limit, clock=bench.clock, sleep=bench.sleep, settle_time=0)
+    again = reopened_station(station, bench)
     result = deflection_scan(again, path, plan, simulation_metadata(settings), fsync=False)
     assert result.resumed == len(partial) and result.measured == 35 - len(partial)
     final = scan_keys(path)
