@@ -87,10 +87,14 @@ class PlannedPoint:
     position: tuple | None = None
 
     @property
+    def position_mm(self) -> tuple | None:
+        """``position`` in the log's unit, mm (None without a position)."""
+        return None if self.position is None else tuple(value / MM for value in self.position)
+
+    @property
     def key(self) -> tuple:
         """Its identity in a log (:func:`~.logwriter.point_key`)."""
-        position = None if self.position is None else tuple(value / MM for value in self.position)
-        return point_key(self.sweep, self.frequency, self.voltage, position)
+        return point_key(self.sweep, self.frequency, self.voltage, self.position_mm)
 
 
 class Station:
@@ -290,8 +294,7 @@ def _measure_points(station: Station, log: LogWriter, points: list[PlannedPoint]
                     logformat.SWEEP: point.sweep,
                     logformat.TIMESTAMP: offset + station.clock() - start,
                     logformat.PHASE: reading.phase_deg,
-                    **({} if point.position is None else
-                       dict(zip((logformat.X_POSITION, logformat.Y_POSITION), (v / MM for v in point.position)))),
+                    **dict(zip((logformat.X_POSITION, logformat.Y_POSITION), point.position_mm or ())),
                 }
             )
             bar.update()

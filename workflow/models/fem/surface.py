@@ -78,11 +78,11 @@ class SurfaceModes:
         return replace(self.model, probe_shapes=shapes, residual=residual)
 
     def deflection(self, x, y, frequency: float, q: float) -> np.ndarray:
-        """Complex w at points (``x``, ``y``) [m] when driven at ``frequency`` [Hz] with quality factor ``q`` [m]."""
+        """Complex w [m] at points (``x``, ``y``) [m] when driven at ``frequency`` [Hz] with quality factor ``q`` [-]."""
         return self.at(x, y).response(frequency, q)
 
     def working_deflection(self, x, y, frequency: float, q: float) -> np.ndarray:
-        """Complex w of the working mode alone at points (``x``, ``y``) [m] (no other mode, no residual) [m]."""
+        """Complex w [m] of the working mode alone (no other mode, no residual) at points (``x``, ``y``) [m]."""
         model = self.at(x, y)
         m = self.working_mode
         omega2 = (2 * np.pi * frequency) ** 2
