@@ -11,6 +11,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from instruments.drivers.amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT, DEFAULT_GAIN, PowerAmplifier
+from instruments.simulator.builtplate import BuiltPlateModel, surface_velocity
 from instruments.simulator.buffers import OVERRUN, InputBuffer, OutputQueue
 from instruments.simulator.faults import Fault, FaultInjector, FaultSettings
 from instruments.simulator.generator import GeneratorDevice
@@ -52,6 +53,9 @@ class BenchSettings:
     seed : int
         Seed of the measurement noise.
     faults : FaultSettings
+    built_plate : BuiltPlateModel or None
+        A built plate (:mod:`.builtplate`) whose FEM gives ``response``'s f_r and gain and the
+        velocity over the plate; the vibrometer then has a scanner.  None: the single-point bench.
     """
 
     response: PlateResponse
@@ -63,6 +67,7 @@ class BenchSettings:
     phase_noise: float = 0.2
     seed: int = 0
     faults: FaultSettings = field(default_factory=FaultSettings)
+    built_plate: BuiltPlateModel | None = None
 
     def metadata(self) -> dict:
         """Flat ``simulator_*`` metadata for log headers: law, parameters, noise, drift, seeds."""
@@ -81,6 +86,7 @@ class BenchSettings:
             "phase_noise_deg": self.phase_noise,
             "seed": self.seed,
             **{f"fault_{name}": value for name, value in asdict(self.faults).items()},
+            **({} if self.built_plate is None else self.built_plate.metadata()),
         }
         return {f"simulator_{key}": value for key, value in items.items()}
 
@@ -88,6 +94,11 @@ class BenchSettings:
 def default_bench_settings(plate: Plate = ORIGINAL_PLATE, law=None, drift_rate: float = DEFAULT_DRIFT_RATE, **changes) -> BenchSettings:
     """Bench settings for ``plate`` (default law: :func:`.physics.default_law`); ``changes`` override fields."""
     return BenchSettings(response=plate_response(plate, law, drift_rate), **changes)
+
+
+def built_bench_settings(model: BuiltPlateModel, law=None, drift_rate: float = DEFAULT_DRIFT_RATE, **changes) -> BenchSettings:
+    """Bench settings playing the built plate ``model`` (default law: that of its nominal plate); ``changes`` override fields."""
+    return BenchSettings(response=model.response(law, drift_rate), built_plate=model, **changes)
 
 
 class Bench:
@@ -104,6 +115,8 @@ class Bench:
             settings.relative_noise,
             settings.floor_fraction,
             settings.phase_noise,
+            scanner=None if settings.built_plate is None else (settings.built_plate.surface.half_length,
+                                                                settings.built_plate.surface.half_width),
         )
         self.faults = FaultInjector(settings.faults)
         self._input = {name: InputBuffer() for name in INSTRUMENTS}
@@ -127,7 +140,11 @@ class Bench:
 
     def _surface_velocity(self):
         self.time += self.settings.measurement_time
-        velocity, phase = self.settings.response.velocity(self.generator.state.frequency, self.ceramic_voltage(), self.time)
+        frequency, voltage = self.generator.state.frequency, self.ceramic_voltage()
+        if self.settings.built_plate is not None:
+            return surface_velocity(self.settings.built_plate, self.settings.response, self.vibrometer.position,
+                                    frequency, voltage, self.time)
+        velocity, phase = self.settings.response.velocity(frequency, voltage, self.time)
         return float(velocity), float(phase)
 
     def reset_port(self, instrument: str) -> None:

@@ -10,7 +10,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from instruments.drivers.vibrometer import format_range, full_scale
+from instruments.drivers.vibrometer import format_position, format_range, full_scale
 
 CONTROLLER_NAME = "OFV-5000 tactile-sim"
 CONTROLLER_VERSION = "1.0-sim"
@@ -35,15 +35,26 @@ class VibrometerDevice:
         Standard deviation of the additive noise, as a fraction of the range's full scale [-].
     phase_noise : float
         Standard deviation of the phase error [deg].
+    scanner : tuple of float or None
+        (L/2, b/2) [m]: the plate's half extents, within which the laser spot can be positioned
+        (``Set,Scanner,0,X|Y,<mm>``); None for a single-point head without a scanner.
+
+    Attributes
+    ----------
+    position : tuple of float
+        Laser spot (x, y) from the plate's centre [m].
     """
 
-    def __init__(self, signal: Callable, rng, relative_noise: float, floor_fraction: float, phase_noise: float):
+    def __init__(self, signal: Callable, rng, relative_noise: float, floor_fraction: float, phase_noise: float,
+                 scanner: tuple | None = None):
         self.signal = signal
         self.rng = rng
         self.relative_noise = relative_noise
         self.floor_fraction = floor_fraction
         self.phase_noise = phase_noise
         self.decoder_range = DECODER_RANGES[-1]
+        self.scanner = scanner
+        self.position = (0.0, 0.0)
         self._gets = {
             ("GetDevInfo", "Controller", "0", "Name"): lambda: CONTROLLER_NAME,
             ("GetDevInfo", "Controller", "0", "Version"): lambda: CONTROLLER_VERSION,
@@ -58,12 +69,34 @@ class VibrometerDevice:
         fields = tuple(field.strip() for field in line.strip().split(","))
         if fields in self._gets:
             return self._gets[fields]()
+        if self.scanner is not None and fields[1:3] == ("Scanner", "0"):
+            return self._scanner(fields)
         if fields[:4] == ("Set", "VeloDec", "1", "Range") and len(fields) == 5:
             choices = {format_range(r).lower(): r for r in DECODER_RANGES}
             if fields[4].lower() not in choices:
                 return "Error,2,Invalid value"
             self.decoder_range = choices[fields[4].lower()]
             return format_range(self.decoder_range)
+        return "Error,1,Unknown command"
+
+    def _scanner(self, fields: tuple) -> str:
+        """The positioning commands: range, and the spot's x and y in mm from the plate's centre."""
+        half = dict(zip("XY", self.scanner))
+        if fields == ("GetDevInfo", "Scanner", "0", "Range"):
+            return ",".join(format_position(sign * half[axis]) for axis in "XY" for sign in (-1, 1))
+        if len(fields) == 4 and fields[0] == "Get" and fields[3] in half:
+            return format_position(self.position["XY".index(fields[3])])
+        if len(fields) == 5 and fields[0] == "Set" and fields[3] in half:
+            try:
+                value = float(fields[4]) * 1e-3
+            except ValueError:
+                return "Error,2,Invalid value"
+            if not abs(value) <= half[fields[3]] * (1 + 1e-9):
+                return "Error,4,Position off the plate"
+            position = list(self.position)
+            position["XY".index(fields[3])] = value
+            self.position = tuple(position)
+            return format_position(value)
         return "Error,1,Unknown command"
 
     def input_overrun(self) -> str:
