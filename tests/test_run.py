@@ -81,6 +81,11 @@ def test_tiny_run_writes_a_report(tiny_run):
     text = (out / "report.md").read_text()
     assert "## Analytical optimum with constant Q" in text
     assert "## Run time" in text
+    damping = text.split("## Damping: Q(v) fitted to the logs")[1].split("\n## ")[0]
+    for shown in ("Preferred law by PSIS-LOO: **quadratic**", "(selection `", "elpd_loo ± se", "stacking weight",
+                  "Misfit checks", "stated σ_rel", "damping/posterior.nc"):
+        assert shown in damping, shown
+    assert (out / "damping" / "posterior.nc").is_file()
 
 
 def test_piped_progress_shows_every_step_and_the_long_computations_inside(tiny_run):
