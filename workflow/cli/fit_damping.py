@@ -81,7 +81,7 @@ def _print_human(summary: dict) -> None:
     for name, check in summary["checks"].items():
         print(f"  checks {name:10s} {'passed' if check['passed'] else 'FAILED'}: binned chi2 p {check['binned_chi2_p']:.2g}, "
               f"runs p {check['runs_test_combined_p']:.2g}, flexible-law likelihood ratio p "
-              f"{_number(check['flexible_law_likelihood_ratio_p'])}; " + "; ".join(check["notes"]))
+              f"{_number(check['flexible_law_likelihood_ratio_p'])}" + "".join(f"; {note}" for note in check["notes"]))
     print(f"  preferred by PSIS-LOO: {summary['law']}; design uses: {summary['selection']} ({summary['design_law']}); "
           f"posterior: {summary['files']['posterior']}")
 
