@@ -30,7 +30,7 @@ from scipy import optimize
 
 from workflow.damping.checks import MisfitCheck, misfit_check
 from workflow.damping.comparison import CRITERION, LawComparison, compare_laws
-from workflow.damping.inference_data import law_inference_data
+from workflow.damping.inference_data import law_inference_data, loo_draws
 from workflow.damping.laws import LAWS, SAMPLED_LAWS, MonotoneSpline, parameter_names
 from workflow.damping.likelihood import FitData, ParameterLayout, fit_data, log_probability, pointwise_log_likelihood
 from workflow.damping.logs import CampaignLog, drop_short_sweeps
@@ -136,9 +136,10 @@ class LawFit:
         BIC at the MAP (lower is better).
     trace : numpy.ndarray (S, W, D)
         The whole chain, subsampled to at most a few hundred steps, for trace plots.
-    inference_data : arviz.InferenceData
-        The posterior with its log-likelihood, for LOO and ``posterior.nc``
-        (:mod:`workflow.damping.inference_data`).
+    loo : tuple of numpy.ndarray
+        At most 2000 draws (S', W, D), their log-posterior (S', W) and pointwise log-likelihood
+        (S', W, N) (:func:`~workflow.damping.inference_data.loo_draws`), plain arrays so that a
+        fit can be cached; :attr:`inference_data` builds the ArviZ object from them.
     """
 
     data: FitData
@@ -148,7 +149,12 @@ class LawFit:
     diagnostics: ChainDiagnostics
     bic: float
     trace: np.ndarray = field(repr=False)
-    inference_data: az.InferenceData = field(repr=False)
+    loo: Tuple[np.ndarray, np.ndarray, np.ndarray] = field(repr=False)
+
+    @property
+    def inference_data(self) -> az.InferenceData:
+        """The posterior with its log-likelihood, for LOO and ``posterior.nc`` (:mod:`workflow.damping.inference_data`)."""
+        return law_inference_data(*self.loo, self.data)
 
     @property
     def law_name(self) -> str:
@@ -518,7 +524,7 @@ def fit_law(
         diagnostics=diagnostics,
         bic=bic(log_likelihood, n_dim, len(data.velocity)),
         trace=chain[:: max(1, len(chain) // 400)],
-        inference_data=law_inference_data(kept, sampler.get_log_prob(discard=diagnostics.burn_in, thin=diagnostics.thin), data),
+        loo=loo_draws(kept, sampler.get_log_prob(discard=diagnostics.burn_in, thin=diagnostics.thin), data),
     )
 
 
@@ -588,9 +594,10 @@ def fit_damping(
     screened = [name for name in laws if criteria[name]["bic"] <= lowest + SCREEN_BIC]
 
     def sample(names):
-        shown = progress and (mapper is None or len(names) == 1)  # a chain's own progress, unless several run at once
+        shown = progress and (mapper is None or len(names) == 1)  # a chain's own progress unless several run at once
         tasks = [(log, name, seed, n_walkers, max_steps, max_seconds, shown, sweeps, chain_taus, maps[name]) for name in names]
-        results = [_fit_law_task(task) for task in tasks] if mapper is None else mapper(_fit_law_task, tasks)
+        alone = mapper is None or len(names) == 1
+        results = [_fit_law_task(task) for task in tasks] if alone else mapper(_fit_law_task, tasks)
         return dict(zip(names, results))
 
     def check(name):

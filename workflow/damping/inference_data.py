@@ -20,8 +20,8 @@ MAX_DRAWS = 2000
 """Largest number of posterior draws (walkers x steps) kept in the InferenceData [-]."""
 
 
-def law_inference_data(chain: np.ndarray, log_prob: np.ndarray, data: FitData) -> az.InferenceData:
-    """InferenceData of one law's chain.
+def loo_draws(chain: np.ndarray, log_prob: np.ndarray, data: FitData):
+    """At most :data:`MAX_DRAWS` draws of a chain and their pointwise log-likelihood, as plain arrays.
 
     Parameters
     ----------
@@ -30,15 +30,24 @@ def law_inference_data(chain: np.ndarray, log_prob: np.ndarray, data: FitData) -
     log_prob : numpy.ndarray (S, W)
         Their log-posterior.
     data : FitData
+
+    Returns
+    -------
+    (chain (S', W, D), log_prob (S', W), pointwise (S', W, N))
     """
     n_steps, n_walkers, _ = chain.shape
     keep = np.unique(np.linspace(0, n_steps - 1, max(1, min(n_steps, MAX_DRAWS // n_walkers))).astype(int))
     chain, log_prob = chain[keep], log_prob[keep]
-    flat = chain.reshape(-1, chain.shape[-1])
-    pointwise = pointwise_log_likelihood(flat, data).reshape(len(keep), n_walkers, -1)
-    natural = data.layout.natural(flat)
+    pointwise = pointwise_log_likelihood(chain.reshape(-1, chain.shape[-1]), data).reshape(len(keep), n_walkers, -1)
+    return chain, log_prob, pointwise
+
+
+def law_inference_data(chain: np.ndarray, log_prob: np.ndarray, pointwise: np.ndarray, data: FitData) -> az.InferenceData:
+    """InferenceData of one law's draws (the arrays of :func:`loo_draws`)."""
+    n_steps, n_walkers, _ = chain.shape
+    natural = data.layout.natural(chain.reshape(-1, chain.shape[-1]))
     return az.from_dict(
-        posterior={name: values.reshape(len(keep), n_walkers).T for name, values in natural.items()},
+        posterior={name: values.reshape(n_steps, n_walkers).T for name, values in natural.items()},
         sample_stats={"lp": log_prob.T},
         log_likelihood={"velocity": np.transpose(pointwise, (1, 0, 2))},
         observed_data={"velocity": data.velocity},
