@@ -27,3 +27,20 @@ COLUMNS = REQUIRED_COLUMNS + OPTIONAL_COLUMNS
 
 METADATA_PREFIX = "# "
 """Metadata lines read ``# key: value``."""
+
+X_POSITION = "x_mm"
+"""Measurement point along the plate's length, from its centre [mm] (column, or metadata when constant)."""
+Y_POSITION = "y_mm"
+"""Measurement point across the width, from the centre [mm] (column, or metadata when constant)."""
+WAVELENGTH = "lambda_mm"
+"""Metadata: the measured plate's nominal wavelength [mm] (maps the measurement point onto the mode)."""
+DECAY_TIME = "decay_time_s"
+"""Ring-down logs: time since the end of the burst [s]; its presence makes a log a ring-down log."""
+TEMPERATURE = "temperature_c"
+"""Plate temperature where the bench reports it [deg C] (optional)."""
+
+POSITION_COLUMNS = (X_POSITION, Y_POSITION)
+RINGDOWN_COLUMNS = (SWEEP, TIMESTAMP, DECAY_TIME, FREQUENCY, DRIVE_VOLTAGE, VELOCITY, TEMPERATURE)
+"""The columns of a ring-down log (``sweep`` is the burst id), in the order our writer emits them."""
+READ_COLUMNS = COLUMNS + POSITION_COLUMNS + (DECAY_TIME, TEMPERATURE)
+"""Every column the reader knows."""
