@@ -35,6 +35,8 @@ _FORMATS = {
     logformat.SWEEP: "{:d}",
     logformat.TIMESTAMP: "{:.3f}",
     logformat.PHASE: "{:.3f}",
+    logformat.DECAY_TIME: "{:.9g}",
+    logformat.TEMPERATURE: "{:.3f}",
 }
 
 
@@ -154,7 +156,7 @@ def _lock(path: Path) -> int:
     return descriptor
 
 
-def read_log(path: Path) -> tuple[dict, list[dict], int]:
+def read_log(path: Path, columns: tuple = logformat.COLUMNS) -> tuple[dict, list[dict], int]:
     """Metadata, complete rows (column -> text) and the byte length of the complete lines of a log we wrote.
 
     The length is 0 when there is no header row yet (a crash while the log was being created).
@@ -179,8 +181,8 @@ def read_log(path: Path) -> tuple[dict, list[dict], int]:
             continue
         fields = next(csv.reader([line]))
         if header is None:
-            if tuple(fields) != logformat.COLUMNS:
-                raise InputFileError(f"{path}:{number}: header {fields} is not {list(logformat.COLUMNS)}; not a log this writer can resume")
+            if tuple(fields) != columns:
+                raise InputFileError(f"{path}:{number}: header {fields} is not {list(columns)}; not a log this writer can resume")
             header = fields
         elif len(fields) != len(header):
             raise InputFileError(f"{path}:{number}: expected {len(header)} fields, got {len(fields)}; not resuming a damaged log")
@@ -202,11 +204,14 @@ class LogWriter:
         Discard an existing log (one this module wrote) instead of resuming it.
     fsync : bool
         fsync after every row (durable against power loss, not only against crashes).
+    columns : tuple of str
+        The header (default the sweep logs'; ring-down logs have ``logformat.RINGDOWN_COLUMNS``).
     """
 
-    def __init__(self, path, metadata: dict, restart: bool = False, fsync: bool = True):
+    def __init__(self, path, metadata: dict, restart: bool = False, fsync: bool = True, columns: tuple = logformat.COLUMNS):
         self.path = Path(path)
         self.fsync = fsync
+        self.columns = columns
         self.metadata = {"format_version": logformat.FORMAT_VERSION, **metadata}
         self.rows: list[dict] = []
         self.truncated_bytes = 0
@@ -220,10 +225,10 @@ class LogWriter:
         if not (self.path.exists() and not restart and self._resume()):
             self._file = open(self.path, "w", encoding="utf-8", newline="")
             lines = [f"# {TITLE}"] + [f"# {key}: {_metadata_text(value)}" for key, value in self.metadata.items()]
-            self._write("\n".join(lines) + "\n" + ",".join(logformat.COLUMNS) + "\n")
+            self._write("\n".join(lines) + "\n" + ",".join(self.columns) + "\n")
 
     def _resume(self) -> bool:
-        old_metadata, self.rows, complete_length = read_log(self.path)
+        old_metadata, self.rows, complete_length = read_log(self.path, self.columns)
         if not complete_length:
             return False
         wanted = {key: _metadata_text(value) for key, value in self.metadata.items() if key == "procedure" or key.startswith("plan_")}
@@ -248,12 +253,32 @@ class LogWriter:
 
     def append(self, row: dict) -> None:
         """Write one row (column -> value; missing optional columns stay empty), durably."""
-        text = {column: format_value(column, row[column]) if column in row else "" for column in logformat.COLUMNS}
+        self.append_rows([row])
+
+    def append_rows(self, rows: list[dict]) -> None:
+        """Write several rows in one write (a ring-down's samples), durably."""
         buffer = io.StringIO()
-        csv.writer(buffer, lineterminator="\n").writerow(text[column] for column in logformat.COLUMNS)
+        writer = csv.writer(buffer, lineterminator="\n")
+        texts = []
+        for row in rows:
+            text = {column: format_value(column, row[column]) if row.get(column) is not None else "" for column in self.columns}
+            writer.writerow(text[column] for column in self.columns)
+            texts.append(text)
         self._write(buffer.getvalue())
-        self.rows.append(text)
-        self.keys.add((text[logformat.SWEEP], text[logformat.FREQUENCY], text[logformat.DRIVE_VOLTAGE]))
+        for text in texts:
+            self.rows.append(text)
+            self.keys.add((text[logformat.SWEEP], text[logformat.FREQUENCY], text[logformat.DRIVE_VOLTAGE]))
+
+    def keep_rows(self, count: int) -> None:
+        """Drop every row after the first ``count`` (an incomplete group of rows, e.g. a ring-down cut short)."""
+        self.rows = self.rows[:count]
+        self.keys = {(row[logformat.SWEEP], row[logformat.FREQUENCY], row[logformat.DRIVE_VOLTAGE]) for row in self.rows}
+        data = self.path.read_bytes()
+        end = data.index(("\n" + ",".join(self.columns) + "\n").encode()) + len(",".join(self.columns)) + 2
+        for _ in range(count):
+            end = data.index(b"\n", end) + 1
+        self._file.flush()
+        os.truncate(self.path, end)
 
     def close(self) -> None:
         """Close the log and release its lock."""
