@@ -529,6 +529,7 @@ def fit_damping(
         for name in laws
     }
     criteria = {}
+    n_points = len(log.velocity) + (0 if log.ringdown is None else len(log.ringdown.velocity))
     for name in LAWS:
         if name in fits:
             log_likelihood, n_parameters = fits[name].log_likelihood_map, fits[name].data.layout.dimension
@@ -538,7 +539,7 @@ def fit_damping(
         criteria[name] = {
             "log_likelihood": log_likelihood,
             "n_parameters": n_parameters,
-            "bic": bic(log_likelihood, n_parameters, len(log.velocity)),
+            "bic": bic(log_likelihood, n_parameters, n_points),
         }
     preferred = min(fits, key=lambda name: fits[name].waic)
     return DampingFit(log=log, sweeps=sweeps, fits=fits, map_criteria=criteria, preferred=preferred)
