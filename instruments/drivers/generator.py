@@ -188,7 +188,7 @@ class FunctionGenerator(LineInstrument):
         self.write(command)
 
     def switch_off(self) -> None:
-        """The safe state: output off, then the lowest amplitude and no offset (each only lowers the peak).
+        """The safe state: output off, then the lowest amplitude, no offset and burst mode off (each only lowers the peak).
 
         Starts with an empty line, which ends a command a signal may have cut short, and drops
         any stale reply.
@@ -197,8 +197,7 @@ class FunctionGenerator(LineInstrument):
         self.discard_input()
         self._send("OUTP 0")
         self._send(f"VOLT:UNIT VPP;:VOLT {_number(LOWEST_AMPLITUDE_VPP)}")
-        self._send("VOLT:OFFS 0")
-        self._send("BURS:STAT 0")
+        self._send("VOLT:OFFS 0;:BURS:STAT 0")
 
     def check_peak_voltage(self, vpp: float, offset: float, gain: float | None = None) -> None:
         """Raise :class:`SafetyLimitError` if the terminal peak (``vpp``/2 + |``offset``|) x ``gain``

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from workflow.damping.harmonic import softened_amplitudes
+from workflow.damping.harmonic import self_consistent_amplitude, softened_amplitudes
 from workflow.damping.ringdown import decay_velocity
 from workflow.damping.laws import QuadraticLoss, quadratic_law_through
 from workflow.models import analytical
@@ -71,15 +71,19 @@ class PlateResponse:
     def deflection(self, frequency, ceramic_voltage, time=0.0, previous=None):
         """Antinode deflection amplitude w [m] at drive ``frequency`` [Hz], ``ceramic_voltage`` [V peak].
 
-        ``previous`` is the deflection before this point [m] (the branch the plate is on); default
-        the small-amplitude response.
+        Without softening the root is unique and arrays are solved elementwise.  With it the points
+        (the last axis of the broadcast arguments) are a sweep in measuring order, the first continued
+        from ``previous``, the deflection before it [m] (default: the small-amplitude response).
         """
         static = self.deflection_per_volt * np.abs(np.asarray(ceramic_voltage, dtype=float))
-        if not static > 0:
-            return 0.0 * static
         resonance = self.resonance_at(time)
-        return softened_amplitudes(np.atleast_1d(static), np.atleast_1d(frequency), np.atleast_1d(resonance),
-                                   self.softening, self.law.quality_factor, start=previous)[..., -1]
+        if not self.softening:
+            return self_consistent_amplitude(static, frequency, resonance, self.law.quality_factor)
+        if not np.any(static):
+            return np.zeros(np.broadcast(static, frequency, resonance).shape)
+        shape = np.broadcast(static, frequency, resonance).shape
+        points = (np.atleast_1d(x) for x in (static, frequency, resonance))
+        return softened_amplitudes(*points, self.softening, self.law.quality_factor, start=previous).reshape(shape)
 
     def velocity(self, frequency, ceramic_voltage, time=0.0, previous=None):
         """Antinode velocity amplitude [m/s] and its phase relative to the drive [deg].
