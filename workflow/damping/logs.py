@@ -96,7 +96,7 @@ class CampaignLog:
         """Median drive voltage of each sweep [V]."""
         return np.array([np.median(self.drive_voltage[self.sweep == k]) for k in range(self.n_sweeps)])
 
-    def rows(self, keep: np.ndarray, sweep: np.ndarray, warnings: Tuple[str, ...]) -> "CampaignLog":
+    def subset(self, keep: np.ndarray, sweep: np.ndarray, warnings: Tuple[str, ...]) -> "CampaignLog":
         """The rows ``keep`` (boolean mask) renumbered into ``sweep``, with ``warnings``."""
         optional = {name: None if getattr(self, name) is None else getattr(self, name)[keep] for name in ("timestamp", "mode_factor")}
         return CampaignLog(self.frequency[keep], self.drive_voltage[keep], self.velocity[keep], sweep, self.sources, warnings,
@@ -168,7 +168,7 @@ def drop_short_sweeps(log: CampaignLog, min_points: int = MIN_POINTS_PER_SWEEP) 
         f"{', '.join(log.sources)}: ignored {short.size} sweep(s) with fewer than {min_points} rows "
         f"({int(counts[short].sum())} rows)"
     )
-    return log.rows(keep, renumbered, log.warnings + (warning,))
+    return log.subset(keep, renumbered, log.warnings + (warning,))
 
 
 def read_logs(paths: Sequence) -> CampaignLog:
