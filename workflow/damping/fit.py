@@ -449,7 +449,8 @@ def fit_law(
     seed : int
         Seeds the initial walkers and emcee's generator.
     n_walkers : int, optional
-        Default: max(32, 4 D), even.
+        Default: max(32, 2 D + 2), even (twice the dimension suffices for the differential-evolution moves;
+        on the joint softening fit 42 walkers reach the same tau in steps as 80, at half the cost).
     max_steps, max_seconds, check_every : int, float, int
         Caps on the chain and the convergence-check interval [steps, s, steps].
     progress : bool
@@ -461,7 +462,7 @@ def fit_law(
     data, theta_map, scale, log_likelihood = map_fit(log, law_name, sweeps, forward)
     rng = np.random.default_rng(seed)
     n_dim = data.layout.dimension
-    n_walkers = n_walkers or max(32, 4 * n_dim)
+    n_walkers = n_walkers or max(32, 2 * n_dim + 2)
     n_walkers += n_walkers % 2
     covariance = laplace_covariance(data, theta_map, scale)
     walkers = initial_walkers(data, theta_map, covariance, n_walkers, rng)
@@ -511,7 +512,7 @@ def fit_damping(
         Cap on each chain's wall time [s].
     progress : bool
     n_walkers : int, optional
-        Walkers per chain (default max(32, 4 D)).
+        Walkers per chain (default max(32, 2 D + 2)).
     forward : ForwardModel
         Softening and drift fitted beyond Q(v) (default: neither).
 
