@@ -15,6 +15,12 @@ Because every Q(v) law is non-increasing in v, T(w) = D(Q(omega w)) is non-incre
 the residual in u = ln w, H(u) = u - ln T(e^u), has slope dH/du >= 1: the root is unique
 (no second branch), bracketed by [ln T(w_0), ln w_0] with w_0 = D(Q(0)), and
 |ln w - ln w*| <= |H(ln w)| at any w, so the residual bounds the error.
+
+A resonance that softens with amplitude, f_r(v) = f_r0 (1 - kappa v^2), breaks that
+monotonicity: the curve can fold over and a frequency can have two stable amplitudes.
+:func:`softened_amplitudes` then solves a sweep's points in their measuring order, each from
+the previous one's amplitude (:func:`follow_branch`, :func:`root_near`), vectorised across
+walkers and sweeps; :func:`single_valued` proves where the order cannot matter.
 """
 
 import numpy as np
