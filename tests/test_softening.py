@@ -1,5 +1,7 @@
 """Softening and drift: the branch-following solve, their recovery by the fit, and the measurement point on the mode."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -113,3 +115,18 @@ def test_an_off_antinode_campaign_gives_the_same_law(tmp_path):
     (tmp_path / "no-lambda.csv").write_text(text)
     with pytest.raises(InputFileError, match="lambda_mm"):
         read_logs([tmp_path / "no-lambda.csv"])
+
+
+def test_cli_fits_softening_and_drift_and_draws_its_figures(tmp_path, capsys):
+    from workflow.cli import main
+    from workflow.damping.synthetic import campaign_csv
+
+    log = tmp_path / "soft.csv"
+    log.write_text(campaign_csv(simulate_campaign(seed=1, softening=0.08, drift_rate=-0.5, alternate=True,
+                                                  voltages=(3.0, 15.0), points_per_sweep=20)))
+    out = tmp_path / "fit"
+    assert main(["fit-damping", str(log), "--out", str(out), "--law", "quadratic", "--softening", "--drift",
+                 "--max-steps", "100", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert {"kappa", "drift_rate"} <= set(summary["parameters"]) and "antinode" in summary["velocity_convention"]
+    assert (out / "resonance_curves.png").exists()

@@ -264,9 +264,8 @@ def fit_data(log: CampaignLog, law_name: str, forward: ForwardModel = ForwardMod
 
 
 def sweep_order(sweep: np.ndarray) -> np.ndarray:
-    """Row indices of each sweep in measuring order (the log's order), shape (S, P), each row padded with its last index."""
-    n_sweeps = int(sweep.max()) + 1
-    rows = [np.nonzero(sweep == k)[0] for k in range(n_sweeps)]
+    """Row indices of each sweep present, in measuring order (the rows' order), shape (S, P), each padded with its last index."""
+    rows = [np.nonzero(sweep == k)[0] for k in np.unique(sweep)]
     width = max(len(r) for r in rows)
     return np.array([np.r_[r, np.full(width - len(r), r[-1])] for r in rows])
 
