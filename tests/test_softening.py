@@ -113,8 +113,11 @@ def test_an_off_antinode_campaign_gives_the_same_law(tmp_path):
     assert fitted["off"] == pytest.approx((truth.q0, truth.alpha), rel=0.05)
     text = path.read_text().replace("# lambda_mm", "# other")
     (tmp_path / "no-lambda.csv").write_text(text)
-    with pytest.raises(InputFileError, match="lambda_mm"):
-        read_logs([tmp_path / "no-lambda.csv"])
+    unmapped = read_logs([tmp_path / "no-lambda.csv"])
+    assert unmapped.mode_factor is None and "lambda_mm" in unmapped.warnings[0]
+    (tmp_path / "node.csv").write_text(path.read_text().replace("# x_mm: 4", "# x_mm: 6"))
+    with pytest.raises(InputFileError, match="node"):
+        read_logs([tmp_path / "node.csv"])
 
 
 def test_cli_fits_softening_and_drift_and_draws_its_figures(tmp_path, capsys):

@@ -274,7 +274,7 @@ def read_log(path):
     line_numbers = np.frombuffer(line_numbers, dtype=np.int64)
     _check_physical(path, arrays, line_numbers)
     sweep = _sweep_index(path, arrays)
-    factor = _mode_factor(path, arrays, metadata)
+    factor = _mode_factor(path, arrays, metadata, warnings)
     if logformat.DECAY_TIME in arrays:
         return RingdownLog(
             frequency=arrays[logformat.FREQUENCY],
@@ -299,8 +299,9 @@ def read_log(path):
     )
 
 
-def _mode_factor(path: Path, arrays: dict, metadata: dict):
-    """|phi| at each row's measurement point (columns, else metadata), or None when the log names no point."""
+def _mode_factor(path: Path, arrays: dict, metadata: dict, warnings: list):
+    """|phi| at each row's measurement point (columns, else metadata), or None when the log names no point
+    (or no wavelength to map it with: a warning is appended to ``warnings``)."""
     n = len(arrays[logformat.VELOCITY])
     position = {}
     for name in logformat.POSITION_COLUMNS:
@@ -311,8 +312,9 @@ def _mode_factor(path: Path, arrays: dict, metadata: dict):
     if not position:
         return None
     if logformat.WAVELENGTH not in metadata:
-        raise InputFileError(f"{path}: a measurement point ({', '.join(position)}) needs the plate's "
-                             f"'# {logformat.WAVELENGTH}: ...' metadata to map it onto the mode")
+        warnings.append(f"{path}: a measurement point ({', '.join(position)}) without the plate's "
+                        f"'# {logformat.WAVELENGTH}: ...' metadata cannot be mapped onto the mode; read as an antinode")
+        return None
     mode = BeamMode(_metadata_number(path, metadata, logformat.WAVELENGTH) * MM)
     zeros = np.zeros(n)
     try:
