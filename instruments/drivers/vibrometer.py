@@ -16,6 +16,8 @@ FULL_SCALE_OUTPUT = 10.0
 """Decoder analog output at full scale [V]: full-scale velocity = range x 10 V."""
 _RANGE = re.compile(r"(\d+(?:\.\d+)?)mm/s/V", re.IGNORECASE)
 _STATUS = {"OK": False, "OVER": True}
+_MM = 1e-3
+"""One millimetre [m]: positions travel in mm."""
 
 
 def parse_range(text: str) -> float:
@@ -34,6 +36,24 @@ def format_range(m_s_v: float) -> str:
 def full_scale(decoder_range: float) -> float:
     """Largest readable velocity amplitude [m/s] on ``decoder_range`` [m/s/V]."""
     return decoder_range * FULL_SCALE_OUTPUT
+
+
+def parse_position(text: str) -> float:
+    """``12.3450`` [mm] -> 0.012345 [m]."""
+    return float(text) * _MM
+
+
+def format_position(metres: float) -> str:
+    """0.012345 [m] -> ``12.3450`` [mm] (0.1 um steps)."""
+    return f"{metres / _MM:.4f}"
+
+
+def parse_scan_range(reply: str) -> tuple[float, float, float, float]:
+    """``xmin,xmax,ymin,ymax`` [mm] -> the same [m]."""
+    values = tuple(parse_position(item) for item in reply.split(","))
+    if len(values) != 4:
+        raise ValueError(reply)
+    return values
 
 
 @dataclass(frozen=True)
@@ -110,6 +130,21 @@ class Vibrometer(LineInstrument):
         "Get,VeloDec,1,Range", "Set,VeloDec,1,Range,{}", "Velocity decoder range [m/s/V] (float).",
         parse=parse_range, format=format_range,
     )
+
+    scan_range = measurement(
+        "GetDevInfo,Scanner,0,Range",
+        "Reachable points of the scanner, (x_min, x_max, y_min, y_max) [m] from the plate's centre.",
+        parse=parse_scan_range,
+    )
+    position_x = control("Get,Scanner,0,X", "Set,Scanner,0,X,{}", "Laser spot along the length, from the centre [m] (float).",
+                         parse=parse_position, format=format_position)
+    position_y = control("Get,Scanner,0,Y", "Set,Scanner,0,Y,{}", "Laser spot across the width, from the centre [m] (float).",
+                         parse=parse_position, format=format_position)
+
+    def move_to(self, x: float, y: float) -> None:
+        """Put the laser spot on (``x``, ``y``) [m] from the plate's centre (an off-plate point is an InstrumentError)."""
+        self.position_x = x
+        self.position_y = y
 
     def query(self, command: str) -> str:
         """Send ``command``; its reply, or :class:`InstrumentError` for an ``Error,...`` reply."""

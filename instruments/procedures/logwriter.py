@@ -37,7 +37,11 @@ _FORMATS = {
     logformat.PHASE: "{:.3f}",
     logformat.DECAY_TIME: "{:.9g}",
     logformat.TEMPERATURE: "{:.3f}",
+    logformat.X_POSITION: "{:.4f}",
+    logformat.Y_POSITION: "{:.4f}",
 }
+KEY_COLUMNS = (logformat.SWEEP, logformat.FREQUENCY, logformat.DRIVE_VOLTAGE, logformat.X_POSITION, logformat.Y_POSITION)
+"""The columns that identify a planned point (those a log has)."""
 
 
 def format_value(column: str, value) -> str:
@@ -45,13 +49,17 @@ def format_value(column: str, value) -> str:
     return _FORMATS[column].format(value)
 
 
-def point_key(sweep: int, frequency: float, voltage: float) -> tuple[str, str, str]:
-    """Identity of a planned point: (sweep, frequency, voltage) as the log writes them."""
-    return (
-        format_value(logformat.SWEEP, sweep),
-        format_value(logformat.FREQUENCY, frequency),
-        format_value(logformat.DRIVE_VOLTAGE, voltage),
-    )
+def point_key(sweep: int, frequency: float, voltage: float, position: tuple | None = None) -> tuple:
+    """Identity of a planned point: (sweep, frequency, voltage) as the log writes them, and (x_mm, y_mm) of a scan."""
+    values = {logformat.SWEEP: sweep, logformat.FREQUENCY: frequency, logformat.DRIVE_VOLTAGE: voltage}
+    if position is not None:
+        values.update(zip((logformat.X_POSITION, logformat.Y_POSITION), position))
+    return tuple(format_value(column, value) for column, value in values.items())
+
+
+def row_key(row: dict) -> tuple:
+    """The :func:`point_key` of a logged row (column -> text)."""
+    return tuple(row[column] for column in KEY_COLUMNS if column in row)
 
 
 def _metadata_text(value) -> str:
@@ -157,7 +165,7 @@ def _lock(path: Path) -> int:
 
 
 def read_log(path: Path, columns: tuple = logformat.COLUMNS) -> tuple[dict, list[dict], int]:
-    """Metadata, complete rows (column -> text) and the byte length of the complete lines of a log we wrote.
+    """Metadata, complete rows (column -> text) and the byte length of the complete lines of a log we wrote with ``columns``.
 
     The length is 0 when there is no header row yet (a crash while the log was being created).
 
@@ -205,13 +213,13 @@ class LogWriter:
     fsync : bool
         fsync after every row (durable against power loss, not only against crashes).
     columns : tuple of str
-        The header (default the sweep logs'; ring-down logs have ``logformat.RINGDOWN_COLUMNS``).
+        The header (:data:`workflow.logformat.COLUMNS`, ``SCAN_COLUMNS`` for a scan, ``RINGDOWN_COLUMNS`` for a ring-down).
     """
 
     def __init__(self, path, metadata: dict, restart: bool = False, fsync: bool = True, columns: tuple = logformat.COLUMNS):
         self.path = Path(path)
-        self.fsync = fsync
         self.columns = columns
+        self.fsync = fsync
         self.metadata = {"format_version": logformat.FORMAT_VERSION, **metadata}
         self.rows: list[dict] = []
         self.truncated_bytes = 0
@@ -219,7 +227,7 @@ class LogWriter:
             stack.enter_context(exclusive(self.path))
             self._open(restart)
             self._lock = stack.pop_all()
-        self.keys = {(row[logformat.SWEEP], row[logformat.FREQUENCY], row[logformat.DRIVE_VOLTAGE]) for row in self.rows}
+        self.keys = {row_key(row) for row in self.rows}
 
     def _open(self, restart: bool) -> None:
         if not (self.path.exists() and not restart and self._resume()):
@@ -267,12 +275,12 @@ class LogWriter:
         self._write(buffer.getvalue())
         for text in texts:
             self.rows.append(text)
-            self.keys.add((text[logformat.SWEEP], text[logformat.FREQUENCY], text[logformat.DRIVE_VOLTAGE]))
+            self.keys.add(row_key(text))
 
     def keep_rows(self, count: int) -> None:
         """Drop every row after the first ``count`` (an incomplete group of rows, e.g. a ring-down cut short)."""
         self.rows = self.rows[:count]
-        self.keys = {(row[logformat.SWEEP], row[logformat.FREQUENCY], row[logformat.DRIVE_VOLTAGE]) for row in self.rows}
+        self.keys = {row_key(row) for row in self.rows}
         data = self.path.read_bytes()
         end = data.index(("\n" + ",".join(self.columns) + "\n").encode()) + len(",".join(self.columns)) + 2
         for _ in range(count):

@@ -39,9 +39,18 @@ def simulated_station(settings: BenchSettings, voltage_limit: float | None = Non
     return open_station(*ports, PowerAmplifier(settings.amplifier_gain), limit, **options), bench
 
 
+def reopened_station(station: Station, bench: Bench) -> Station:
+    """A new station on the ports of ``station``'s simulated bench, reopened (as after an unplugged cable)."""
+    ports = [serial.serial_for_url(driver.port.port, timeout=1.0) for driver in (station.generator, station.vibrometer)]
+    return open_station(*ports, station.amplifier, station.voltage_limit, clock=bench.clock, sleep=bench.sleep,
+                        settle_time=station.settle_time, retries=station.retries)
+
+
 def simulation_metadata(settings: BenchSettings) -> dict:
-    """Header lines marking a log as simulated, with the simulator's settings."""
-    return {"simulated": "yes", "note": SIMULATED_NOTE, **settings.point_metadata(), **settings.metadata()}
+    """Header lines marking a log as simulated, with the simulator's settings; a built plate's nominal geometry
+    and an off-centre measurement point too."""
+    built = {} if settings.built_plate is None else settings.built_plate.nominal.metadata()
+    return {"simulated": "yes", "note": SIMULATED_NOTE, **built, **settings.point_metadata(), **settings.metadata()}
 
 
 def simulate_campaign(

@@ -11,6 +11,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from instruments.drivers.amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT, DEFAULT_GAIN, PowerAmplifier
+from instruments.simulator.builtplate import BuiltPlateModel, surface_velocity
 from instruments.simulator.buffers import OVERRUN, InputBuffer, OutputQueue
 from instruments.simulator.faults import Fault, FaultInjector, FaultSettings
 from instruments.simulator.generator import GeneratorDevice
@@ -59,6 +60,9 @@ class BenchSettings:
         The plate's wavelength [m]: maps the measurement point onto the beam mode.
     measurement_point : tuple of float
         Where the vibrometer points, (x, y) from the plate's centre [m]; the centre is an antinode.
+    built_plate : BuiltPlateModel or None
+        A built plate (:mod:`.builtplate`) whose FEM gives ``response``'s f_r and gain and the
+        velocity over the plate; the vibrometer then has a scanner.  None: the single-point bench.
     """
 
     response: PlateResponse
@@ -82,7 +86,8 @@ class BenchSettings:
         if self.measurement_point == (0.0, 0.0):
             return {}
         x, y = self.measurement_point
-        return {logformat.X_POSITION: x / MM, logformat.Y_POSITION: y / MM, logformat.WAVELENGTH: self.wavelength / MM}
+        return {logformat.X_POSITION: x / MM, logformat.Y_POSITION: y / MM, logformat.LAMBDA_MM: self.wavelength / MM}
+    built_plate: BuiltPlateModel | None = None
 
     def metadata(self) -> dict:
         """Flat ``simulator_*`` metadata for log headers: law, parameters, noise, drift, seeds."""
@@ -102,6 +107,7 @@ class BenchSettings:
             "phase_noise_deg": self.phase_noise,
             "seed": self.seed,
             **{f"fault_{name}": value for name, value in asdict(self.faults).items()},
+            **({} if self.built_plate is None else self.built_plate.metadata()),
         }
         return {f"simulator_{key}": value for key, value in items.items()}
 
@@ -111,6 +117,11 @@ def default_bench_settings(plate: Plate = ORIGINAL_PLATE, law=None, drift_rate: 
     """Bench settings for ``plate`` (default law: :func:`.physics.default_law`, no softening); ``changes`` override fields."""
     changes.setdefault("wavelength", float(plate.wavelength))
     return BenchSettings(response=plate_response(plate, law, drift_rate, softening), **changes)
+
+
+def built_bench_settings(model: BuiltPlateModel, law=None, drift_rate: float = DEFAULT_DRIFT_RATE, **changes) -> BenchSettings:
+    """Bench settings playing the built plate ``model`` (default law: that of its nominal plate); ``changes`` override fields."""
+    return BenchSettings(response=model.response(law, drift_rate), built_plate=model, **changes)
 
 
 class Bench:
@@ -129,6 +140,8 @@ class Bench:
             settings.phase_noise,
             record=self._decay_record,
             temperature=lambda: float(settings.response.temperature_at(self.time)),
+            scanner=None if settings.built_plate is None else (settings.built_plate.surface.half_length,
+                                                                settings.built_plate.surface.half_width),
         )
         self._mode_factor = settings.mode_factor()
         self._deflection = None
@@ -157,8 +170,11 @@ class Bench:
 
     def _surface_velocity(self):
         self.time += self.settings.measurement_time
-        voltage = 0.0 if self.generator.state.burst else self.ceramic_voltage()
         frequency = self.generator.state.frequency
+        voltage = 0.0 if self.generator.state.burst else self.ceramic_voltage()
+        if self.settings.built_plate is not None:
+            return surface_velocity(self.settings.built_plate, self.settings.response, self.vibrometer.position,
+                                    frequency, voltage, self.time)
         if voltage == 0.0:
             self._deflection = None
             return 0.0, 0.0

@@ -10,7 +10,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from instruments.drivers.vibrometer import format_range, full_scale
+from instruments.drivers.vibrometer import format_position, format_range, full_scale
 
 CONTROLLER_NAME = "OFV-5000 tactile-sim"
 CONTROLLER_VERSION = "1.0-sim"
@@ -46,10 +46,18 @@ class VibrometerDevice:
         when no burst fired since the last record; without it the record commands are unknown.
     temperature : callable, optional
         () -> plate temperature [deg C]; without it the temperature command is unknown.
+    scanner : tuple of float or None
+        (L/2, b/2) [m]: the plate's half extents, within which the laser spot can be positioned
+        (``Set,Scanner,0,X|Y,<mm>``); None for a single-point head without a scanner.
+
+    Attributes
+    ----------
+    position : tuple of float
+        Laser spot (x, y) from the plate's centre [m].
     """
 
     def __init__(self, signal: Callable, rng, relative_noise: float, floor_fraction: float, phase_noise: float,
-                 record: Callable | None = None, temperature: Callable | None = None):
+                 record: Callable | None = None, temperature: Callable | None = None, scanner: tuple | None = None):
         self.signal = signal
         self.record = record
         self.record_samples = DEFAULT_RECORD_SAMPLES
@@ -59,6 +67,8 @@ class VibrometerDevice:
         self.floor_fraction = floor_fraction
         self.phase_noise = phase_noise
         self.decoder_range = DECODER_RANGES[-1]
+        self.scanner = scanner
+        self.position = (0.0, 0.0)
         self._gets = {
             ("GetDevInfo", "Controller", "0", "Name"): lambda: CONTROLLER_NAME,
             ("GetDevInfo", "Controller", "0", "Version"): lambda: CONTROLLER_VERSION,
@@ -79,6 +89,8 @@ class VibrometerDevice:
         fields = tuple(field.strip() for field in line.strip().split(","))
         if fields in self._gets:
             return self._gets[fields]()
+        if self.scanner is not None and fields[1:3] == ("Scanner", "0"):
+            return self._scanner(fields)
         if fields[:4] == ("Set", "VeloDec", "1", "Range") and len(fields) == 5:
             choices = {format_range(r).lower(): r for r in DECODER_RANGES}
             if fields[4].lower() not in choices:
@@ -101,7 +113,7 @@ class VibrometerDevice:
     def _record_readout(self) -> str:
         envelope = self.record(self.record_samples, self.record_interval_us * 1e-6)
         if envelope is None:
-            return "Error,4,No trigger"
+            return "Error,5,No trigger"
         limit = full_scale(self.decoder_range)
         noise = self.rng.standard_normal((3, len(envelope)))
         phasor = envelope * (1 + self.relative_noise * noise[0]) + self.floor_fraction * limit * (noise[1] + 1j * noise[2]) / np.sqrt(2)
@@ -109,6 +121,26 @@ class VibrometerDevice:
         status = "OVER" if np.any(measured > limit) else "OK"
         values = ";".join(f"{v:.5E}" for v in np.minimum(measured, limit))
         return f"{status},{self.record_interval_us},{len(envelope)},{values}"
+
+    def _scanner(self, fields: tuple) -> str:
+        """The positioning commands: range, and the spot's x and y in mm from the plate's centre."""
+        half = dict(zip("XY", self.scanner))
+        if fields == ("GetDevInfo", "Scanner", "0", "Range"):
+            return ",".join(format_position(sign * half[axis]) for axis in "XY" for sign in (-1, 1))
+        if len(fields) == 4 and fields[0] == "Get" and fields[3] in half:
+            return format_position(self.position["XY".index(fields[3])])
+        if len(fields) == 5 and fields[0] == "Set" and fields[3] in half:
+            try:
+                value = float(fields[4]) * 1e-3
+            except ValueError:
+                return "Error,2,Invalid value"
+            if not abs(value) <= half[fields[3]] * (1 + 1e-9):
+                return "Error,4,Position off the plate"
+            position = list(self.position)
+            position["XY".index(fields[3])] = value
+            self.position = tuple(position)
+            return format_position(value)
+        return "Error,1,Unknown command"
 
     def input_overrun(self) -> str:
         """The reply to a command line that overran the input buffer and was discarded."""

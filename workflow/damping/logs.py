@@ -311,11 +311,11 @@ def _mode_factor(path: Path, arrays: dict, metadata: dict, warnings: list):
             position[name] = np.full(n, _metadata_number(path, metadata, name))
     if not position:
         return None
-    if logformat.WAVELENGTH not in metadata:
+    if logformat.LAMBDA_MM not in metadata:
         warnings.append(f"{path}: a measurement point ({', '.join(position)}) without the plate's "
-                        f"'# {logformat.WAVELENGTH}: ...' metadata cannot be mapped onto the mode; read as an antinode")
+                        f"'# {logformat.LAMBDA_MM}: ...' metadata cannot be mapped onto the mode; read as an antinode")
         return None
-    mode = BeamMode(_metadata_number(path, metadata, logformat.WAVELENGTH) * MM)
+    mode = BeamMode(_metadata_number(path, metadata, logformat.LAMBDA_MM) * MM)
     zeros = np.zeros(n)
     try:
         return measurement_factor(mode, position.get(logformat.X_POSITION, zeros) * MM,
