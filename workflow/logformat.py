@@ -38,6 +38,15 @@ Y_POSITION = "y_mm"
 """Measurement point across the plate, from its centre [mm]."""
 SCAN_COLUMNS = COLUMNS + (X_POSITION, Y_POSITION)
 """The columns of a deflection scan, in this order."""
+DECAY_TIME = "decay_time_s"
+"""Ring-down logs: time since the end of the burst [s]; its presence makes a log a ring-down log."""
+TEMPERATURE = "temperature_c"
+"""Plate temperature where the bench reports it [deg C] (optional)."""
+POSITION_COLUMNS = (X_POSITION, Y_POSITION)
+RINGDOWN_COLUMNS = (SWEEP, TIMESTAMP, DECAY_TIME, FREQUENCY, DRIVE_VOLTAGE, VELOCITY, TEMPERATURE)
+"""The columns of a ring-down log (``sweep`` is the burst id), in the order our writer emits them."""
+READ_COLUMNS = COLUMNS + POSITION_COLUMNS + (DECAY_TIME, TEMPERATURE)
+"""Every column the reader knows."""
 
 LAMBDA_MM = "lambda_mm"
 """Metadata: the built plate's nominal wavelength [mm]."""

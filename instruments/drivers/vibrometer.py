@@ -7,6 +7,8 @@ speaks SI (m/s per volt).  An over-range readout is returned flagged, never as a
 import re
 from dataclasses import dataclass
 
+import numpy as np
+
 from instruments.drivers.base import LineInstrument, control, measurement, parse_with
 from instruments.drivers.errors import GarbledReply, InstrumentError
 
@@ -73,6 +75,33 @@ class VelocityReading:
     over_range: bool
 
 
+@dataclass(frozen=True)
+class EnvelopeRecord:
+    """The velocity envelope recorded after a burst's end (``Get,Record,0,Envelope``).
+
+    Attributes
+    ----------
+    time : numpy.ndarray
+        Time of each sample since the end of the burst [s].
+    amplitude : numpy.ndarray
+        Envelope (peak velocity) [m/s]; the full-scale value where over range.
+    over_range : bool
+        Some sample exceeded the decoder range.
+    """
+
+    time: np.ndarray
+    amplitude: np.ndarray
+    over_range: bool
+
+
+def _parse_record(reply: str) -> EnvelopeRecord:
+    status, interval_us, count, values = reply.split(",", 3)
+    amplitude = np.array([float(v) for v in values.split(";")])
+    if len(amplitude) != int(count) or not np.all(amplitude >= 0) or not int(interval_us) > 0:
+        raise ValueError(reply)
+    return EnvelopeRecord(int(interval_us) * 1e-6 * np.arange(len(amplitude)), amplitude, _STATUS[status.strip().upper()])
+
+
 def _parse_reading(reply: str) -> VelocityReading:
     amplitude, phase, status = reply.split(",")
     reading = VelocityReading(float(amplitude), float(phase), _STATUS[status.strip().upper()])
@@ -130,6 +159,28 @@ class Vibrometer(LineInstrument):
         reply = self.query(command)
         if reply.strip().lower() != sent.lower():
             raise GarbledReply(f"{self._where()}: acknowledged {reply!r} to {command!r}")
+
+    record_samples = control("Get,Record,0,Samples", "Set,Record,0,Samples,{}", "Samples of an envelope record (int).",
+                             parse=int, format=lambda n: f"{int(n):d}")
+    record_interval = control("Get,Record,0,Interval", "Set,Record,0,Interval,{}",
+                              "Time between envelope record samples [s] (float; sent in whole microseconds).",
+                              parse=lambda reply: int(reply) * 1e-6, format=lambda seconds: f"{round(seconds * 1e6):d}")
+
+    RECORD = "Get,Record,0,Envelope"
+    TEMPERATURE = "Get,Sensor,0,Temperature"
+
+    def read_record(self) -> EnvelopeRecord:
+        """The envelope recorded from the end of the latest burst (the generator's trigger output arms it)."""
+        return parse_with(_parse_record, self.RECORD, self.query(self.RECORD), self._where())
+
+    def read_temperature(self) -> float | None:
+        """Plate temperature from the controller's sensor input [deg C], or None if it has none."""
+        try:
+            return parse_with(float, self.TEMPERATURE, self.query(self.TEMPERATURE), self._where())
+        except InstrumentError as error:
+            if "Unknown command" in str(error):
+                return None
+            raise
 
     def read_velocity(self) -> VelocityReading:
         """Velocity amplitude and phase at the drive frequency, flagged when over range."""

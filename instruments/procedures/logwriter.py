@@ -35,6 +35,8 @@ _FORMATS = {
     logformat.SWEEP: "{:d}",
     logformat.TIMESTAMP: "{:.3f}",
     logformat.PHASE: "{:.3f}",
+    logformat.DECAY_TIME: "{:.9g}",
+    logformat.TEMPERATURE: "{:.3f}",
     logformat.X_POSITION: "{:.4f}",
     logformat.Y_POSITION: "{:.4f}",
 }
@@ -211,7 +213,7 @@ class LogWriter:
     fsync : bool
         fsync after every row (durable against power loss, not only against crashes).
     columns : tuple of str
-        The header (:data:`workflow.logformat.COLUMNS`, or ``SCAN_COLUMNS`` for a scan).
+        The header (:data:`workflow.logformat.COLUMNS`, ``SCAN_COLUMNS`` for a scan, ``RINGDOWN_COLUMNS`` for a ring-down).
     """
 
     def __init__(self, path, metadata: dict, restart: bool = False, fsync: bool = True, columns: tuple = logformat.COLUMNS):
@@ -259,12 +261,32 @@ class LogWriter:
 
     def append(self, row: dict) -> None:
         """Write one row (column -> value; missing optional columns stay empty), durably."""
-        text = {column: format_value(column, row[column]) if column in row else "" for column in self.columns}
+        self.append_rows([row])
+
+    def append_rows(self, rows: list[dict]) -> None:
+        """Write several rows in one write (a ring-down's samples), durably."""
         buffer = io.StringIO()
-        csv.writer(buffer, lineterminator="\n").writerow(text[column] for column in self.columns)
+        writer = csv.writer(buffer, lineterminator="\n")
+        texts = []
+        for row in rows:
+            text = {column: format_value(column, row[column]) if row.get(column) is not None else "" for column in self.columns}
+            writer.writerow(text[column] for column in self.columns)
+            texts.append(text)
         self._write(buffer.getvalue())
-        self.rows.append(text)
-        self.keys.add(row_key(text))
+        for text in texts:
+            self.rows.append(text)
+            self.keys.add(row_key(text))
+
+    def keep_rows(self, count: int) -> None:
+        """Drop every row after the first ``count`` (an incomplete group of rows, e.g. a ring-down cut short)."""
+        self.rows = self.rows[:count]
+        self.keys = {row_key(row) for row in self.rows}
+        data = self.path.read_bytes()
+        end = data.index(("\n" + ",".join(self.columns) + "\n").encode()) + len(",".join(self.columns)) + 2
+        for _ in range(count):
+            end = data.index(b"\n", end) + 1
+        self._file.flush()
+        os.truncate(self.path, end)
 
     def close(self) -> None:
         """Close the log and release its lock."""

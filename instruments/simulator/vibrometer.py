@@ -17,6 +17,12 @@ CONTROLLER_VERSION = "1.0-sim"
 DECODER_NAME = "VD-09"
 DECODER_RANGES = tuple(mm_s_v * 1e-3 for mm_s_v in (1, 2, 5, 10, 20, 50, 100))
 """Velocity decoder ranges [m/s per volt of analog output]."""
+RECORD_SAMPLES_RANGE = (2, 256)
+"""Samples of one envelope record (its reply line stays under the 4 kB output buffer) [-]."""
+RECORD_INTERVAL_US_RANGE = (1, 1_000_000)
+"""Time between record samples [us]."""
+DEFAULT_RECORD_SAMPLES = 100
+DEFAULT_RECORD_INTERVAL_US = 50
 
 
 class VibrometerDevice:
@@ -35,6 +41,11 @@ class VibrometerDevice:
         Standard deviation of the additive noise, as a fraction of the range's full scale [-].
     phase_noise : float
         Standard deviation of the phase error [deg].
+    record : callable, optional
+        (samples, interval [s]) -> true velocity envelope [m/s] after the latest burst, or None
+        when no burst fired since the last record; without it the record commands are unknown.
+    temperature : callable, optional
+        () -> plate temperature [deg C]; without it the temperature command is unknown.
     scanner : tuple of float or None
         (L/2, b/2) [m]: the plate's half extents, within which the laser spot can be positioned
         (``Set,Scanner,0,X|Y,<mm>``); None for a single-point head without a scanner.
@@ -46,8 +57,11 @@ class VibrometerDevice:
     """
 
     def __init__(self, signal: Callable, rng, relative_noise: float, floor_fraction: float, phase_noise: float,
-                 scanner: tuple | None = None):
+                 record: Callable | None = None, temperature: Callable | None = None, scanner: tuple | None = None):
         self.signal = signal
+        self.record = record
+        self.record_samples = DEFAULT_RECORD_SAMPLES
+        self.record_interval_us = DEFAULT_RECORD_INTERVAL_US
         self.rng = rng
         self.relative_noise = relative_noise
         self.floor_fraction = floor_fraction
@@ -63,6 +77,12 @@ class VibrometerDevice:
             ("Get", "VeloDec", "1", "Range"): lambda: format_range(self.decoder_range),
             ("Get", "LockIn", "0", "Velocity"): self._readout,
         }
+        if record is not None:
+            self._gets[("Get", "Record", "0", "Samples")] = lambda: str(self.record_samples)
+            self._gets[("Get", "Record", "0", "Interval")] = lambda: str(self.record_interval_us)
+            self._gets[("Get", "Record", "0", "Envelope")] = self._record_readout
+        if temperature is not None:
+            self._gets[("Get", "Sensor", "0", "Temperature")] = lambda: f"{temperature():.3f}"
 
     def handle_line(self, line: str) -> str:
         """Execute one command line and return its reply line."""
@@ -77,7 +97,30 @@ class VibrometerDevice:
                 return "Error,2,Invalid value"
             self.decoder_range = choices[fields[4].lower()]
             return format_range(self.decoder_range)
+        if self.record is not None and fields[:3] == ("Set", "Record", "0") and len(fields) == 5:
+            return self._set_record(fields[3], fields[4])
         return "Error,1,Unknown command"
+
+    def _set_record(self, name: str, text: str) -> str:
+        limits = {"Samples": RECORD_SAMPLES_RANGE, "Interval": RECORD_INTERVAL_US_RANGE}
+        if name not in limits:
+            return "Error,1,Unknown command"
+        if not text.isdigit() or not limits[name][0] <= int(text) <= limits[name][1]:
+            return "Error,2,Invalid value"
+        setattr(self, "record_samples" if name == "Samples" else "record_interval_us", int(text))
+        return str(int(text))
+
+    def _record_readout(self) -> str:
+        envelope = self.record(self.record_samples, self.record_interval_us * 1e-6)
+        if envelope is None:
+            return "Error,5,No trigger"
+        limit = full_scale(self.decoder_range)
+        noise = self.rng.standard_normal((3, len(envelope)))
+        phasor = envelope * (1 + self.relative_noise * noise[0]) + self.floor_fraction * limit * (noise[1] + 1j * noise[2]) / np.sqrt(2)
+        measured = np.abs(phasor)
+        status = "OVER" if np.any(measured > limit) else "OK"
+        values = ";".join(f"{v:.5E}" for v in np.minimum(measured, limit))
+        return f"{status},{self.record_interval_us},{len(envelope)},{values}"
 
     def _scanner(self, fields: tuple) -> str:
         """The positioning commands: range, and the spot's x and y in mm from the plate's centre."""

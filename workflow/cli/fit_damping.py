@@ -7,6 +7,7 @@ from pathlib import Path
 from workflow.cli.options import add_force_option, add_json_flag, bounded, limit_text, seed_option
 from workflow.damping.fit import fit_damping, fit_summary
 from workflow.damping.laws import SAMPLED_LAWS
+from workflow.damping.likelihood import ForwardModel
 from workflow.damping.logs import drop_short_sweeps, read_logs
 from workflow.execution.parallel import map_evaluations
 from workflow.pipeline.config import LIMITS
@@ -25,7 +26,8 @@ def register(subparsers) -> None:
         "or the flexible law (docs/damping.md).  Writes posterior.npz (what --damping reads), posterior.nc "
         "(ArviZ), fit.json and figures into --out.",
     )
-    parser.add_argument("logs", nargs="+", metavar="LOG.csv", help="interferometer log(s) (docs/log-format.md)")
+    parser.add_argument("logs", nargs="+", metavar="LOG.csv",
+                        help="interferometer log(s): sweep logs and/or ring-down logs, fitted jointly (docs/log-format.md)")
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
     add_force_option(parser)
     parser.add_argument(
@@ -37,6 +39,11 @@ def register(subparsers) -> None:
     seed_option(parser, 0, "random seed of the walkers and the sampler")
     parser.add_argument("--max-steps", type=bounded(int, *LIMITS["damping.max_steps"]), default=20000,
                         help=f"cap on each chain's length, {limit_text('damping.max_steps')} (default: 20000)")
+    parser.add_argument("--softening", action="store_true",
+                        help="fit the resonance's amplitude softening f_r0 (1 - kappa v^2), each sweep solved in its "
+                        "measuring order (up and down sweeps differ when the resonance folds over)")
+    parser.add_argument("--drift", action="store_true",
+                        help="fit a drift rate of the resonance within each sweep (needs timestamp_s)")
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     add_json_flag(parser)
     parser.set_defaults(handler=run)
@@ -50,8 +57,9 @@ def run(args) -> dict:
     laws = SAMPLED_LAWS if args.law == "all" else (args.law,)
     with output_folder(args.out, FIT_OUTPUTS, force=args.force) as out:
         noise = stated_noise(args.logs)
-        fit = fit_damping(log, laws=laws, seed=args.seed, max_steps=args.max_steps, progress=True, stated_noise=noise,
-                          mapper=partial(map_evaluations, description="laws sampled"))
+        forward = ForwardModel(softening=args.softening, drift=args.drift)
+        fit = fit_damping(log, laws=laws, seed=args.seed, max_steps=args.max_steps, progress=True, forward=forward,
+                          stated_noise=noise, mapper=partial(map_evaluations, description="laws sampled"))
         summary = dict(fit_summary(fit), files=write_fit(fit, out, figures=not args.no_figures, protect=input_paths))
     if fit.warning:
         print(f"tactile fit-damping: warning: {fit.warning}", file=sys.stderr)
@@ -82,6 +90,7 @@ def _print_human(summary: dict) -> None:
         print(f"  checks {name:10s} {'passed' if check['passed'] else 'FAILED'}: binned chi2 p {check['binned_chi2_p']:.2g}, "
               f"runs p {check['runs_test_combined_p']:.2g}, flexible-law likelihood ratio p "
               f"{_number(check['flexible_law_likelihood_ratio_p'])}" + "".join(f"; {note}" for note in check["notes"]))
+    print(f"  velocity convention: {summary['velocity_convention']}")
     print(f"  preferred by PSIS-LOO: {summary['law']}; design uses: {summary['selection']} ({summary['design_law']}); "
           f"posterior: {summary['files']['posterior']}")
 

@@ -29,7 +29,7 @@ from workflow.units import MM
 
 DEFAULT_DATA_DIR = Path("measurements")
 """Folder of the logs when --out is not given, relative to the working directory."""
-PROCEDURES = ("resonance", "campaign", "voltage-sweep", "scan")
+PROCEDURES = ("resonance", "campaign", "voltage-sweep", "scan", "ringdown")
 
 
 def _voltages(text: str) -> tuple:
@@ -45,7 +45,7 @@ def _voltages(text: str) -> tuple:
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
         "measure",
-        help="run a bench procedure (resonance, campaign, voltage-sweep, scan) and log it",
+        help="run a bench procedure (resonance, campaign, voltage-sweep, scan, ringdown) and log it",
         description="Run a measurement procedure against serial ports (--generator/--vibrometer) or the in-process "
         "simulator (--simulate). Each point is appended to a CSV log (docs/log-format.md) at once, by default "
         f"{DEFAULT_DATA_DIR}/<procedure>.csv in the working directory (a folder git ignores); rerunning the "
@@ -98,6 +98,21 @@ def register(subparsers) -> None:
     sweep.add_argument("--voltages", type=_voltages, default=tuple(float(v) for v in range(1, 16)),
                        help="peak volts across the ceramics, comma-separated, at most 100000 (default 1,2,...,15)")
     sweep.add_argument("--frequency-hz", type=float, help="drive frequency [Hz] (default: see above)")
+    ring = procedures.add_parser("ringdown", parents=[common], help="free decays after bursts at resonance",
+                                 description="One burst per level at the resonance (33500 burst mode, bus trigger), "
+                                 "then the vibrometer's envelope record of the free decay; one row per sample, with "
+                                 "the plate temperature where the bench reports it (docs/log-format.md). Without "
+                                 "--frequency-hz the frequency comes from the log being resumed or from a resonance "
+                                 "search logged to <out>-resonance.csv.")
+    ring.add_argument("--voltages", type=_voltages, default=(5.0, 10.0, 15.0),
+                      help="burst levels, peak volts across the ceramics, comma-separated (default 5,10,15)")
+    ring.add_argument("--frequency-hz", type=float, help="burst frequency [Hz] (default: see above)")
+    ring.add_argument("--cycles", type=bounded(int, 1, 100_000_000), default=2000,
+                      help="cycles per burst, 1 to 100000000 (default 2000)")
+    ring.add_argument("--samples", type=bounded(int, 2, 256), default=100,
+                      help="envelope samples after each burst, 2 to 256 (default 100)")
+    ring.add_argument("--interval-us", type=bounded(int, 1, 1_000_000), default=50,
+                      help="time between samples [us], 1 to 1000000 (default 50)")
     scan = procedures.add_parser(
         "scan", parents=[common], help="deflection map: the laser spot moved over a grid of points at resonance",
         description="Drive the plate at one frequency and voltage and measure the velocity at each point of a grid "
@@ -115,7 +130,7 @@ def register(subparsers) -> None:
     scan.add_argument("--frequency-hz", type=float, help="drive frequency [Hz] (default: see above)")
     _add_search_flags(scan, 15e3, 101)
     scan.add_argument("--figure", type=Path, help="the map figure (default: <out> with .png)")
-    for sub in (resonance, campaign, sweep, scan):
+    for sub in (resonance, campaign, sweep, scan, ring):
         sub.set_defaults(handler=run)
 
 
@@ -205,6 +220,8 @@ def _check_plan_flags(args) -> None:
         check_sizes({}, len(args.points) if args.points else args.grid[0] * args.grid[1], "scan points")
     elif args.procedure == "campaign":
         check_sizes({"--points": args.points}, args.points * len(args.voltages), "--points x --voltages")
+    elif args.procedure == "ringdown":
+        check_sizes({}, args.samples * len(args.voltages), "--samples x --voltages")
     elif args.procedure == "voltage-sweep":
         check_sizes({}, len(args.voltages), "--voltages")
     if args.procedure in ("resonance", "scan") and not args.start_hz < args.stop_hz:
@@ -258,6 +275,11 @@ def _measure(args, station, metadata: dict, out: Path):
     if args.procedure == "scan":
         return _scan(args, station, metadata, out)
     frequency = args.frequency_hz or _centre(args, station, metadata, out, "frequency")
+    if args.procedure == "ringdown":
+        from instruments.procedures.ringdown import RingdownPlan, ringdown
+
+        plan = RingdownPlan(frequency, args.voltages, args.cycles, args.samples, args.interval_us * 1e-6)
+        return ringdown(station, out, plan, metadata, args.restart)
     plan = procedures.VoltageSweepPlan(frequency, args.voltages)
     return procedures.voltage_sweep(station, out, plan, metadata, args.restart)
 
@@ -317,6 +339,11 @@ def _print_summary(procedure: str, summary: dict) -> None:
         for sweep in summary["sweeps"]:
             print(f"  sweep {sweep['sweep']} at {sweep['voltage_v']:g} V: peak {sweep['peak_frequency_hz']:.1f} Hz, "
                   f"{sweep['peak_velocity_m_s']:.4f} m/s, {_q_estimate(sweep['q_estimate'])}")
+    elif procedure == "ringdown":
+        for burst in summary["bursts"]:
+            temperature = "" if burst["temperature_c"] is None else f", plate {burst['temperature_c']:.2f} °C"
+            print(f"  burst {burst['burst']} at {burst['voltage_v']:g} V: {burst['initial_velocity_m_s']:.4f} m/s "
+                  f"at the burst's end{temperature}")
     elif procedure == "scan":
         print(f"  {summary['points']} points at {summary['frequency_hz']:.1f} Hz, {summary['voltage_v']:g} V: largest "
               f"deflection {summary['max_deflection_um']:.3f} µm at ({summary['max_x_mm']:g}, {summary['max_y_mm']:g}) mm")

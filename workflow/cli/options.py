@@ -320,6 +320,22 @@ def add_bench_arguments(parser) -> None:
                        help="cut the line at the N-th command (once; default never)")
     group.add_argument("--bench-limit", type=float, default=None, metavar="VOLTS",
                        help="the simulated generator's own limit, peak volts across the ceramics (default 30)")
+    group.add_argument("--softening", type=bounded(float, 0.0, 100.0, "s^2/m^2"), default=0.0, metavar="KAPPA",
+                       help="amplitude softening of the simulated resonance, f_r (1 - KAPPA v^2) with v the antinode "
+                       "velocity, 0 to 100 s^2/m^2 (default 0: none)")
+    group.add_argument("--point-mm", type=_point, default=(0.0, 0.0), metavar="X,Y",
+                       help="where the simulated vibrometer points, from the plate's centre [mm] (default 0,0: an antinode)")
+
+
+def _point(text: str) -> tuple:
+    """``X,Y`` in millimetres -> (x, y) [mm]."""
+    try:
+        x, y = (float(item) for item in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected X,Y in millimetres, e.g. 3,0; got {text!r}") from None
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise argparse.ArgumentTypeError(f"expected finite millimetres, got {text!r}")
+    return x, y
 
 
 def add_built_plate_arguments(parser) -> None:
@@ -425,9 +441,15 @@ def bench_settings(args):
     gain = getattr(args, "amplifier_gain", DEFAULT_GAIN)
     fields = dict(seed=args.seed, faults=faults, ceramic_voltage_limit=limit, amplifier_gain=gain)
     built = built_plate_from_args(args) if hasattr(args, "deviations") else None
-    if built is None:
-        return default_bench_settings(**fields)
-    return built_bench_settings(built_plate_model(args, built, deviations_from_args(args)), **fields)
+    if built is not None:
+        return built_bench_settings(built_plate_model(args, built, deviations_from_args(args)), **fields)
+    point = tuple(value * MM for value in args.point_mm)
+    try:
+        settings = default_bench_settings(**fields, softening=args.softening, measurement_point=point)
+        settings.mode_factor()
+    except ValueError as error:
+        raise TactileError(f"--point-mm {args.point_mm[0]:g},{args.point_mm[1]:g}: {error}") from None
+    return settings
 
 
 # Stop signals as an exception, so that a command's cleanup (the bench's output off) runs on each.

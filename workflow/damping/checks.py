@@ -148,11 +148,16 @@ def misfit_check(
     """
     rng = np.random.default_rng(seed)
     chosen = samples[rng.choice(len(samples), size=min(PREDICTIVE_DRAWS, len(samples)), replace=False)]
-    model = np.median(predicted_velocity(chosen, data.layout, data.frequency, data.voltage, data.sweep), axis=0)
-    sigma_rel, sigma_abs = np.median(np.exp(chosen[:, -2:]), axis=0)
-    standardised = (data.velocity - model) / np.sqrt((sigma_rel * model) ** 2 + sigma_abs**2)
+    layout = data.layout
+    if not layout.n_sweeps:
+        return MisfitCheck(np.zeros(0), np.zeros(0), 1.0, np.zeros(0), 1.0, float("nan"), stated_noise, None, True,
+                           ("no sweeps: the residual and noise checks apply to sweeps only",))
+    model = np.median(predicted_velocity(chosen, layout, data.frequency, data.voltage, data.sweep, data.time_offset,
+                                         data.mode_factor), axis=0)
+    sigma_rel, sigma_abs = (float(np.median(np.exp(layout.column(chosen, name)))) for name in ("ln_sigma_rel", "ln_sigma_abs"))
+    standardised = (data.velocity[: data.n_rows] - model) / np.sqrt((sigma_rel * model) ** 2 + sigma_abs**2)
     z, p, chi2, dof = [], [], [], []
-    for k in range(data.layout.n_sweeps):
+    for k in range(layout.n_sweeps):
         mine = np.nonzero(data.sweep == k)[0]
         ordered = standardised[mine[np.argsort(data.frequency[mine])]]
         zk, pk = runs_test(ordered)
@@ -164,7 +169,6 @@ def misfit_check(
     z, p, chi2, dof = (np.array(x) for x in (z, p, chi2, dof))
     combined = float(stats.norm.cdf(np.sum(z) / np.sqrt(len(z))))
     binned_all = float(stats.chi2.sf(chi2.sum(), dof.sum()))
-    sigma_rel = float(sigma_rel)
     reasons = []
     if binned_all < ALPHA or combined < ALPHA:
         reasons.append(

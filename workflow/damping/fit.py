@@ -32,7 +32,16 @@ from workflow.damping.checks import MisfitCheck, misfit_check
 from workflow.damping.comparison import CRITERION, LawComparison, compare_laws
 from workflow.damping.inference_data import law_inference_data, loo_draws
 from workflow.damping.laws import LAWS, SAMPLED_LAWS, MonotoneSpline, parameter_names
-from workflow.damping.likelihood import FitData, ParameterLayout, fit_data, log_probability, pointwise_log_likelihood
+from workflow.damping.likelihood import (
+    FitData,
+    ForwardModel,
+    ParameterLayout,
+    decay_estimates,
+    fit_data,
+    initial_effects,
+    log_probability,
+    pointwise_log_likelihood,
+)
 from workflow.damping.logs import CampaignLog, drop_short_sweeps
 from workflow.damping.posterior import DampingPosterior, stacked_posterior
 from workflow.progress import Progress
@@ -44,6 +53,8 @@ FALLBACK_LAW = MonotoneSpline.name
 SCREEN_BIC = 10.0
 """Laws whose BIC at the MAP is more than this above the best law's are not sampled [-]: odds of
 about e^5 = 150 to 1 against them (a law that only adds parameters to a law that fits lands here)."""
+VELOCITY_CONVENTION = "v: peak velocity amplitude at the antinodes (measured velocities divided by |phi| at their point)"
+"""The velocity Q(v) is a function of (docs/damping.md)."""
 CHAIN_TAUS = 50
 """A converged chain is at least this many autocorrelation times long [-] (one law, :func:`fit_law`)."""
 COMPARISON_TAUS = 25
@@ -226,7 +237,7 @@ class DampingFit:
 
 def sweep_estimates(log: CampaignLog) -> SweepEstimates:
     """Peak and half-power-bandwidth quality factor of every sweep (model-free)."""
-    rows = []
+    rows = [(np.nan,) * 4] if not log.n_sweeps else []
     for k in range(log.n_sweeps):
         mine = log.sweep == k
         order = np.argsort(log.frequency[mine])
@@ -263,8 +274,10 @@ def initial_guess(data: FitData, sweeps: SweepEstimates) -> Tuple[np.ndarray, np
     """
     layout = data.layout
     ok = np.isfinite(sweeps.quality_factor)
-    q = sweeps.quality_factor[ok] if ok.any() else np.array([50.0])
-    velocity = sweeps.peak_velocity[ok] if ok.any() else np.array([np.max(data.velocity)])
+    decay_velocity, decay_q = decay_estimates(data)
+    ok_q, ok_v = np.r_[sweeps.quality_factor[ok], decay_q], np.r_[sweeps.peak_velocity[ok], decay_velocity]
+    q = ok_q if ok_q.size else np.array([50.0])
+    velocity = ok_v if ok_v.size else np.array([np.max(data.velocity)])
     loss = 1 / q
     start, scale = {}, {}
     exponent = {"quadratic": 2, "linear": 1, "threshold": 2, "flexible": 2}.get(layout.law_name)
@@ -289,6 +302,9 @@ def initial_guess(data: FitData, sweeps: SweepEstimates) -> Tuple[np.ndarray, np
         start[f"f_r_{k}"], scale[f"f_r_{k}"] = sweeps.peak_frequency[k], sweeps.peak_frequency[k] / peak_q[k] / 10
     start["ln_sigma_rel"], scale["ln_sigma_rel"] = np.log(0.03), 0.5
     start["ln_sigma_abs"], scale["ln_sigma_abs"] = np.log(0.01 * np.max(data.velocity)), 0.5
+    effects = initial_effects(data)
+    start.update(effects[0])
+    scale.update(effects[1])
     theta = np.array([start[name] for name in layout.names])
     margin = 1e-6 * (data.upper - data.lower)
     return np.clip(theta, data.lower + margin, data.upper - margin), np.array([scale[name] for name in layout.names])
@@ -302,8 +318,7 @@ def maximum_a_posteriori(data: FitData, start: np.ndarray, scale: np.ndarray) ->
     gradient is a central difference computed as one batched evaluation; points are
     clipped into the prior box, so the objective stays finite up to the bounds.
     """
-    physical = np.ones(len(start), dtype=bool)
-    physical[-2:] = False
+    physical = np.array([not name.startswith("ln_sigma") for name in data.layout.names])
     theta = _maximise(data, start, scale, physical)
     return _maximise(data, theta, scale, np.ones(len(start), dtype=bool))
 
@@ -450,9 +465,9 @@ def bic(log_likelihood: float, n_parameters: int, n_points: int) -> float:
     return float(-2 * log_likelihood + n_parameters * np.log(n_points))
 
 
-def map_fit(log: CampaignLog, law_name: str, sweeps: Optional[SweepEstimates] = None):
+def map_fit(log: CampaignLog, law_name: str, sweeps: Optional[SweepEstimates] = None, forward: ForwardModel = ForwardModel()):
     """MAP of one law: (FitData, theta_map, scale, log-likelihood at the MAP)."""
-    data = fit_data(log, law_name)
+    data = fit_data(log, law_name, forward)
     start, scale = initial_guess(data, sweeps or sweep_estimates(log))
     theta = maximum_a_posteriori(data, start, scale)
     return data, theta, scale, float(pointwise_log_likelihood(theta, data).sum())
@@ -479,6 +494,7 @@ def fit_law(
     check_every: int = 100,
     progress: bool = False,
     sweeps: Optional[SweepEstimates] = None,
+    forward: ForwardModel = ForwardModel(),
     chain_taus: float = CHAIN_TAUS,
     start: Optional[tuple] = None,
 ) -> LawFit:
@@ -492,21 +508,24 @@ def fit_law(
     seed : int
         Seeds the initial walkers and emcee's generator.
     n_walkers : int, optional
-        Default: max(32, 4 D), even.
+        Default: max(32, 2 D + 2), even (twice the dimension suffices for the differential-evolution moves;
+        on the joint softening fit 42 walkers reach the same tau in steps as 80, at half the cost).
     max_steps, max_seconds, check_every : int, float, int
         Caps on the chain and the convergence-check interval [steps, s, steps].
     progress : bool
         Show the chain's progress towards convergence on stderr.
     sweeps : SweepEstimates, optional
+    forward : ForwardModel
+        Softening and drift fitted beyond Q(v) (default: neither).
     chain_taus : float
         Chain length the convergence rule asks for, in autocorrelation times [-].
     start : tuple, optional
         The law's :func:`map_fit` result, when already computed.
     """
-    data, theta_map, scale, log_likelihood = start or map_fit(log, law_name, sweeps)
+    data, theta_map, scale, log_likelihood = start or map_fit(log, law_name, sweeps, forward)
     rng = np.random.default_rng(seed)
     n_dim = data.layout.dimension
-    n_walkers = max(n_walkers, 2 * n_dim) if n_walkers else max(32, 4 * n_dim)
+    n_walkers = max(n_walkers, 2 * n_dim) if n_walkers else max(32, 2 * n_dim + 2)
     n_walkers += n_walkers % 2
     covariance = laplace_covariance(data, theta_map, scale)
     walkers = initial_walkers(data, theta_map, covariance, n_walkers, rng)
@@ -530,10 +549,10 @@ def fit_law(
 
 def _fit_law_task(task: tuple) -> LawFit:
     """:func:`fit_law` on (log, law_name, seed, n_walkers, max_steps, max_seconds, progress, sweeps,
-    chain_taus, start), for a process pool."""
-    log, name, seed, n_walkers, max_steps, max_seconds, progress, sweeps, chain_taus, start = task
+    forward, chain_taus, start), for a process pool."""
+    log, name, seed, n_walkers, max_steps, max_seconds, progress, sweeps, forward, chain_taus, start = task
     return fit_law(log, name, seed, n_walkers, max_steps, max_seconds, progress=progress, sweeps=sweeps,
-                   chain_taus=chain_taus, start=start)
+                   forward=forward, chain_taus=chain_taus, start=start)
 
 
 def fit_damping(
@@ -544,6 +563,7 @@ def fit_damping(
     max_seconds: Optional[float] = None,
     progress: bool = False,
     n_walkers: Optional[int] = None,
+    forward: ForwardModel = ForwardModel(),
     stated_noise: Optional[float] = None,
     chain_taus: float = COMPARISON_TAUS,
     mapper: Optional[Callable] = None,
@@ -565,7 +585,9 @@ def fit_damping(
         Cap on each chain's wall time [s].
     progress : bool
     n_walkers : int, optional
-        Walkers per chain (default max(32, 4 D)).
+        Walkers per chain (default max(32, 2 D + 2)).
+    forward : ForwardModel
+        Softening and drift fitted beyond Q(v) (default: neither).
     stated_noise : float, optional
         The instrument's relative velocity noise [-], for the misfit check.
     chain_taus : float
@@ -584,18 +606,20 @@ def fit_damping(
     """
     log = drop_short_sweeps(log)
     sweeps = sweep_estimates(log)
-    maps = {name: map_fit(log, name, sweeps) for name in dict.fromkeys((*laws, *LAWS))}
+    maps = {name: map_fit(log, name, sweeps, forward) for name in dict.fromkeys((*laws, *LAWS))}
+    n_points = len(log.velocity) + (0 if log.ringdown is None else len(log.ringdown.velocity))
     criteria = {}
     for name, (data, _, _, log_likelihood) in maps.items():
         k = data.layout.dimension
         criteria[name] = {"log_likelihood": log_likelihood, "n_parameters": k, "aic": aic(log_likelihood, k),
-                          "bic": bic(log_likelihood, k, len(log.velocity))}
+                          "bic": bic(log_likelihood, k, n_points)}
     lowest = min(criteria[name]["bic"] for name in laws)
     screened = [name for name in laws if criteria[name]["bic"] <= lowest + SCREEN_BIC]
 
     def sample(names):
         shown = progress and (mapper is None or len(names) == 1)  # a chain's own progress unless several run at once
-        tasks = [(log, name, seed, n_walkers, max_steps, max_seconds, shown, sweeps, chain_taus, maps[name]) for name in names]
+        tasks = [(log, name, seed, n_walkers, max_steps, max_seconds, shown, sweeps, forward, chain_taus, maps[name])
+                 for name in names]
         alone = mapper is None or len(names) == 1
         results = [_fit_law_task(task) for task in tasks] if alone else mapper(_fit_law_task, tasks)
         return dict(zip(names, results))
@@ -628,13 +652,14 @@ def fit_damping(
     return DampingFit(log, sweeps, fits, criteria, preferred, comparison, checks, selection, answer)
 
 
-_UNITS = {"q0": "-", "gain": "m/V", "sigma_rel": "-", "sigma_abs": "m/s", "v_t": "m/s", **{d: "-" for d in MonotoneSpline.INCREMENTS}}
+_UNITS = {"q0": "-", "gain": "m/V", "sigma_rel": "-", "sigma_abs": "m/s", "kappa": "s^2/m^2", "drift_rate": "Hz/s",
+          "sigma_decay_rel": "-", "sigma_decay_abs": "m/s", "v_t": "m/s", **{d: "-" for d in MonotoneSpline.INCREMENTS}}
 _ALPHA_UNITS = {"quadratic": "s^2/m^2", "linear": "s/m", "threshold": "s^2/m^2"}
 
 
 def parameter_unit(law_name: str, name: str) -> str:
     """Unit of the fitted parameter ``name`` of the law ``law_name`` (``"-"`` when dimensionless)."""
-    return "Hz" if name.startswith("f_r_") else _ALPHA_UNITS.get(law_name) if name == "alpha" else _UNITS[name]
+    return "Hz" if name.startswith("f_r_") else "m/s" if name.startswith("v0_") else _ALPHA_UNITS.get(law_name) if name == "alpha" else _UNITS[name]
 
 
 def parameter_summary(law_fit: LawFit) -> dict:
@@ -666,8 +691,11 @@ def diagnostics_summary(law_fit: LawFit) -> dict:
 
 
 def velocity_grid(log: CampaignLog, n: int = 50) -> np.ndarray:
-    """n velocities spanning the measured ones [m/s]."""
-    return np.linspace(float(np.min(log.velocity)), float(np.max(log.velocity)), n)
+    """n antinode velocities spanning the measured ones (sweeps and ring-downs) [m/s]."""
+    velocity = log.velocity / log.measurement_factor()
+    if log.ringdown is not None:
+        velocity = np.r_[velocity, log.ringdown.velocity / log.ringdown.mode_factor]
+    return np.linspace(float(np.min(velocity)), float(np.max(velocity)), n)
 
 
 def fit_summary(fit: DampingFit) -> dict:
@@ -706,7 +734,9 @@ def fit_summary(fit: DampingFit) -> dict:
             "peak_velocity_m_s": fit.sweeps.peak_velocity,
             "half_power_q": [None if not np.isfinite(q) else float(q) for q in fit.sweeps.quality_factor],
         },
+        "velocity_convention": VELOCITY_CONVENTION,
         "n_points": int(len(fit.log.velocity)),
+        "n_ringdown_samples": 0 if fit.log.ringdown is None else int(len(fit.log.ringdown.velocity)),
         "n_sweeps": fit.log.n_sweeps,
         "sources": list(fit.log.sources),
     }
