@@ -100,8 +100,6 @@ class CalibrationSettings:
         Relative standard deviation of a measured resonance frequency [-].
     surrogate_points, surrogate_degree : int
         FEM evaluations of each surrogate's design and the polynomial degree (1 or 2) [-].
-    accuracy : float
-        FEM target relative frequency error of the design evaluations [-].
     surrogate_seed, sampler_seed : int
     walkers, steps, kept_samples : int
     """
@@ -110,7 +108,6 @@ class CalibrationSettings:
     measurement_sigma: float = 0.002
     surrogate_points: int = 24
     surrogate_degree: int = 2
-    accuracy: float = 0.01
     surrogate_seed: int = 1
     walkers: int = 32
     steps: int = 4000
@@ -217,7 +214,6 @@ def parse_settings(data: dict, origin: str) -> CalibrationSettings:
         ("likelihood", "measurement_sigma"): (float, 1e-6, 0.5),
         ("surrogate", "points"): (int, 3, 10_000),
         ("surrogate", "degree"): (int, 1, 2),
-        ("surrogate", "accuracy"): (float, 1e-4, 0.05),
         ("surrogate", "seed"): (int, 0, 2**32 - 1),
         ("sampler", "walkers"): (int, 4, 10_000),
         ("sampler", "steps"): (int, 10, 10_000_000),
@@ -241,7 +237,6 @@ def parse_settings(data: dict, origin: str) -> CalibrationSettings:
         measurement_sigma=values[("likelihood", "measurement_sigma")],
         surrogate_points=values[("surrogate", "points")],
         surrogate_degree=values[("surrogate", "degree")],
-        accuracy=values[("surrogate", "accuracy")],
         surrogate_seed=values[("surrogate", "seed")],
         walkers=values[("sampler", "walkers")],
         steps=values[("sampler", "steps")],
