@@ -215,3 +215,34 @@ def test_read_built_plate_takes_materials_and_glue_from_the_metadata(tmp_path):
     log = read_built_plate(write_log(tmp_path / "p.csv", P2, 24e3, {"ceramic": "PZT-5A", "glue_um": 20}))
     assert log.plate.ceramic.name == "PZT-5A" and log.plate.glue_thickness == pytest.approx(20 * UM)
     assert log.frequency == pytest.approx(24e3, rel=1e-4)
+
+
+@pytest.mark.slow
+def test_robust_optimum_probability_checked_by_direct_fem_sampling(tmp_path, capsys, coarse_cli, coarse_model):
+    """The robust optimum of 'optimize --calibration' meets 25 kHz on most direct FEM draws of posterior and scatter."""
+    from workflow.optimise.robust import Tolerances, scattered_draws
+
+    log = write_log(tmp_path / "p1.csv", P1, built_plate_frequency(coarse_model, P1))
+    config = tmp_path / "fast.toml"
+    config.write_text("[sampler]\nsteps = 2000\n[surrogate]\npoints = 18\n", encoding="utf-8")
+    assert main(["calibrate", str(log), "--out", str(tmp_path / "cal"), "--config", str(config), "--no-figures"]) == 0
+    capsys.readouterr()
+    assert main(["optimize", "--model", "fem", "--hp-mm", "1", "--calibration", str(tmp_path / "cal"),
+                 "--stock-hi-mm", "0.75,1.0", "--json"]) == 0
+    record = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert record["probability"] == pytest.approx(0.95, abs=4 * record["probability_se"] + 0.01)
+    assert record["f_r_khz_p05"] == pytest.approx(25.0, abs=0.05)
+    assert {c["h_i_mm"] for c in record["candidates"]} == {0.75, 1.0} and record["h_i_mm"] in (0.75, 1.0)
+    best = max((c for c in record["candidates"] if c["separated"]), key=lambda c: c["w_dyn_um"])
+    assert best["h_i_mm"] == record["h_i_mm"]
+
+    from workflow.pipeline.calibration_files import load_calibration
+
+    calibration = load_calibration(tmp_path / "cal")
+    design = P1.with_(wavelength=record["lambda_mm"] * MM, resonator_thickness=record["h_i_mm"] * MM)
+    draws = scattered_draws(calibration, design, Tolerances(), 12, seed=5)
+    names = calibration.settings.names
+    plates = [deviated_plate(design.with_(wavelength=design.wavelength * np.exp(d[0]),
+                                          ceramic_thickness=design.ceramic_thickness + d[-1]), names, d[1:-1]) for d in draws]
+    frequencies = np.array([r.frequency for r in coarse_model.evaluate_plates(plates)])
+    assert np.sum(frequencies >= 25e3) >= 10, frequencies  # P(at most 9 of 12 | p = 0.95) = 2 %
