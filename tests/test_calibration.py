@@ -246,3 +246,18 @@ def test_robust_optimum_probability_checked_by_direct_fem_sampling(tmp_path, cap
                                           ceramic_thickness=design.ceramic_thickness + d[-1]), names, d[1:-1]) for d in draws]
     frequencies = np.array([r.frequency for r in coarse_model.evaluate_plates(plates)])
     assert np.sum(frequencies >= 25e3) >= 10, frequencies  # P(at most 9 of 12 | p = 0.95) = 2 %
+
+
+@pytest.mark.slow
+def test_maps_with_a_calibration_scale_and_state_it(tmp_path, capsys, coarse_cli, coarse_model):
+    log = write_log(tmp_path / "p1.csv", P1, built_plate_frequency(coarse_model, P1))
+    config = tmp_path / "fast.toml"
+    config.write_text("[sampler]\nsteps = 2000\n[surrogate]\npoints = 18\n", encoding="utf-8")
+    assert main(["calibrate", str(log), "--out", str(tmp_path / "cal"), "--config", str(config), "--no-figures"]) == 0
+    capsys.readouterr()
+    assert main(["maps", "--model", "fem", "--hp-mm", "1", "--grid", "2", "--out", str(tmp_path / "maps"),
+                 "--calibration", str(tmp_path / "cal"), "--json"]) == 0
+    record = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    correction = record["calibration"]
+    assert correction["frequency_factor"] < 1 and "scaled" in correction["statement"]
+    assert correction["optimum_f_r_khz_p05"] <= record["optimum"]["f_r_khz"] <= correction["optimum_f_r_khz_p95"]
