@@ -24,7 +24,7 @@ from scipy.optimize import brentq
 from workflow.calibration.calibration import POSTERIOR_RANGE, Calibration, nominal_theta, prediction_points
 from workflow.calibration.parameters import deviated_plate
 from workflow.calibration.plate_surrogate import Evaluate
-from workflow.calibration.surrogate import fit_response_surface, latin_hypercube
+from workflow.calibration.surrogate import ResponseSurface, fit_response_surface, latin_hypercube
 from workflow.errors import InfeasibleError
 from workflow.models import analytical, materials
 from workflow.models.plate import Plate
@@ -192,53 +192,78 @@ def calibration_ratio(calibration: Calibration) -> float:
     return float(np.mean(ratios))
 
 
-def robust_candidate(calibration: Calibration, plate: Plate, settings: RobustSettings, evaluate: Evaluate, q: float) -> RobustCandidate:
-    """The robust design of one nominal plate (its h_i and h_p fixed, lambda solved); see the module."""
+@dataclass(frozen=True)
+class RobustSurrogate:
+    """Linear response surfaces of one nominal plate over (ln lambda, parameters..., h_p offset).
+
+    Attributes
+    ----------
+    bounds : numpy.ndarray
+        (n, 2) box of the inputs [SI; ln m for lambda].
+    log_frequency, log_deflection : ResponseSurface
+    frequency_sigma : float
+        Leave-one-out and FEM errors of ln f_r in quadrature [-].
+    evaluations : int
+    """
+
+    bounds: np.ndarray
+    log_frequency: ResponseSurface
+    log_deflection: ResponseSurface
+    frequency_sigma: float
+    evaluations: int
+
+    def sample(self, log_lambda: float, draws: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
+        """ln f_r and ln w of ``draws`` (deviations, :func:`scattered_draws`) about the design ln lambda, each
+        with its surrogate's error drawn from ``seed``."""
+        rng = np.random.default_rng(seed)
+        shifted = draws.copy()
+        shifted[:, 0] += log_lambda
+        inside = np.clip(shifted, self.bounds[:, 0], self.bounds[:, 1])
+        return (self.log_frequency(inside) + rng.normal(0, self.frequency_sigma, len(draws)),
+                self.log_deflection(inside) + rng.normal(0, self.log_deflection.loo_rms, len(draws)))
+
+
+def robust_surrogate(calibration: Calibration, plate: Plate, settings: RobustSettings, evaluate: Evaluate) -> RobustSurrogate:
+    """The linear surrogate of a nominal plate for its robust design (the module's step 1)."""
     names = robust_inputs(calibration)
     tol = settings.tolerances
     guess = beam_wavelength(plate, settings.min_frequency / calibration_ratio(calibration))
-    samples = posterior_columns(calibration, plate)
-    low, high = np.percentile(samples, POSTERIOR_RANGE, axis=0)
-    spread = np.array([3 * (tol.glue_thickness if n == "glue_um" else tol.resonator_thickness if n == "resonator_offset_um" else 0.0)
-                       for n in names])
+    low, high = np.percentile(posterior_columns(calibration, plate), POSTERIOR_RANGE, axis=0)
+    scatter = {"glue_um": tol.glue_thickness, "resonator_offset_um": tol.resonator_thickness}
+    spread = np.array([3 * scatter.get(name, 0.0) for name in names])
     low, high = low - spread, high + spread
     high = np.maximum(high, low + 1e-3 * np.abs(low) + 1e-9)
-    bounds = np.vstack([
-        np.log(np.array(LAMBDA_BOX) * guess),
-        np.column_stack([low, high]),
-        [-max(3 * tol.ceramic_thickness, 1e-6), max(3 * tol.ceramic_thickness, 1e-6)],
-    ])
-    n_points = prediction_points(len(bounds) - 1)
-    points = latin_hypercube(n_points, bounds, settings.seed)
+    half_hp = max(3 * tol.ceramic_thickness, 1e-6)
+    bounds = np.vstack([np.log(np.array(LAMBDA_BOX) * guess), np.column_stack([low, high]), [-half_hp, half_hp]])
+    points = latin_hypercube(prediction_points(len(bounds) - 1), bounds, settings.seed)
     results = evaluate([_robust_plate(plate, names, point) for point in points])
     errors = np.array([0.0 if r.error is None else r.error.frequency for r in results])
     log_f = fit_response_surface(points, np.log([r.frequency for r in results]), bounds, 1)
     log_w = fit_response_surface(points, np.log([r.deflection for r in results]), bounds, 1)
-    sigma_f = float(np.hypot(log_f.loo_rms, np.sqrt(np.mean(errors**2))))
+    return RobustSurrogate(bounds, log_f, log_w, float(np.hypot(log_f.loo_rms, np.sqrt(np.mean(errors**2)))), len(points))
 
-    def log_frequencies(log_lambda, draws, rng):
-        shifted = draws.copy()
-        shifted[:, 0] += log_lambda
-        return log_f(np.clip(shifted, bounds[:, 0], bounds[:, 1])) + rng.normal(0, sigma_f, len(draws)), shifted
 
-    solve = scattered_draws(calibration, plate, tol, SOLVE_DRAWS, settings.seed)
+def robust_candidate(calibration: Calibration, plate: Plate, settings: RobustSettings, evaluate: Evaluate,
+                     q: float) -> RobustCandidate:
+    """The robust design of one nominal plate (its h_i and h_p fixed, lambda solved); see the module."""
+    surrogate = robust_surrogate(calibration, plate, settings, evaluate)
+    solve = scattered_draws(calibration, plate, settings.tolerances, SOLVE_DRAWS, settings.seed)
     target = np.log(settings.min_frequency)
-    quantile = 100 * (1 - settings.reliability)
 
     def shortfall(log_lambda):
-        values, _ = log_frequencies(log_lambda, solve, np.random.default_rng(settings.seed))
-        return float(np.percentile(values, quantile)) - target
+        log_f, _ = surrogate.sample(log_lambda, solve, settings.seed)
+        return float(np.percentile(log_f, 100 * (1 - settings.reliability))) - target
 
-    edge = shortfall(bounds[0, 0]) < 0 or shortfall(bounds[0, 1]) > 0
-    log_lambda = bounds[0, 0] if shortfall(bounds[0, 0]) < 0 else bounds[0, 1] if edge else brentq(shortfall, *bounds[0], xtol=1e-8)
-    check = scattered_draws(calibration, plate, tol, CHECK_DRAWS, settings.seed + 1)
-    values, shifted = log_frequencies(log_lambda, check, np.random.default_rng(settings.seed + 1))
-    frequencies = np.exp(values)
-    deflections = np.exp(log_w(np.clip(shifted, bounds[:, 0], bounds[:, 1])) + np.random.default_rng(settings.seed + 2).normal(0, log_w.loo_rms, len(shifted)))
+    low, high = surrogate.bounds[0]
+    too_low, too_high = shortfall(low) < 0, shortfall(high) > 0
+    log_lambda = low if too_low else high if too_high else brentq(shortfall, low, high, xtol=1e-8)
+    check = scattered_draws(calibration, plate, settings.tolerances, CHECK_DRAWS, settings.seed + 1)
+    log_f, log_w = surrogate.sample(log_lambda, check, settings.seed + 1)
+    frequencies, deflections = np.exp(log_f), np.exp(log_w)
     probability = float(np.mean(frequencies >= settings.min_frequency))
     design = plate.with_(wavelength=float(np.exp(log_lambda)))
-    median = deviated_plate(design, names, np.median(samples, axis=0))
-    result = evaluate([median])[0]
+    median = deviated_plate(design, robust_inputs(calibration), np.median(posterior_columns(calibration, plate), axis=0))
+    (result,) = evaluate([median])
     nearest, separated = mode_separation(result, settings)
     probes = np.abs(result.probe_model.response(result.frequency, q))
     return RobustCandidate(
@@ -252,9 +277,9 @@ def robust_candidate(calibration: Calibration, plate: Plate, settings: RobustSet
         nearest_transverse=nearest,
         separated=separated,
         homogeneity=float(np.std(probes) / np.mean(probes)),
-        surrogate_error=log_f.loo_rms,
-        evaluations=n_points + 1,
-        lambda_at_edge=bool(edge),
+        surrogate_error=surrogate.log_frequency.loo_rms,
+        evaluations=surrogate.evaluations + 1,
+        lambda_at_edge=bool(too_low or too_high),
     )
 
 
