@@ -261,3 +261,39 @@ def test_maps_with_a_calibration_scale_and_state_it(tmp_path, capsys, coarse_cli
     correction = record["calibration"]
     assert correction["frequency_factor"] < 1 and "scaled" in correction["statement"]
     assert correction["optimum_f_r_khz_p05"] <= record["optimum"]["f_r_khz"] <= correction["optimum_f_r_khz_p95"]
+
+
+class _BeamResult:
+    """A stand-in for an FEM result from the beam model: one longitudinal mode, uniform probes."""
+
+    def __init__(self, plate):
+        from types import SimpleNamespace
+
+        from workflow.models import analytical
+
+        self.frequency = float(analytical.resonance_frequency(plate))
+        self.deflection = float(analytical.dynamic_deflection(plate, 15.0, 54.0))
+        self.error, self.best_index = None, 0
+        self.modes = (SimpleNamespace(frequency=self.frequency, transverse_indicator=0.0),
+                      SimpleNamespace(frequency=1.02 * self.frequency, transverse_indicator=0.9))
+        self.probe_model = SimpleNamespace(response=lambda f, q: np.full(44, self.deflection))
+
+
+def test_robust_candidate_meets_the_reliability_on_a_known_model():
+    """With the beam model as 'FEM' (fast, exact surrogate inputs), the solved lambda puts the 5 % quantile of f_r
+    on 25 kHz, the fresh-draw probability is 0.95 within its Monte Carlo error, and a transverse mode 2 % away
+    is flagged."""
+    from workflow.optimise.robust import RobustSettings, robust_candidate
+
+    settings = default_settings()
+    rng = np.random.default_rng(0)
+    samples = np.column_stack([rng.normal(0.95, 0.02, 3000), rng.normal(0.97, 0.02, 3000),
+                               rng.uniform(20e-6, 40e-6, 3000), rng.normal(-10e-6, 5e-6, 3000)])
+    surrogate = build_plate_surrogate(P1, settings.names, settings.bounds, lambda ps: [_BeamResult(p) for p in ps], 20, 2, 1)
+    calibration = Calibration(settings, samples, (MeasuredPlate("P1", P1, 23.2e3),), (surrogate,), None, {})
+    candidate = robust_candidate(calibration, P1, RobustSettings(), lambda ps: [_BeamResult(p) for p in ps], 54.0)
+    assert candidate.frequency[0] == pytest.approx(25e3, rel=2e-3)
+    assert abs(candidate.probability - 0.95) < 4 * candidate.probability_error + 0.005
+    assert candidate.margin == pytest.approx(candidate.frequency[0] - 25e3)
+    assert not candidate.separated and candidate.nearest_transverse["relative_distance"] == pytest.approx(0.02)
+    assert candidate.homogeneity == pytest.approx(0.0, abs=1e-12) and not candidate.lambda_at_edge
