@@ -297,3 +297,25 @@ def test_robust_candidate_meets_the_reliability_on_a_known_model():
     assert candidate.margin == pytest.approx(candidate.frequency[0] - 25e3)
     assert not candidate.separated and candidate.nearest_transverse["relative_distance"] == pytest.approx(0.02)
     assert candidate.homogeneity == pytest.approx(0.0, abs=1e-12) and not candidate.lambda_at_edge
+
+
+def test_run_step_predicts_the_recommended_designs_with_the_calibration(tmp_path, coarse_cli, coarse_model):
+    """``tactile run --calibration``: the step's predictions and the report section that states them."""
+    from types import SimpleNamespace
+
+    from workflow.pipeline.calibration_files import write_calibration
+    from workflow.pipeline.config import default_config
+    from workflow.pipeline.report import _calibrated_designs
+    from workflow.pipeline.steps import calibrated_designs
+
+    plate = MeasuredPlate("P1", P1, built_plate_frequency(coarse_model, P1))
+    calibration = calibrate([plate], FAST, coarse_model.evaluate_plates, {"accuracy": 0.05, "piezo": "eigenstrain"})
+    files = write_calibration(calibration, tmp_path, figures=False)
+    designs = {1e-3: SimpleNamespace(plate=P1, frequency=25.1e3)}
+    context = SimpleNamespace(calibration=Path(files["calibration"]), config=default_config(), cache=None,
+                              results={"recommended_design": SimpleNamespace(designs=designs)})
+    predicted = calibrated_designs(context)[1e-3]
+    assert predicted["f_r_khz_p05"] <= plate.frequency / KHZ <= predicted["f_r_khz_p95"]
+    section = _calibrated_designs(context, {1e-3: predicted})
+    assert "as the calibration predicts them" in section and f"{predicted['f_r_khz']:.3f}" in section
+    assert calibrated_designs(SimpleNamespace(calibration=None)) == {}
