@@ -116,11 +116,12 @@ def _optimum_and_refined(tmp_path, target: float, refine_by: int):
     return problem, found, refined
 
 
-def test_the_optimum_of_a_coarse_search_clears_the_limit_on_a_finer_mesh(tmp_path, monkeypatch):
+def test_the_optimum_of_a_coarse_search_clears_the_limit_on_a_finer_mesh(tmp_path):
     """Optima that hold, cheaply: the search on level 4 corrected by the accurate levels (6 against 4) at 3 %."""
     from workflow.optimise import fem_optimum
 
-    monkeypatch.setattr(fem_optimum, "SEARCH_LEVEL", 4)
+    assert fem_optimum.search_level(FemAccuracy(target=0.03)) == 4
+    assert fem_optimum.search_level(FemAccuracy(target=0.002)) == 6
     problem, found, refined = _optimum_and_refined(tmp_path, 0.03, 2)
     assert found.verified and found.error.met and found.verification_evaluations >= 2
     margin = fem_optimum.margin_frequency(problem.min_frequency, found.error.frequency)

@@ -9,7 +9,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from workflow.models.fem.accuracy import ErrorEstimate, FemAccuracy, mesh_for_level
+from workflow.models.fem.accuracy import LEVELS, ErrorEstimate, FemAccuracy, mesh_for_level
 
 from workflow.optimise.problem import (
     FREQUENCY_SLACK,
@@ -41,8 +41,15 @@ well inside the margin itself (the estimated error, typically 0.1-0.2 %)."""
 SETTLE_TOLERANCE = 5e-4
 """A verified optimum more than this above its margin (relative; 12.5 Hz at 25 kHz) gives away deflection:
 the search is repeated with the offset measured there (within :data:`VERIFICATION_ROUNDS`)."""
-SEARCH_LEVEL = 6
-"""Mesh level (elements per ceramic) of the search when the model evaluates to an accuracy."""
+
+
+def search_level(accuracy: FemAccuracy) -> int:
+    """Mesh level (elements per ceramic) of the search: the one below the accuracy's first level [-].
+
+    6 for targets under 0.5 %, 4 for coarser ones; the search only needs to be smooth in the geometry,
+    its offset from the accurate model is measured and corrected.
+    """
+    return LEVELS[LEVELS.index(accuracy.start_level) - 1]
 
 
 @dataclass(frozen=True)
@@ -97,7 +104,7 @@ def optimise_fem(
 
     When the model evaluates to an accuracy (``fem_model.settings`` a
     :class:`~workflow.models.fem.accuracy.FemAccuracy`), the search runs on one fixed coarse mesh
-    (level :data:`SEARCH_LEVEL`: cheap, and smooth in the geometry) whose frequency limit is
+    (:func:`search_level`: cheap, and smooth in the geometry) whose frequency limit is
     corrected by the coarse mesh's offset from the accurate evaluation at the current point and
     raised by that evaluation's error estimate (:func:`margin_frequency`).  The optimum is then
     evaluated at the requested accuracy; while its frequency misses the margin, the offset is
@@ -111,7 +118,7 @@ def optimise_fem(
     if coarse_model is None:
         coarse_model = analytical_model(fem_model.q if q is None else q, problem.voltage)
     plate = maximise_deflection(coarse_model, problem).plate
-    search = fem_model.on_mesh(mesh_for_level(plate, SEARCH_LEVEL, accuracy.n_modes, accuracy.piezo))
+    search = fem_model.on_mesh(mesh_for_level(plate, search_level(accuracy), accuracy.n_modes, accuracy.piezo))
     (check,) = fem_model.results(plate)
     fine_evaluations, coarse_evaluations, checks, trajectory = 0, 0, 1, ()
     for _ in range(VERIFICATION_ROUNDS):
