@@ -94,9 +94,9 @@ def test_peak_of_a_sweep_is_located_between_its_points():
 
 
 def test_surrogate_error_against_fresh_fem_evaluations(coarse_model):
-    settings = default_settings()
+    settings = FAST
     surrogate = build_plate_surrogate(P1, settings.names, settings.bounds, coarse_model.evaluate_plates,
-                                      settings.surrogate_points, 2, seed=1)
+                                      settings.surrogate_points, 2, seed=settings.surrogate_seed)
     fresh = latin_hypercube(6, settings.bounds, seed=11)[1:]
     results = coarse_model.evaluate_plates([deviated_plate(P1, settings.names, theta) for theta in fresh])
     errors = surrogate.frequency(fresh) / np.array([r.frequency for r in results]) - 1
