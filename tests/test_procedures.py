@@ -11,12 +11,11 @@ import serial
 
 from instruments.drivers.errors import ConnectionLost, InstrumentError, SafetyLimitError
 from instruments.procedures.logwriter import LogWriter, read_log
-from instruments.procedures.simulated import simulate_campaign, simulated_station
+from instruments.procedures.simulated import reopened_station, simulate_campaign, simulated_station
 from instruments.procedures.sweeps import (
     CampaignPlan,
     ResonancePlan,
     VoltageSweepPlan,
-    open_station,
     q_campaign,
     resonance_search,
     voltage_sweep,
@@ -118,8 +117,7 @@ def test_disconnect_mid_campaign_then_resume_gives_every_row_once(tmp_path):
     with open(path, "a") as file:  # a crash in the middle of a row
         file.write("32126.3,15,0.2")
     # reconnect to the same bench (the fault fired once) and resume
-    ports = [serial.serial_for_url(p.port.port, timeout=1) for p in (station.generator, station.vibrometer)]
-    again = open_station(*ports, station.amplifier, station.voltage_limit, clock=bench.clock, sleep=bench.sleep, settle_time=0)
+    again = reopened_station(station, bench)
     result = q_campaign(again, path, PLAN, fsync=False)
     assert result.resumed == len(partial) and result.truncated_bytes == len("32126.3,15,0.2")
     final = keys(path)

@@ -1,9 +1,13 @@
-"""Interferometer log format, version 1 (docs/log-format.md): the names, once.
+"""Interferometer log format, version 1 (docs/log-format.md): the names, once, and the metadata reader.
 
 UTF-8 CSV.  Optional leading metadata lines ``# key: value`` (the first may be a title
 line), then one header row and the data rows.  Readers live in
 :mod:`workflow.damping.logs`; the writer in :mod:`instruments.procedures.logwriter`.
 """
+
+from pathlib import Path
+
+from workflow.errors import InputFileError
 
 FORMAT_VERSION = 1
 
@@ -27,3 +31,68 @@ COLUMNS = REQUIRED_COLUMNS + OPTIONAL_COLUMNS
 
 METADATA_PREFIX = "# "
 """Metadata lines read ``# key: value``."""
+
+X_POSITION = "x_mm"
+"""Measurement point along the plate's length, from its centre [mm] (column of a scan; metadata when constant)."""
+Y_POSITION = "y_mm"
+"""Measurement point across the plate, from its centre [mm]."""
+SCAN_COLUMNS = COLUMNS + (X_POSITION, Y_POSITION)
+"""The columns of a deflection scan, in this order."""
+DECAY_TIME = "decay_time_s"
+"""Ring-down logs: time since the end of the burst [s]; its presence makes a log a ring-down log."""
+TEMPERATURE = "temperature_c"
+"""Plate temperature where the bench reports it [deg C] (optional)."""
+POSITION_COLUMNS = (X_POSITION, Y_POSITION)
+RINGDOWN_COLUMNS = (SWEEP, TIMESTAMP, DECAY_TIME, FREQUENCY, DRIVE_VOLTAGE, VELOCITY, TEMPERATURE)
+"""The columns of a ring-down log (``sweep`` is the burst id), in the order our writer emits them."""
+READ_COLUMNS = COLUMNS + POSITION_COLUMNS + (DECAY_TIME, TEMPERATURE)
+"""Every column the reader knows."""
+
+LAMBDA_MM = "lambda_mm"
+"""Metadata: the built plate's nominal wavelength [mm]."""
+HI_MM = "h_i_mm"
+"""Metadata: nominal resonator thickness [mm]."""
+HP_MM = "h_p_mm"
+"""Metadata: nominal ceramic thickness [mm]."""
+B_MM = "b_mm"
+"""Metadata: nominal width [mm]."""
+CERAMIC = "ceramic"
+"""Metadata: ceramic material record name (optional)."""
+RESONATOR = "resonator"
+"""Metadata: resonator material record name (optional)."""
+GLUE_UM = "glue_um"
+"""Metadata: nominal bond thickness [um] (optional)."""
+BUILT_PLATE_KEYS = (LAMBDA_MM, HI_MM, HP_MM, B_MM)
+"""The metadata keys every built-plate log has."""
+
+
+MAX_HEADER_LINES = 10_000
+"""Most metadata lines read before the header row [-]."""
+
+
+def read_metadata(path: Path) -> dict:
+    """key -> (value, line number) of the ``# key: value`` lines before a log's header row.
+
+    Raises
+    ------
+    InputFileError
+        If the file cannot be read, is not UTF-8, or has more than :data:`MAX_HEADER_LINES` lines before its header.
+    """
+    metadata = {}
+    try:
+        with open(path, encoding="utf-8-sig", newline="") as stream:
+            for number, line in enumerate(stream, start=1):
+                if number > MAX_HEADER_LINES:
+                    raise InputFileError(f"{path}, line {number}: no header row within {MAX_HEADER_LINES} lines")
+                if not line.strip():
+                    continue
+                if not line.lstrip().startswith("#"):
+                    break
+                key, separator, value = line.lstrip()[1:].partition(":")
+                if separator and key.strip():
+                    metadata.setdefault(key.strip(), (value.strip(), number))
+    except OSError as error:
+        raise InputFileError(f"{path}: cannot read ({error.strerror or error})") from None
+    except UnicodeDecodeError as error:
+        raise InputFileError(f"{path}: not UTF-8 (byte {error.start} of a line)") from None
+    return metadata

@@ -188,7 +188,7 @@ class FunctionGenerator(LineInstrument):
         self.write(command)
 
     def switch_off(self) -> None:
-        """The safe state: output off, then the lowest amplitude and no offset (each only lowers the peak).
+        """The safe state: output off, then the lowest amplitude, no offset and burst mode off (each only lowers the peak).
 
         Starts with an empty line, which ends a command a signal may have cut short, and drops
         any stale reply.
@@ -197,7 +197,7 @@ class FunctionGenerator(LineInstrument):
         self.discard_input()
         self._send("OUTP 0")
         self._send(f"VOLT:UNIT VPP;:VOLT {_number(LOWEST_AMPLITUDE_VPP)}")
-        self._send("VOLT:OFFS 0")
+        self._send("VOLT:OFFS 0;:BURS:STAT 0")
 
     def check_peak_voltage(self, vpp: float, offset: float, gain: float | None = None) -> None:
         """Raise :class:`SafetyLimitError` if the terminal peak (``vpp``/2 + |``offset``|) x ``gain``
@@ -211,6 +211,30 @@ class FunctionGenerator(LineInstrument):
                 f"{self._where()}: refusing {vpp:g} Vpp with offset {offset:g} V: output peak {peak:g} V{load} "
                 f"exceeds the limit {self.max_peak_voltage:g} V"
             )
+
+    burst_state = control("BURS:STAT?", "BURS:STAT {}", "Burst mode on (bool).", parse=_scpi_bool,
+                          format=lambda on: "1" if on else "0")
+    burst_mode = control("BURS:MODE?", "BURS:MODE {}", "Burst mode, ``TRIG`` or ``GAT`` (str).", parse=str.upper)
+    burst_cycles = control("BURS:NCYC?", "BURS:NCYC {}", "Cycles per burst (int).", parse=lambda reply: int(round(float(reply))),
+                           format=lambda cycles: f"{int(cycles):d}")
+    burst_period = control("BURS:INT:PER?", "BURS:INT:PER {}", "Period of internally triggered bursts [s] (float).",
+                           parse=float, format=_number)
+    trigger_source = control("TRIG:SOUR?", "TRIG:SOUR {}", "Trigger source, ``IMM``, ``EXT`` or ``BUS`` (str).",
+                             parse=str.upper)
+
+    def configure_burst(self, cycles: int) -> None:
+        """Triggered bursts of ``cycles`` cycles fired by :meth:`trigger` (bus trigger), burst mode on.
+
+        The burst carries the amplitude set through :attr:`amplitude_vpp`, which checked the limit.
+        """
+        self.burst_mode = "TRIG"
+        self.burst_cycles = cycles
+        self.trigger_source = "BUS"
+        self.burst_state = True
+
+    def trigger(self) -> None:
+        """``*TRG``: fire one burst (bus trigger source)."""
+        self.write("*TRG")
 
     def reset(self) -> None:
         """``*RST``: default state, output off."""

@@ -35,7 +35,13 @@ _FORMATS = {
     logformat.SWEEP: "{:d}",
     logformat.TIMESTAMP: "{:.3f}",
     logformat.PHASE: "{:.3f}",
+    logformat.DECAY_TIME: "{:.9g}",
+    logformat.TEMPERATURE: "{:.3f}",
+    logformat.X_POSITION: "{:.4f}",
+    logformat.Y_POSITION: "{:.4f}",
 }
+KEY_COLUMNS = (logformat.SWEEP, logformat.FREQUENCY, logformat.DRIVE_VOLTAGE, logformat.X_POSITION, logformat.Y_POSITION)
+"""The columns that identify a planned point (those a log has)."""
 
 
 def format_value(column: str, value) -> str:
@@ -43,13 +49,17 @@ def format_value(column: str, value) -> str:
     return _FORMATS[column].format(value)
 
 
-def point_key(sweep: int, frequency: float, voltage: float) -> tuple[str, str, str]:
-    """Identity of a planned point: (sweep, frequency, voltage) as the log writes them."""
-    return (
-        format_value(logformat.SWEEP, sweep),
-        format_value(logformat.FREQUENCY, frequency),
-        format_value(logformat.DRIVE_VOLTAGE, voltage),
-    )
+def point_key(sweep: int, frequency: float, voltage: float, position: tuple | None = None) -> tuple:
+    """Identity of a planned point: (sweep, frequency, voltage) as the log writes them, and (x_mm, y_mm) of a scan."""
+    values = {logformat.SWEEP: sweep, logformat.FREQUENCY: frequency, logformat.DRIVE_VOLTAGE: voltage}
+    if position is not None:
+        values.update(zip((logformat.X_POSITION, logformat.Y_POSITION), position))
+    return tuple(format_value(column, value) for column, value in values.items())
+
+
+def row_key(row: dict) -> tuple:
+    """The :func:`point_key` of a logged row (column -> text)."""
+    return tuple(row[column] for column in KEY_COLUMNS if column in row)
 
 
 def _metadata_text(value) -> str:
@@ -154,8 +164,8 @@ def _lock(path: Path) -> int:
     return descriptor
 
 
-def read_log(path: Path) -> tuple[dict, list[dict], int]:
-    """Metadata, complete rows (column -> text) and the byte length of the complete lines of a log we wrote.
+def read_log(path: Path, columns: tuple = logformat.COLUMNS) -> tuple[dict, list[dict], int]:
+    """Metadata, complete rows (column -> text) and the byte length of the complete lines of a log we wrote with ``columns``.
 
     The length is 0 when there is no header row yet (a crash while the log was being created).
 
@@ -179,8 +189,8 @@ def read_log(path: Path) -> tuple[dict, list[dict], int]:
             continue
         fields = next(csv.reader([line]))
         if header is None:
-            if tuple(fields) != logformat.COLUMNS:
-                raise InputFileError(f"{path}:{number}: header {fields} is not {list(logformat.COLUMNS)}; not a log this writer can resume")
+            if tuple(fields) != columns:
+                raise InputFileError(f"{path}:{number}: header {fields} is not {list(columns)}; not a log this writer can resume")
             header = fields
         elif len(fields) != len(header):
             raise InputFileError(f"{path}:{number}: expected {len(header)} fields, got {len(fields)}; not resuming a damaged log")
@@ -202,10 +212,13 @@ class LogWriter:
         Discard an existing log (one this module wrote) instead of resuming it.
     fsync : bool
         fsync after every row (durable against power loss, not only against crashes).
+    columns : tuple of str
+        The header (:data:`workflow.logformat.COLUMNS`, ``SCAN_COLUMNS`` for a scan, ``RINGDOWN_COLUMNS`` for a ring-down).
     """
 
-    def __init__(self, path, metadata: dict, restart: bool = False, fsync: bool = True):
+    def __init__(self, path, metadata: dict, restart: bool = False, fsync: bool = True, columns: tuple = logformat.COLUMNS):
         self.path = Path(path)
+        self.columns = columns
         self.fsync = fsync
         self.metadata = {"format_version": logformat.FORMAT_VERSION, **metadata}
         self.rows: list[dict] = []
@@ -214,16 +227,16 @@ class LogWriter:
             stack.enter_context(exclusive(self.path))
             self._open(restart)
             self._lock = stack.pop_all()
-        self.keys = {(row[logformat.SWEEP], row[logformat.FREQUENCY], row[logformat.DRIVE_VOLTAGE]) for row in self.rows}
+        self.keys = {row_key(row) for row in self.rows}
 
     def _open(self, restart: bool) -> None:
         if not (self.path.exists() and not restart and self._resume()):
             self._file = open(self.path, "w", encoding="utf-8", newline="")
             lines = [f"# {TITLE}"] + [f"# {key}: {_metadata_text(value)}" for key, value in self.metadata.items()]
-            self._write("\n".join(lines) + "\n" + ",".join(logformat.COLUMNS) + "\n")
+            self._write("\n".join(lines) + "\n" + ",".join(self.columns) + "\n")
 
     def _resume(self) -> bool:
-        old_metadata, self.rows, complete_length = read_log(self.path)
+        old_metadata, self.rows, complete_length = read_log(self.path, self.columns)
         if not complete_length:
             return False
         wanted = {key: _metadata_text(value) for key, value in self.metadata.items() if key == "procedure" or key.startswith("plan_")}
@@ -248,12 +261,32 @@ class LogWriter:
 
     def append(self, row: dict) -> None:
         """Write one row (column -> value; missing optional columns stay empty), durably."""
-        text = {column: format_value(column, row[column]) if column in row else "" for column in logformat.COLUMNS}
+        self.append_rows([row])
+
+    def append_rows(self, rows: list[dict]) -> None:
+        """Write several rows in one write (a ring-down's samples), durably."""
         buffer = io.StringIO()
-        csv.writer(buffer, lineterminator="\n").writerow(text[column] for column in logformat.COLUMNS)
+        writer = csv.writer(buffer, lineterminator="\n")
+        texts = []
+        for row in rows:
+            text = {column: format_value(column, row[column]) if row.get(column) is not None else "" for column in self.columns}
+            writer.writerow(text[column] for column in self.columns)
+            texts.append(text)
         self._write(buffer.getvalue())
-        self.rows.append(text)
-        self.keys.add((text[logformat.SWEEP], text[logformat.FREQUENCY], text[logformat.DRIVE_VOLTAGE]))
+        for text in texts:
+            self.rows.append(text)
+            self.keys.add(row_key(text))
+
+    def keep_rows(self, count: int) -> None:
+        """Drop every row after the first ``count`` (an incomplete group of rows, e.g. a ring-down cut short)."""
+        self.rows = self.rows[:count]
+        self.keys = {row_key(row) for row in self.rows}
+        data = self.path.read_bytes()
+        end = data.index(("\n" + ",".join(self.columns) + "\n").encode()) + len(",".join(self.columns)) + 2
+        for _ in range(count):
+            end = data.index(b"\n", end) + 1
+        self._file.flush()
+        os.truncate(self.path, end)
 
     def close(self) -> None:
         """Close the log and release its lock."""

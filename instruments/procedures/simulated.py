@@ -9,6 +9,7 @@ from dataclasses import replace
 import serial
 
 from instruments.drivers.amplifier import PowerAmplifier
+from instruments.procedures.ringdown import RingdownPlan, ringdown
 from instruments.procedures.sweeps import CampaignPlan, ProcedureResult, Station, open_station, q_campaign
 from instruments.simulator.bench import Bench, BenchSettings, default_bench_settings, register_bench
 from instruments.simulator.urlhandler import bench_url, register_url_handler
@@ -38,9 +39,18 @@ def simulated_station(settings: BenchSettings, voltage_limit: float | None = Non
     return open_station(*ports, PowerAmplifier(settings.amplifier_gain), limit, **options), bench
 
 
+def reopened_station(station: Station, bench: Bench) -> Station:
+    """A new station on the ports of ``station``'s simulated bench, reopened (as after an unplugged cable)."""
+    ports = [serial.serial_for_url(driver.port.port, timeout=1.0) for driver in (station.generator, station.vibrometer)]
+    return open_station(*ports, station.amplifier, station.voltage_limit, clock=bench.clock, sleep=bench.sleep,
+                        settle_time=station.settle_time, retries=station.retries)
+
+
 def simulation_metadata(settings: BenchSettings) -> dict:
-    """Header lines marking a log as simulated, with the simulator's settings."""
-    return {"simulated": "yes", "note": SIMULATED_NOTE, **settings.metadata()}
+    """Header lines marking a log as simulated, with the simulator's settings; a built plate's nominal geometry
+    and an off-centre measurement point too."""
+    built = {} if settings.built_plate is None else settings.built_plate.nominal.metadata()
+    return {"simulated": "yes", "note": SIMULATED_NOTE, **built, **settings.point_metadata(), **settings.metadata()}
 
 
 def simulate_campaign(
@@ -87,3 +97,27 @@ def simulate_campaign(
     plan = CampaignPlan(centre, span, points_per_sweep, tuple(float(v) for v in voltages))
     station, _ = simulated_station(settings, settle_time=0.0)
     return q_campaign(station, path, plan, metadata=simulation_metadata(settings), restart=restart, fsync=False)
+
+
+def simulate_ringdown(
+    path,
+    settings: BenchSettings | None = None,
+    voltages=RingdownPlan.voltages,
+    cycles: int = RingdownPlan.cycles,
+    samples: int = RingdownPlan.samples,
+    interval: float = RingdownPlan.interval,
+    seed: int | None = None,
+    restart: bool = True,
+) -> ProcedureResult:
+    """Ring-downs on a simulated bench at its resonance (time 0, rounded to 1 Hz), logged to ``path``.
+
+    Parameters as :class:`~instruments.procedures.ringdown.RingdownPlan`; ``settings``, ``seed``
+    and ``restart`` as :func:`simulate_campaign`.
+    """
+    settings = settings or default_bench_settings()
+    if seed is not None:
+        settings = replace(settings, seed=seed)
+    plan = RingdownPlan(round(settings.response.resonance_frequency), tuple(float(v) for v in voltages), cycles, samples,
+                        interval)
+    station, _ = simulated_station(settings, settle_time=0.0)
+    return ringdown(station, path, plan, metadata=simulation_metadata(settings), restart=restart, fsync=False)

@@ -28,6 +28,7 @@ from instruments.simulator.generator import FREQUENCY_RANGE
 from workflow import logformat
 from workflow.errors import TactileError
 from workflow.progress import Progress
+from workflow.units import MM
 
 DEFAULT_RETRIES = 3
 """Retries of one point after a timeout or a garbled reply."""
@@ -77,11 +78,23 @@ def check_frequencies(low: float, high: float, what: str) -> None:
 
 @dataclass(frozen=True)
 class PlannedPoint:
-    """One measurement: drive at ``frequency`` [Hz] with ``voltage`` [V peak across the ceramics]."""
+    """One measurement: drive at ``frequency`` [Hz] with ``voltage`` [V peak across the ceramics], and for a
+    scan the laser spot at ``position`` (x, y) [m] from the plate's centre."""
 
     sweep: int
     frequency: float
     voltage: float
+    position: tuple | None = None
+
+    @property
+    def position_mm(self) -> tuple | None:
+        """``position`` in the log's unit, mm (None without a position)."""
+        return None if self.position is None else tuple(value / MM for value in self.position)
+
+    @property
+    def key(self) -> tuple:
+        """Its identity in a log (:func:`~.logwriter.point_key`)."""
+        return point_key(self.sweep, self.frequency, self.voltage, self.position_mm)
 
 
 class Station:
@@ -211,6 +224,8 @@ class Station:
         """Drive and read one point, with retries."""
 
         def drive_and_read():
+            if point.position is not None:
+                self.vibrometer.move_to(*point.position)
             self.drive(point.frequency, point.voltage)
             return self.read_velocity()
 
@@ -264,7 +279,7 @@ class ProcedureResult:
 
 def _measure_points(station: Station, log: LogWriter, points: list[PlannedPoint], label: str) -> int:
     """Measure the points not yet in ``log``; returns how many were measured."""
-    todo = [p for p in points if point_key(p.sweep, p.frequency, p.voltage) not in log.keys]
+    todo = [p for p in points if p.key not in log.keys]
     stamps = [float(row[logformat.TIMESTAMP]) for row in log.rows if row[logformat.TIMESTAMP]]
     offset = max(stamps, default=0.0)
     start = station.clock()
@@ -279,6 +294,7 @@ def _measure_points(station: Station, log: LogWriter, points: list[PlannedPoint]
                     logformat.SWEEP: point.sweep,
                     logformat.TIMESTAMP: offset + station.clock() - start,
                     logformat.PHASE: reading.phase_deg,
+                    **dict(zip((logformat.X_POSITION, logformat.Y_POSITION), point.position_mm or ())),
                 }
             )
             bar.update()
@@ -286,10 +302,11 @@ def _measure_points(station: Station, log: LogWriter, points: list[PlannedPoint]
 
 
 def _run(station: Station, path, procedure: str, plan: dict, voltages, stages: Callable, metadata: dict, restart: bool,
-         fsync: bool):
+         fsync: bool, columns: tuple = logformat.COLUMNS):
     """Common frame: safety check of ``voltages``, identify, open/resume the log, measure each stage's points.
 
-    ``stages`` yields lists of points; it may look at the log's rows (adaptive plans).
+    ``stages`` yields lists of points; it may look at the log's rows (adaptive plans).  ``columns``:
+    the log's header (``logformat.SCAN_COLUMNS`` for points with a position).
     Returns (log rows, counts) for the summary.
     """
     for voltage in voltages:
@@ -303,7 +320,7 @@ def _run(station: Station, path, procedure: str, plan: dict, voltages, stages: C
         **{f"plan_{key}": value for key, value in plan.items()},
         **metadata,
     }
-    with LogWriter(path, header, restart=restart, fsync=fsync) as log:
+    with LogWriter(path, header, restart=restart, fsync=fsync, columns=columns) as log:
         resumed = len(log.rows)
         planned = measured = 0
         station.prepare()
@@ -402,12 +419,9 @@ def resonance_search(station: Station, path, plan: ResonancePlan = ResonancePlan
 
 def logged_plan_value(path: Path, key: str) -> float | None:
     """The ``plan_<key>`` metadata of an existing log (what a resumed procedure was planned with), or None."""
-    from instruments.procedures.logwriter import read_log
-
     if not Path(path).exists():
         return None
-    metadata, _, _ = read_log(Path(path))
-    value = metadata.get(f"plan_{key}")
+    value, _ = logformat.read_metadata(Path(path)).get(f"plan_{key}", (None, None))
     return float(value) if value is not None else None
 
 
@@ -418,17 +432,18 @@ def resonance_log_path(path: Path) -> Path:
 
 
 def working_frequency(station: Station, path: Path, key: str, metadata: dict | None = None,
-                      restart: bool = False) -> tuple[float, ProcedureResult | None]:
+                      restart: bool = False, search: ResonancePlan = ResonancePlan()) -> tuple[float, ProcedureResult | None]:
     """The frequency a procedure logged at ``path`` is centred on [Hz], and the resonance search behind it.
 
     A resumed log keeps the frequency it was planned with (its ``plan_<key>`` metadata); otherwise a
-    resonance search (default plan) is run and logged beside it (:func:`resonance_log_path`), itself
-    resumable.  Returns (frequency, the search's result or None when the log's plan was used).
+    resonance search (``search``, by default the default plan) is run and logged beside it
+    (:func:`resonance_log_path`), itself resumable.  Returns (frequency, the search's result or None
+    when the log's plan was used).
     """
     planned = None if restart else logged_plan_value(path, key)
     if planned is not None:
         return planned, None
-    found = resonance_search(station, resonance_log_path(path), ResonancePlan(), metadata=metadata, restart=restart)
+    found = resonance_search(station, resonance_log_path(path), search, metadata=metadata, restart=restart)
     return found.summary["resonance_frequency_hz"], found
 
 

@@ -11,13 +11,17 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from instruments.drivers.amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT, DEFAULT_GAIN, PowerAmplifier
+from instruments.simulator.builtplate import BuiltPlateModel, surface_velocity
 from instruments.simulator.buffers import OVERRUN, InputBuffer, OutputQueue
 from instruments.simulator.faults import Fault, FaultInjector, FaultSettings
 from instruments.simulator.generator import GeneratorDevice
 from instruments.simulator.physics import PlateResponse, plate_response
 from instruments.simulator.vibrometer import VibrometerDevice
+from workflow import logformat
 from workflow.damping.laws import law_parameters
+from workflow.damping.mode_shape import BeamMode, measurement_factor
 from workflow.models.plate import ORIGINAL_PLATE, Plate
+from workflow.units import MM
 
 INSTRUMENTS = ("generator", "vibrometer")
 DEFAULT_DRIFT_RATE = -0.02
@@ -52,6 +56,13 @@ class BenchSettings:
     seed : int
         Seed of the measurement noise.
     faults : FaultSettings
+    wavelength : float
+        The plate's wavelength [m]: maps the measurement point onto the beam mode.
+    measurement_point : tuple of float
+        Where the vibrometer points, (x, y) from the plate's centre [m]; the centre is an antinode.
+    built_plate : BuiltPlateModel or None
+        A built plate (:mod:`.builtplate`) whose FEM gives ``response``'s f_r and gain and the
+        velocity over the plate; the vibrometer then has a scanner.  None: the single-point bench.
     """
 
     response: PlateResponse
@@ -63,6 +74,20 @@ class BenchSettings:
     phase_noise: float = 0.2
     seed: int = 0
     faults: FaultSettings = field(default_factory=FaultSettings)
+    wavelength: float = ORIGINAL_PLATE.wavelength
+    measurement_point: tuple = (0.0, 0.0)
+
+    def mode_factor(self) -> float:
+        """|phi| at the measurement point: the velocity read over the antinode's [-]."""
+        return float(measurement_factor(BeamMode(self.wavelength), *self.measurement_point))
+
+    def point_metadata(self) -> dict:
+        """``x_mm``, ``y_mm`` and ``lambda_mm`` for the log header when the point is off the centre (else empty)."""
+        if self.measurement_point == (0.0, 0.0):
+            return {}
+        x, y = self.measurement_point
+        return {logformat.X_POSITION: x / MM, logformat.Y_POSITION: y / MM, logformat.LAMBDA_MM: self.wavelength / MM}
+    built_plate: BuiltPlateModel | None = None
 
     def metadata(self) -> dict:
         """Flat ``simulator_*`` metadata for log headers: law, parameters, noise, drift, seeds."""
@@ -73,6 +98,7 @@ class BenchSettings:
             "resonance_frequency_hz": response.resonance_frequency,
             "deflection_per_volt_m_v": response.deflection_per_volt,
             "drift_rate_hz_s": response.drift_rate,
+            **({"softening_s2_m2": response.softening} if response.softening else {}),
             "amplifier_gain": self.amplifier_gain,
             "ceramic_voltage_limit_v": self.ceramic_voltage_limit,
             "measurement_time_s": self.measurement_time,
@@ -81,13 +107,21 @@ class BenchSettings:
             "phase_noise_deg": self.phase_noise,
             "seed": self.seed,
             **{f"fault_{name}": value for name, value in asdict(self.faults).items()},
+            **({} if self.built_plate is None else self.built_plate.metadata()),
         }
         return {f"simulator_{key}": value for key, value in items.items()}
 
 
-def default_bench_settings(plate: Plate = ORIGINAL_PLATE, law=None, drift_rate: float = DEFAULT_DRIFT_RATE, **changes) -> BenchSettings:
-    """Bench settings for ``plate`` (default law: :func:`.physics.default_law`); ``changes`` override fields."""
-    return BenchSettings(response=plate_response(plate, law, drift_rate), **changes)
+def default_bench_settings(plate: Plate = ORIGINAL_PLATE, law=None, drift_rate: float = DEFAULT_DRIFT_RATE,
+                           softening: float = 0.0, **changes) -> BenchSettings:
+    """Bench settings for ``plate`` (default law: :func:`.physics.default_law`, no softening); ``changes`` override fields."""
+    changes.setdefault("wavelength", float(plate.wavelength))
+    return BenchSettings(response=plate_response(plate, law, drift_rate, softening), **changes)
+
+
+def built_bench_settings(model: BuiltPlateModel, law=None, drift_rate: float = DEFAULT_DRIFT_RATE, **changes) -> BenchSettings:
+    """Bench settings playing the built plate ``model`` (default law: that of its nominal plate); ``changes`` override fields."""
+    return BenchSettings(response=model.response(law, drift_rate), built_plate=model, **changes)
 
 
 class Bench:
@@ -97,14 +131,23 @@ class Bench:
         self.settings = settings
         self.time = 0.0
         self.amplifier = PowerAmplifier(settings.amplifier_gain)
-        self.generator = GeneratorDevice(self.amplifier.generator_peak_limit(settings.ceramic_voltage_limit))
+        self.generator = GeneratorDevice(self.amplifier.generator_peak_limit(settings.ceramic_voltage_limit), self._burst)
         self.vibrometer = VibrometerDevice(
             self._surface_velocity,
             np.random.default_rng(settings.seed),
             settings.relative_noise,
             settings.floor_fraction,
             settings.phase_noise,
+            record=self._decay_record,
+            temperature=lambda: float(settings.response.temperature_at(self.time)),
+            scanner=None if settings.built_plate is None else (settings.built_plate.surface.half_length,
+                                                                settings.built_plate.surface.half_width),
         )
+        self._mode_factor = settings.mode_factor()
+        self._deflection = None
+        """The plate's deflection at the last readout [m] (None: at rest or off resonance drive)."""
+        self._last_burst = None
+        """(end time [s], antinode velocity then [m/s], f_r [Hz]) of the latest burst not yet read out."""
         self.faults = FaultInjector(settings.faults)
         self._input = {name: InputBuffer() for name in INSTRUMENTS}
         self.output = {name: OutputQueue() for name in INSTRUMENTS}
@@ -127,8 +170,40 @@ class Bench:
 
     def _surface_velocity(self):
         self.time += self.settings.measurement_time
-        velocity, phase = self.settings.response.velocity(self.generator.state.frequency, self.ceramic_voltage(), self.time)
-        return float(velocity), float(phase)
+        frequency = self.generator.state.frequency
+        voltage = 0.0 if self.generator.state.burst else self.ceramic_voltage()
+        if self.settings.built_plate is not None:
+            return surface_velocity(self.settings.built_plate, self.settings.response, self.vibrometer.position,
+                                    frequency, voltage, self.time)
+        if voltage == 0.0:
+            self._deflection = None
+            return 0.0, 0.0
+        velocity, phase = self.settings.response.velocity(frequency, voltage, self.time, self._deflection)
+        self._deflection = float(velocity) / (2 * np.pi * frequency)
+        return float(velocity) * self._mode_factor, float(phase)
+
+    def _burst(self) -> None:
+        """A burst fired: the plate builds up for NCYC cycles, then rings down from the burst's end."""
+        state = self.generator.state
+        duration = state.burst_cycles / state.frequency
+        voltage = float(self.amplifier.ceramic_voltage(state.terminal_amplitude_vpp))
+        initial = self.settings.response.burst_velocity(state.frequency, voltage, state.burst_cycles, self.time)
+        self.time += duration
+        self._deflection = None
+        self._last_burst = (self.time, initial)
+
+    def _decay_record(self, samples: int, interval: float):
+        """The antinode-to-point velocity envelope at ``samples`` times ``interval`` [s] apart from the latest
+        burst's end [m/s], or None when no burst fired since the last record (an IMM trigger fires one now)."""
+        if self.generator.state.trigger_source == "IMM" and self.generator.bursting():
+            self._burst()
+        if self._last_burst is None:
+            return None
+        end, initial = self._last_burst
+        self._last_burst = None
+        decay_time = interval * np.arange(samples)
+        self.time = max(self.time, end + decay_time[-1]) + self.settings.measurement_time
+        return self.settings.response.ringdown(initial, decay_time, end) * self._mode_factor
 
     def reset_port(self, instrument: str) -> None:
         """Forget a partial command line and the queued replies (a port was reopened)."""

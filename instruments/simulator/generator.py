@@ -2,7 +2,12 @@
 
 State changes that would exceed the output's peak-voltage limit (amplitude/2 + |offset|)
 are refused with ``-222,"Data out of range"`` in the error queue; the output keeps its
-previous value.  An over-long line (-363) and a reply lost to a full output queue (-430)
+previous value (in burst mode as in continuous mode: a burst carries the set amplitude).
+
+Burst mode (as PyMeasure's ``Agilent33500`` driver uses it): ``BURS:STAT``, ``BURS:MODE
+TRIG|GAT``, ``BURS:NCYC``, ``BURS:INT:PER``, ``TRIG:SOUR IMM|EXT|BUS`` and ``*TRG``, with
+their queries.  A triggered burst with the output on (``*TRG`` with the BUS source, or the
+next readout with IMM) is reported to the bench through ``on_burst``.  An over-long line (-363) and a reply lost to a full output queue (-430)
 are reported in the error queue too.
 """
 
@@ -32,6 +37,10 @@ DEFAULT_LOAD = 50.0
 HIGH_Z_REPLY = 9.9e37
 """What ``OUTP:LOAD?`` answers for the High Z (infinite) setting."""
 VRMS_PER_VPP = 1 / (2 * np.sqrt(2))
+BURST_CYCLES_RANGE = (1, 100_000_000)
+"""Cycles per burst accepted by ``BURS:NCYC`` [-]."""
+BURST_PERIOD_RANGE = (1e-6, 8000.0)
+"""Internal burst period accepted by ``BURS:INT:PER`` [s]."""
 """Sine: V_rms / V_pp [-]."""
 
 
@@ -62,6 +71,11 @@ class GeneratorState:
     offset: float = 0.0
     output: bool = False
     load: float = DEFAULT_LOAD
+    burst: bool = False
+    burst_mode: str = "TRIG"
+    burst_cycles: int = 1
+    burst_period: float = 0.01
+    trigger_source: str = "IMM"
 
     @property
     def open_circuit_gain(self) -> float:
@@ -135,8 +149,9 @@ class GeneratorDevice:
         translated through the amplifier gain.
     """
 
-    def __init__(self, peak_voltage_limit: float):
+    def __init__(self, peak_voltage_limit: float, on_burst=None):
         self.peak_voltage_limit = peak_voltage_limit
+        self.on_burst = on_burst
         self.state = GeneratorState()
         self.errors: list[str] = []
         self._commands = [
@@ -146,6 +161,13 @@ class GeneratorDevice:
                 ("*RST", self._reset, EVENT),
                 ("*CLS", self._clear, EVENT),
                 ("*OPC", self._operation_complete, EVENT | {"query"}),
+                ("*WAI", self._wait, EVENT),
+                ("*TRG", self._trigger, EVENT),
+                ("[SOURce#:]BURSt:STATe", self._burst_state, SETTING),
+                ("[SOURce#:]BURSt:MODE", self._burst_mode, SETTING),
+                ("[SOURce#:]BURSt:NCYCles", self._burst_cycles, SETTING),
+                ("[SOURce#:]BURSt:INTernal:PERiod", self._burst_period, SETTING),
+                ("TRIGger#:SOURce", self._trigger_source, SETTING),
                 ("SYSTem:ERRor[:NEXT]", self._next_error, QUERY_ONLY),
                 ("[SOURce#:]FUNCtion[:SHAPe]", self._function, SETTING),
                 ("[SOURce#:]FREQuency[:CW]", self._frequency, SETTING),
@@ -277,3 +299,55 @@ class GeneratorDevice:
         if not (np.isinf(value) or LOAD_RANGE[0] <= value <= LOAD_RANGE[1]):
             raise CommandError(-222, "Data out of range")
         self._apply(load=value)
+
+    def _wait(self, argument):
+        """``*WAI``: commands run in order here, so there is nothing to wait for."""
+
+    def bursting(self) -> bool:
+        """Whether the output emits triggered bursts (burst on, triggered mode, output on, a sine)."""
+        state = self.state
+        return state.burst and state.burst_mode == "TRIG" and state.output and state.function == "SIN"
+
+    def _trigger(self, argument):
+        if self.state.trigger_source == "BUS" and self.bursting() and self.on_burst is not None:
+            self.on_burst()
+
+    def _burst_state(self, argument):
+        if argument is None:
+            return "1" if self.state.burst else "0"
+        states = {"1": True, "ON": True, "0": False, "OFF": False}
+        if argument.upper() not in states:
+            raise CommandError(-224, "Illegal parameter value")
+        self._apply(burst=states[argument.upper()])
+
+    def _burst_mode(self, argument):
+        if argument is None:
+            return self.state.burst_mode
+        modes = {"TRIG": "TRIG", "TRIGGERED": "TRIG", "GAT": "GAT", "GATED": "GAT"}
+        if argument.upper() not in modes:
+            raise CommandError(-224, "Illegal parameter value")
+        self._apply(burst_mode=modes[argument.upper()])
+
+    def _burst_cycles(self, argument):
+        if argument is None:
+            return _format(self.state.burst_cycles)
+        value = _number(argument)
+        if value != round(value) or not BURST_CYCLES_RANGE[0] <= value <= BURST_CYCLES_RANGE[1]:
+            raise CommandError(-222, "Data out of range")
+        self._apply(burst_cycles=int(value))
+
+    def _burst_period(self, argument):
+        if argument is None:
+            return _format(self.state.burst_period)
+        value = _number(argument)
+        if not BURST_PERIOD_RANGE[0] <= value <= BURST_PERIOD_RANGE[1]:
+            raise CommandError(-222, "Data out of range")
+        self._apply(burst_period=value)
+
+    def _trigger_source(self, argument):
+        if argument is None:
+            return self.state.trigger_source
+        sources = {"IMM": "IMM", "IMMEDIATE": "IMM", "EXT": "EXT", "EXTERNAL": "EXT", "BUS": "BUS"}
+        if argument.upper() not in sources:
+            raise CommandError(-224, "Illegal parameter value")
+        self._apply(trigger_source=sources[argument.upper()])

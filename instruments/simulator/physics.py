@@ -4,22 +4,34 @@ Deflection amplitude at the antinode (docs/damping.md)
 
     w = w_s / sqrt((1 - r^2)^2 + (r / Q(v))^2),   r = f / f_r(t),   v = 2 pi f w,
 
-solved self-consistently by :func:`workflow.damping.harmonic.self_consistent_amplitude`;
+solved self-consistently by :func:`workflow.damping.harmonic.softened_amplitudes`, starting
+from the deflection the plate had at the previous readout (so that, with a softening
+resonance, f_r(v) = f_r(t) (1 - kappa v^2), up and down sweeps follow different branches);
 w_s = g V with g the quasi-static deflection per volt of the beam model and V the peak
 voltage across the ceramics.  The velocity leads the drive by 90 deg minus the
 displacement lag atan2(r/Q, 1 - r^2).
+
+After a burst of N cycles at f the plate rings down from v0 = v_ss (1 - exp(-pi N / Q(v_ss)))
+(v_ss the steady velocity at f; the build-up of a linear mode with the steady state's Q),
+following dv/dt = -pi f_r v / Q(v) (:func:`workflow.damping.ringdown.decay_velocity`).
+The plate's temperature rises with the drift: T = T_0 + (f_r(t) - f_r(0)) / (df_r/dT).
 """
 
 from dataclasses import dataclass
 
 import numpy as np
 
-from workflow.damping.harmonic import self_consistent_amplitude
+from workflow.damping.harmonic import self_consistent_amplitude, softened_amplitudes
+from workflow.damping.ringdown import decay_velocity
 from workflow.damping.laws import QuadraticLoss, quadratic_law_through
 from workflow.models import analytical
 from workflow.models.materials import DESIGN_VOLTAGE, PLATE_Q
 from workflow.models.plate import ORIGINAL_PLATE, Plate
 
+AMBIENT_TEMPERATURE = 22.0
+"""Plate temperature when the bench starts [deg C]."""
+FREQUENCY_PER_KELVIN = -5.0
+"""df_r/dT of the simulated plate [Hz/K]: CuBe's modulus falls about 3.5e-4 per kelvin, f_r half as fast."""
 DEFAULT_LOW_VELOCITY_Q = 150.0
 """Q(v -> 0) of the default simulated plate [-]: glued plates damp well below the ceramic's Q."""
 
@@ -38,40 +50,70 @@ class PlateResponse:
         Q(v) law with ``quality_factor(velocity)`` (:mod:`workflow.damping.laws`).
     drift_rate : float
         Thermal drift of the resonance, d f_r / d t [Hz/s].
+    softening : float
+        kappa in f_r(v) = f_r(t) (1 - kappa v^2), v the antinode velocity [s^2/m^2] (0: none).
     """
 
     resonance_frequency: float
     deflection_per_volt: float
     law: object
     drift_rate: float = 0.0
+    softening: float = 0.0
 
     def resonance_at(self, time):
-        """f_r(t) = f_r + drift_rate t [Hz] at ``time`` [s]."""
+        """f_r(t) = f_r + drift_rate t [Hz] at ``time`` [s] (small amplitude)."""
         return self.resonance_frequency + self.drift_rate * np.asarray(time)
 
-    def deflection(self, frequency, ceramic_voltage, time=0.0):
-        """Antinode deflection amplitude w [m] at drive ``frequency`` [Hz], ``ceramic_voltage`` [V peak]."""
-        static = self.deflection_per_volt * np.abs(np.asarray(ceramic_voltage, dtype=float))
-        return self_consistent_amplitude(static, frequency, self.resonance_at(time), self.law.quality_factor)
+    def temperature_at(self, time):
+        """Plate temperature [deg C] at ``time`` [s]: the drift read through df_r/dT."""
+        return AMBIENT_TEMPERATURE + self.drift_rate * np.asarray(time) / FREQUENCY_PER_KELVIN
 
-    def velocity(self, frequency, ceramic_voltage, time=0.0):
+    def deflection(self, frequency, ceramic_voltage, time=0.0, previous=None):
+        """Antinode deflection amplitude w [m] at drive ``frequency`` [Hz], ``ceramic_voltage`` [V peak].
+
+        Without softening the root is unique and arrays are solved elementwise.  With it the points
+        (the last axis of the broadcast arguments) are a sweep in measuring order, the first continued
+        from ``previous``, the deflection before it [m] (default: the small-amplitude response).
+        """
+        static = self.deflection_per_volt * np.abs(np.asarray(ceramic_voltage, dtype=float))
+        resonance = self.resonance_at(time)
+        if not self.softening:
+            return self_consistent_amplitude(static, frequency, resonance, self.law.quality_factor)
+        if not np.any(static):
+            return np.zeros(np.broadcast(static, frequency, resonance).shape)
+        shape = np.broadcast(static, frequency, resonance).shape
+        points = (np.atleast_1d(x) for x in (static, frequency, resonance))
+        return softened_amplitudes(*points, self.softening, self.law.quality_factor, start=previous).reshape(shape)
+
+    def velocity(self, frequency, ceramic_voltage, time=0.0, previous=None):
         """Antinode velocity amplitude [m/s] and its phase relative to the drive [deg].
 
         Parameters
         ----------
-        frequency : array
+        frequency : float
             Drive frequency [Hz].
-        ceramic_voltage : array
+        ceramic_voltage : float
             Peak voltage across the ceramics [V].
-        time : array
+        time : float
             Time since the bench started [s] (drift).
+        previous : float, optional
+            Deflection before this point [m] (see :meth:`deflection`).
         """
         frequency = np.asarray(frequency, dtype=float)
-        w = self.deflection(frequency, ceramic_voltage, time)
+        w = self.deflection(frequency, ceramic_voltage, time, previous)
         v = 2 * np.pi * frequency * w
-        r = frequency / self.resonance_at(time)
+        r = frequency / (self.resonance_at(time) * (1 - self.softening * v**2))
         lag = np.degrees(np.arctan2(r / self.law.quality_factor(v), 1 - r**2))
         return v, 90.0 - lag
+
+    def burst_velocity(self, frequency, ceramic_voltage, cycles, time):
+        """Antinode velocity at the end of a burst of ``cycles`` cycles [m/s] (build-up of the module docstring)."""
+        steady, _ = self.velocity(frequency, ceramic_voltage, time)
+        return float(steady * (1 - np.exp(-np.pi * cycles / self.law.quality_factor(steady))))
+
+    def ringdown(self, initial_velocity, decay_time, time):
+        """Antinode velocity envelope ``decay_time`` [s] after a burst that ended at ``time`` [s] with ``initial_velocity`` [m/s]."""
+        return decay_velocity(self.law, self.resonance_at(time), initial_velocity, decay_time)
 
 
 def working_point_velocity(plate: Plate = ORIGINAL_PLATE, q: float = PLATE_Q, voltage: float = DESIGN_VOLTAGE) -> float:
@@ -95,7 +137,7 @@ def default_law(
     return quadratic_law_through(low_velocity_q, working_q, working_point_velocity(plate, working_q, working_voltage))
 
 
-def plate_response(plate: Plate = ORIGINAL_PLATE, law=None, drift_rate: float = 0.0) -> PlateResponse:
+def plate_response(plate: Plate = ORIGINAL_PLATE, law=None, drift_rate: float = 0.0, softening: float = 0.0) -> PlateResponse:
     """The simulated response of ``plate``: f_r and w_s / V from the beam model (:mod:`workflow.models.analytical`).
 
     The quasi-static gain is the calibrated beam model's deflection per volt per unit Q,
@@ -106,4 +148,5 @@ def plate_response(plate: Plate = ORIGINAL_PLATE, law=None, drift_rate: float = 
         deflection_per_volt=float(analytical.deflection_per_volt_per_q(plate)),
         law=default_law(plate) if law is None else law,
         drift_rate=drift_rate,
+        softening=softening,
     )

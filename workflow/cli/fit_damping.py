@@ -6,6 +6,7 @@ from pathlib import Path
 from workflow.cli.options import add_force_option, add_json_flag, bounded, limit_text, seed_option
 from workflow.damping.fit import fit_damping, fit_summary
 from workflow.damping.laws import SAMPLED_LAWS
+from workflow.damping.likelihood import ForwardModel
 from workflow.damping.logs import drop_short_sweeps, read_logs
 from workflow.pipeline.config import LIMITS
 from workflow.pipeline.damping_files import FIT_OUTPUTS, write_fit
@@ -22,7 +23,8 @@ def register(subparsers) -> None:
         "(BIC at the MAP also reported).  Writes posterior.npz (what --damping reads), fit.json and "
         "figures into --out.",
     )
-    parser.add_argument("logs", nargs="+", metavar="LOG.csv", help="interferometer log(s) (docs/log-format.md)")
+    parser.add_argument("logs", nargs="+", metavar="LOG.csv",
+                        help="interferometer log(s): sweep logs and/or ring-down logs, fitted jointly (docs/log-format.md)")
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
     add_force_option(parser)
     parser.add_argument(
@@ -34,6 +36,11 @@ def register(subparsers) -> None:
     seed_option(parser, 0, "random seed of the walkers and the sampler")
     parser.add_argument("--max-steps", type=bounded(int, *LIMITS["damping.max_steps"]), default=20000,
                         help=f"cap on each chain's length, {limit_text('damping.max_steps')} (default: 20000)")
+    parser.add_argument("--softening", action="store_true",
+                        help="fit the resonance's amplitude softening f_r0 (1 - kappa v^2), each sweep solved in its "
+                        "measuring order (up and down sweeps differ when the resonance folds over)")
+    parser.add_argument("--drift", action="store_true",
+                        help="fit a drift rate of the resonance within each sweep (needs timestamp_s)")
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     add_json_flag(parser)
     parser.set_defaults(handler=run)
@@ -46,7 +53,8 @@ def run(args) -> dict:
     input_paths = {Path(p).resolve() for p in args.logs}
     laws = SAMPLED_LAWS if args.law == "all" else (args.law,)
     with output_folder(args.out, FIT_OUTPUTS, force=args.force) as out:
-        fit = fit_damping(log, laws=laws, seed=args.seed, max_steps=args.max_steps, progress=True)
+        forward = ForwardModel(softening=args.softening, drift=args.drift)
+        fit = fit_damping(log, laws=laws, seed=args.seed, max_steps=args.max_steps, progress=True, forward=forward)
         summary = dict(fit_summary(fit), files=write_fit(fit, out, figures=not args.no_figures, protect=input_paths))
     if not args.json:
         _print_human(summary)
@@ -66,6 +74,7 @@ def _print_human(summary: dict) -> None:
     for name, c in summary["comparison"]["laws"].items():
         waic = f"WAIC {c['waic']:.1f}, " if "waic" in c else ""
         print(f"  {name:10s} {waic}BIC {c['bic']:.1f}")
+    print(f"  velocity convention: {summary['velocity_convention']}")
     print(f"  preferred by WAIC: {summary['comparison']['preferred']}; posterior: {summary['files']['posterior']}")
 
 

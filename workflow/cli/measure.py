@@ -12,12 +12,24 @@ import sys
 from pathlib import Path
 
 from instruments.drivers.amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT, DEFAULT_GAIN
-from workflow.cli.options import Stopped, StopSignals, add_bench_arguments, add_json_flag, bench_settings, bounded
+from instruments.procedures.scan import DEFAULT_GRID, DEFAULT_MARGIN, DEFAULT_VOLTAGE
+from workflow.cli.options import (
+    Stopped,
+    StopSignals,
+    add_bench_arguments,
+    add_built_plate_arguments,
+    add_json_flag,
+    bench_settings,
+    bounded,
+    built_plate_from_args,
+    built_plate_model,
+)
 from workflow.errors import TactileError
+from workflow.units import MM
 
 DEFAULT_DATA_DIR = Path("measurements")
 """Folder of the logs when --out is not given, relative to the working directory."""
-PROCEDURES = ("resonance", "campaign", "voltage-sweep")
+PROCEDURES = ("resonance", "campaign", "voltage-sweep", "scan", "ringdown")
 
 
 def _voltages(text: str) -> tuple:
@@ -33,7 +45,7 @@ def _voltages(text: str) -> tuple:
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
         "measure",
-        help="run a bench procedure (resonance, campaign, voltage-sweep) and log it",
+        help="run a bench procedure (resonance, campaign, voltage-sweep, scan, ringdown) and log it",
         description="Run a measurement procedure against serial ports (--generator/--vibrometer) or the in-process "
         "simulator (--simulate). Each point is appended to a CSV log (docs/log-format.md) at once, by default "
         f"{DEFAULT_DATA_DIR}/<procedure>.csv in the working directory (a folder git ignores); rerunning the "
@@ -61,14 +73,12 @@ def register(subparsers) -> None:
                        "directory, a folder git ignores; the path is printed at the end)")
     ports.add_argument("--restart", action="store_true", help="overwrite an existing log tactile wrote instead of resuming it (any other file is never overwritten nor appended to: the command refuses it)")
     add_bench_arguments(common)
+    add_built_plate_arguments(common)
     add_json_flag(common)
 
     resonance = procedures.add_parser("resonance", parents=[common], help="coarse then fine sweep to find f_r",
                                       description="Find the resonance: a coarse sweep then a fine one around its peak.")
-    resonance.add_argument("--start-hz", type=float, default=25e3, help="coarse sweep start [Hz] (default 25000)")
-    resonance.add_argument("--stop-hz", type=float, default=40e3, help="coarse sweep stop [Hz] (default 40000)")
-    resonance.add_argument("--coarse-points", type=int, default=61, help="points of the coarse sweep, 3 to 10000 (default 61)")
-    resonance.add_argument("--fine-points", type=int, default=41, help="points of the fine sweep, 3 to 10000 (default 41)")
+    _add_search_flags(resonance, 25e3, 61)
     resonance.add_argument("--voltage", type=float, default=2.0, help="drive, peak volts across the ceramics (default 2)")
 
     campaign = procedures.add_parser("campaign", parents=[common], help="Q(v) campaign: sweeps at several voltages",
@@ -88,8 +98,59 @@ def register(subparsers) -> None:
     sweep.add_argument("--voltages", type=_voltages, default=tuple(float(v) for v in range(1, 16)),
                        help="peak volts across the ceramics, comma-separated, at most 100000 (default 1,2,...,15)")
     sweep.add_argument("--frequency-hz", type=float, help="drive frequency [Hz] (default: see above)")
-    for sub in (resonance, campaign, sweep):
+    ring = procedures.add_parser("ringdown", parents=[common], help="free decays after bursts at resonance",
+                                 description="One burst per level at the resonance (33500 burst mode, bus trigger), "
+                                 "then the vibrometer's envelope record of the free decay; one row per sample, with "
+                                 "the plate temperature where the bench reports it (docs/log-format.md). Without "
+                                 "--frequency-hz the frequency comes from the log being resumed or from a resonance "
+                                 "search logged to <out>-resonance.csv.")
+    ring.add_argument("--voltages", type=_voltages, default=(5.0, 10.0, 15.0),
+                      help="burst levels, peak volts across the ceramics, comma-separated (default 5,10,15)")
+    ring.add_argument("--frequency-hz", type=float, help="burst frequency [Hz] (default: see above)")
+    ring.add_argument("--cycles", type=bounded(int, 1, 100_000_000), default=2000,
+                      help="cycles per burst, 1 to 100000000 (default 2000)")
+    ring.add_argument("--samples", type=bounded(int, 2, 256), default=100,
+                      help="envelope samples after each burst, 2 to 256 (default 100)")
+    ring.add_argument("--interval-us", type=bounded(int, 1, 1_000_000), default=50,
+                      help="time between samples [us], 1 to 1000000 (default 50)")
+    scan = procedures.add_parser(
+        "scan", parents=[common], help="deflection map: the laser spot moved over a grid of points at resonance",
+        description="Drive the plate at one frequency and voltage and measure the velocity at each point of a grid "
+        "covering the plate (the vibrometer's scanner; docs/instruments.md). Needs the built plate (--lambda-mm, "
+        "--hi-mm, --hp-mm [--b-mm]) for its extent. Without --frequency-hz the frequency comes from the log being "
+        "resumed or from a resonance search (the --start-hz ... flags) logged to <out>-resonance.csv. Writes a "
+        "figure of the measured map beside the FEM's map of the nominal plate, with their MAC.")
+    scan.add_argument("--grid", type=int, nargs=2, default=DEFAULT_GRID, metavar=("NX", "NY"),
+                      help=f"points along x and y (default {DEFAULT_GRID[0]} {DEFAULT_GRID[1]})")
+    scan.add_argument("--points", type=_points, help="explicit points instead of --grid: 'x:y,x:y,...' [mm from the centre]")
+    scan.add_argument("--margin-mm", type=float, default=DEFAULT_MARGIN / MM,
+                      help=f"distance of the outer grid points from the edges [mm] (default {DEFAULT_MARGIN / MM:g})")
+    scan.add_argument("--voltage", type=float, default=DEFAULT_VOLTAGE,
+                      help=f"drive, peak volts across the ceramics (default {DEFAULT_VOLTAGE:g})")
+    scan.add_argument("--frequency-hz", type=float, help="drive frequency [Hz] (default: see above)")
+    _add_search_flags(scan, 15e3, 101)
+    scan.add_argument("--figure", type=Path, help="the map figure (default: <out> with .png)")
+    for sub in (resonance, campaign, sweep, scan, ring):
         sub.set_defaults(handler=run)
+
+
+def _add_search_flags(parser, start: float, coarse: int) -> None:
+    """The flags of a resonance search's plan."""
+    parser.add_argument("--start-hz", type=float, default=start, help=f"coarse sweep start [Hz] (default {start:g})")
+    parser.add_argument("--stop-hz", type=float, default=40e3, help="coarse sweep stop [Hz] (default 40000)")
+    parser.add_argument("--coarse-points", type=int, default=coarse,
+                        help=f"points of the coarse sweep, 3 to 10000 (default {coarse})")
+    parser.add_argument("--fine-points", type=int, default=41, help="points of the fine sweep, 3 to 10000 (default 41)")
+
+
+def _points(text: str) -> tuple:
+    try:
+        points = tuple(tuple(float(v) * MM for v in item.split(":")) for item in text.split(","))
+    except ValueError:
+        points = ((),)
+    if not points or any(len(point) != 2 or not all(map(math.isfinite, point)) for point in points):
+        raise argparse.ArgumentTypeError(f"expected points as x:y,x:y,... in mm, got {text!r}")
+    return points
 
 
 def _open_station(args):
@@ -113,6 +174,7 @@ def _open_station(args):
         settings = bench_settings(args)
         station, _ = simulated_station(settings, args.max_voltage, settle_time=0.0, **options)
         return station, simulation_metadata(settings)
+    built = built_plate_from_args(args)
     if not (args.generator and args.vibrometer):
         raise TactileError("need --generator PORT and --vibrometer PORT (or --simulate)")
     register_url_handler()
@@ -122,14 +184,18 @@ def _open_station(args):
             ports.append(serial.serial_for_url(name, baudrate=args.baudrate, timeout=args.timeout))
         except (serial.SerialException, ValueError, OSError) as error:
             raise TactileError(f"cannot open {flag} {name}: {error}") from None
-    return open_station(*ports, PowerAmplifier(args.amplifier_gain), args.max_voltage, **options), {"simulated": "no"}
+    metadata = {"simulated": "no", **({} if built is None else built.metadata())}
+    return open_station(*ports, PowerAmplifier(args.amplifier_gain), args.max_voltage, **options), metadata
 
 
 def _centre(args, station, metadata, out: Path, key: str) -> float:
     """The frequency a campaign or voltage sweep is centred on (see ``working_frequency``)."""
     from instruments.procedures.sweeps import working_frequency
 
-    frequency, search = working_frequency(station, out, key, metadata, args.restart)
+    from instruments.procedures.sweeps import ResonancePlan
+
+    plan = ResonancePlan(args.start_hz, args.stop_hz, args.coarse_points, args.fine_points) if args.procedure == "scan" else ResonancePlan()
+    frequency, search = working_frequency(station, out, key, metadata, args.restart, plan)
     if search is not None and not args.json:
         print(f"resonance search: {frequency:.1f} Hz; log: {search.path}")
     return frequency
@@ -143,14 +209,22 @@ def _check_plan_flags(args) -> None:
     for flag, value in positive.items():
         if value is not None and not value > 0:
             raise TactileError(f"{flag} must be positive, got {value:g}")
-    if args.procedure == "resonance":
+    if args.procedure in ("resonance", "scan"):
         sweeps = {"--coarse-points": args.coarse_points, "--fine-points": args.fine_points}
         check_sizes(sweeps, sum(sweeps.values()), "--coarse-points + --fine-points")
+    if args.procedure == "scan":
+        if built_plate_from_args(args) is None:
+            raise TactileError("a scan needs the plate: give --lambda-mm, --hi-mm and --hp-mm (and --b-mm)")
+        if args.points is None and min(args.grid) < 1:
+            raise TactileError(f"--grid needs at least 1 point along each axis, got {args.grid[0]} {args.grid[1]}")
+        check_sizes({}, len(args.points) if args.points else args.grid[0] * args.grid[1], "scan points")
     elif args.procedure == "campaign":
         check_sizes({"--points": args.points}, args.points * len(args.voltages), "--points x --voltages")
-    else:
+    elif args.procedure == "ringdown":
+        check_sizes({}, args.samples * len(args.voltages), "--samples x --voltages")
+    elif args.procedure == "voltage-sweep":
         check_sizes({}, len(args.voltages), "--voltages")
-    if args.procedure == "resonance" and not args.start_hz < args.stop_hz:
+    if args.procedure in ("resonance", "scan") and not args.start_hz < args.stop_hz:
         raise TactileError(f"--start-hz {args.start_hz:g} must be below --stop-hz {args.stop_hz:g}")
 
 
@@ -178,10 +252,12 @@ def run(args):
         "truncated_bytes": result.truncated_bytes,
         **result.summary,
     }
+    if result.procedure == "scan":
+        summary.update(_scan_figure(args, result.path))
     if not args.json:
         print(f"{result.procedure}: {result.measured} points measured, {result.resumed} already logged "
               f"({result.planned} planned); log: {result.path}")
-        _print_summary(result.procedure, result.summary)
+        _print_summary(result.procedure, summary)
     return summary
 
 
@@ -196,9 +272,48 @@ def _measure(args, station, metadata: dict, out: Path):
         centre = args.center_hz or _centre(args, station, metadata, out, "center_frequency")
         plan = procedures.CampaignPlan(centre, args.span_hz, args.points, args.voltages)
         return procedures.q_campaign(station, out, plan, metadata, args.restart)
+    if args.procedure == "scan":
+        return _scan(args, station, metadata, out)
     frequency = args.frequency_hz or _centre(args, station, metadata, out, "frequency")
+    if args.procedure == "ringdown":
+        from instruments.procedures.ringdown import RingdownPlan, ringdown
+
+        plan = RingdownPlan(frequency, args.voltages, args.cycles, args.samples, args.interval_us * 1e-6)
+        return ringdown(station, out, plan, metadata, args.restart)
     plan = procedures.VoltageSweepPlan(frequency, args.voltages)
     return procedures.voltage_sweep(station, out, plan, metadata, args.restart)
+
+
+def _scan(args, station, metadata: dict, out: Path):
+    """The deflection scan over --grid or --points of the built plate."""
+    from instruments.procedures.scan import ScanPlan, deflection_scan, grid_points
+
+    plate = built_plate_from_args(args).plate()
+    points = args.points
+    if points is None:
+        try:
+            points = grid_points(float(plate.length) / 2, float(plate.width) / 2, *args.grid, args.margin_mm * MM)
+        except ValueError as error:
+            raise TactileError(f"--margin-mm: {error}") from None
+    frequency = args.frequency_hz or _centre(args, station, metadata, out, "frequency")
+    return deflection_scan(station, out, ScanPlan(frequency, args.voltage, points), metadata, args.restart)
+
+
+def _scan_figure(args, log: Path) -> dict:
+    """Compare a scan with the FEM's map of the nominal plate: write the figure; its path, the MAC and the FEM's f_r."""
+    from workflow.pipeline.builtplate import read_scan, scan_mac
+    from workflow.pipeline.figures.scan import scan_figure
+
+    scan = read_scan(log)
+    nominal = built_plate_model(args, scan.plate)
+    mac = scan_mac(scan, nominal)
+    path = args.figure or log.with_suffix(".png")
+    figure = scan_figure(scan, nominal, mac)
+    try:
+        figure.savefig(path, dpi=120)
+    except OSError as error:
+        raise TactileError(f"cannot write the figure {path}: {error.strerror or error}") from None
+    return {"mac": mac, "figure": str(path), "nominal_fem_frequency_hz": nominal.resonance_frequency}
 
 
 def _shut_down(station, signals: StopSignals) -> str | None:
@@ -224,6 +339,16 @@ def _print_summary(procedure: str, summary: dict) -> None:
         for sweep in summary["sweeps"]:
             print(f"  sweep {sweep['sweep']} at {sweep['voltage_v']:g} V: peak {sweep['peak_frequency_hz']:.1f} Hz, "
                   f"{sweep['peak_velocity_m_s']:.4f} m/s, {_q_estimate(sweep['q_estimate'])}")
+    elif procedure == "ringdown":
+        for burst in summary["bursts"]:
+            temperature = "" if burst["temperature_c"] is None else f", plate {burst['temperature_c']:.2f} °C"
+            print(f"  burst {burst['burst']} at {burst['voltage_v']:g} V: {burst['initial_velocity_m_s']:.4f} m/s "
+                  f"at the burst's end{temperature}")
+    elif procedure == "scan":
+        print(f"  {summary['points']} points at {summary['frequency_hz']:.1f} Hz, {summary['voltage_v']:g} V: largest "
+              f"deflection {summary['max_deflection_um']:.3f} µm at ({summary['max_x_mm']:g}, {summary['max_y_mm']:g}) mm")
+        print(f"  MAC with the FEM's map of the nominal plate (working mode {summary['nominal_fem_frequency_hz']:.0f} Hz): "
+              f"{summary['mac']:.4f}; figure: {summary['figure']}")
     else:
         for voltage, deflection in zip(summary["voltage_v"], summary["deflection_um"]):
             print(f"  {voltage:g} V: deflection {deflection:.4f} µm")

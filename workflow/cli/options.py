@@ -324,12 +324,116 @@ def add_bench_arguments(parser) -> None:
                        help="cut the line at the N-th command (once; default never)")
     group.add_argument("--bench-limit", type=float, default=None, metavar="VOLTS",
                        help="the simulated generator's own limit, peak volts across the ceramics (default 30)")
+    group.add_argument("--softening", type=bounded(float, 0.0, 100.0, "s^2/m^2"), default=0.0, metavar="KAPPA",
+                       help="amplitude softening of the simulated resonance, f_r (1 - KAPPA v^2) with v the antinode "
+                       "velocity, 0 to 100 s^2/m^2 (default 0: none)")
+    group.add_argument("--point-mm", type=_point, default=(0.0, 0.0), metavar="X,Y",
+                       help="where the simulated vibrometer points, from the plate's centre [mm] (default 0,0: an antinode)")
+
+
+def _point(text: str) -> tuple:
+    """``X,Y`` in millimetres -> (x, y) [mm]."""
+    try:
+        x, y = (float(item) for item in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected X,Y in millimetres, e.g. 3,0; got {text!r}") from None
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise argparse.ArgumentTypeError(f"expected finite millimetres, got {text!r}")
+    return x, y
+
+
+def add_built_plate_arguments(parser) -> None:
+    """The built plate's nominal design (written to logs) and, for the simulator, its hidden deviations."""
+    from workflow.models.builtplate import DEMONSTRATION_DEVIATIONS as demo
+
+    group = parser.add_argument_group(
+        "built plate",
+        "the measured plate's nominal design, written to the log's metadata (# lambda_mm, # h_i_mm, ...; "
+        "docs/log-format.md); with --simulate the simulator plays it as built, with hidden deviations (the "
+        "FEM of the deviated plate; docs/instruments.md)",
+    )
+    group.add_argument("--lambda-mm", type=positive_float, help="nominal wavelength lambda [mm] (with --hi-mm, --hp-mm)")
+    group.add_argument("--hi-mm", type=positive_float, help="nominal resonator thickness h_i [mm]")
+    group.add_argument("--hp-mm", type=positive_float, help="nominal ceramic thickness h_p [mm]")
+    group.add_argument("--b-mm", type=positive_float, help=f"width b [mm] (default {ORIGINAL_PLATE.width / MM:g})")
+    group.add_argument("--ceramic", choices=materials.ceramic_names(), help="ceramic record (default: the paper's)")
+    group.add_argument("--resonator", choices=materials.resonator_names(), help="resonator record (default: the paper's)")
+    group.add_argument("--glue-um", type=bounded(float, *GLUE_RANGE_UM, "um"), metavar="T",
+                       help="nominal bond thickness [um] (default: not stated; the model then has no bond)")
+    group.add_argument("--deviations", choices=("demo", "none"), default="demo",
+                       help="simulator: the built plate's hidden deviations, the documented demonstration set or "
+                       "none (default demo); the --dev-* flags override single values")
+    for flag, value, text in (
+        ("--dev-glue-um", demo.glue_thickness / UM, "bond thickness [um]"),
+        ("--dev-ceramic-factor", demo.ceramic_modulus_factor, "ceramic stiffness factor [-]"),
+        ("--dev-resonator-factor", demo.resonator_modulus_factor, "resonator Young's modulus factor [-]"),
+        ("--dev-hi-offset-um", demo.resonator_thickness_offset / UM, "resonator thickness offset [um]"),
+        ("--dev-ceramic-offset-mm", demo.ceramic_offset / MM, "offset of the ceramics along x [mm]"),
+    ):
+        group.add_argument(flag, type=finite_float, help=f"simulator: {text} (demo {value:g})")
+    group.add_argument("--sim-accuracy", type=bounded(float, *ACCURACY_RANGE), default=0.01, metavar="REL",
+                       help="FEM accuracy of the simulated built plate and of the nominal map a scan is compared "
+                       "with (default 0.01)")
+
+
+def built_plate_from_args(args):
+    """The :class:`~workflow.models.builtplate.BuiltPlate` of --lambda-mm, --hi-mm, --hp-mm, ..., or None if not given."""
+    from workflow.models.builtplate import BuiltPlate
+
+    geometry = {flag: getattr(args, flag.lstrip("-").replace("-", "_"), None) for flag in ("--lambda-mm", "--hi-mm", "--hp-mm")}
+    given = [flag for flag, value in geometry.items() if value is not None]
+    if not given:
+        return None
+    if len(given) < len(geometry):
+        missing = [flag for flag in geometry if flag not in given]
+        raise TactileError(f"a built plate needs --lambda-mm, --hi-mm and --hp-mm; {', '.join(missing)} missing")
+    width = args.b_mm if args.b_mm is not None else ORIGINAL_PLATE.width / MM
+    glue = None if args.glue_um is None else args.glue_um * UM
+    built = BuiltPlate(args.lambda_mm * MM, args.hi_mm * MM, args.hp_mm * MM, width * MM, args.ceramic, args.resonator, glue)
+    built.plate()  # checks the geometry (GeometryError)
+    return built
+
+
+def deviations_from_args(args):
+    """The simulated built plate's :class:`~workflow.models.builtplate.PlateDeviations` of --deviations and --dev-*."""
+    from dataclasses import replace
+
+    from workflow.models.builtplate import DEMONSTRATION_DEVIATIONS, PlateDeviations
+
+    base = DEMONSTRATION_DEVIATIONS if args.deviations == "demo" else PlateDeviations()
+    changes = {
+        field: getattr(args, option) * scale
+        for option, field, scale in (
+            ("dev_glue_um", "glue_thickness", UM),
+            ("dev_ceramic_factor", "ceramic_modulus_factor", 1.0),
+            ("dev_resonator_factor", "resonator_modulus_factor", 1.0),
+            ("dev_hi_offset_um", "resonator_thickness_offset", UM),
+            ("dev_ceramic_offset_mm", "ceramic_offset", MM),
+        )
+        if getattr(args, option) is not None
+    }
+    try:
+        return replace(base, **changes)
+    except ValueError as error:
+        raise TactileError(f"bad --dev-* flag: {error}") from None
+
+
+def built_plate_model(args, built, deviations=None):
+    """The FEM of ``built`` (a BuiltPlate) with ``deviations`` (default none) at --sim-accuracy, from the disk cache."""
+    from workflow.execution.cache import EvaluationCache
+    from workflow.models.builtplate import PlateDeviations
+    from workflow.pipeline.builtplate import built_plate_model as cached_model
+
+    return cached_model(built.plate(), deviations or PlateDeviations(), FemAccuracy(target=args.sim_accuracy),
+                        EvaluationCache())
 
 
 def bench_settings(args):
-    """BenchSettings from the flags of :func:`add_bench_arguments` (and ``--amplifier-gain`` if present)."""
+    """BenchSettings from the flags of :func:`add_bench_arguments` (and ``--amplifier-gain`` if present); a built
+    plate from those of :func:`add_built_plate_arguments` when they name one."""
     from instruments.drivers.amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT, DEFAULT_GAIN
     from instruments.simulator import FaultSettings, default_bench_settings
+    from instruments.simulator.bench import built_bench_settings
 
     try:
         faults = FaultSettings(args.drop_rate, args.garble_rate, args.disconnect_at, seed=args.seed)
@@ -339,7 +443,17 @@ def bench_settings(args):
     if not (math.isfinite(limit) and limit > 0):
         raise TactileError(f"--bench-limit must be a finite number of volts > 0, got {limit:g}")
     gain = getattr(args, "amplifier_gain", DEFAULT_GAIN)
-    return default_bench_settings(seed=args.seed, faults=faults, ceramic_voltage_limit=limit, amplifier_gain=gain)
+    fields = dict(seed=args.seed, faults=faults, ceramic_voltage_limit=limit, amplifier_gain=gain)
+    built = built_plate_from_args(args) if hasattr(args, "deviations") else None
+    if built is not None:
+        return built_bench_settings(built_plate_model(args, built, deviations_from_args(args)), **fields)
+    point = tuple(value * MM for value in args.point_mm)
+    try:
+        settings = default_bench_settings(**fields, softening=args.softening, measurement_point=point)
+        settings.mode_factor()
+    except ValueError as error:
+        raise TactileError(f"--point-mm {args.point_mm[0]:g},{args.point_mm[1]:g}: {error}") from None
+    return settings
 
 
 # Stop signals as an exception, so that a command's cleanup (the bench's output off) runs on each.

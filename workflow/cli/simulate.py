@@ -5,7 +5,14 @@ import os
 import signal
 import sys
 
-from workflow.cli.options import add_bench_arguments, add_json_flag, bench_settings, describe_law
+from workflow.cli.options import (
+    add_bench_arguments,
+    add_built_plate_arguments,
+    add_json_flag,
+    bench_settings,
+    built_plate_from_args,
+    describe_law,
+)
 from workflow.units import KHZ, PM_PER_V
 
 
@@ -20,6 +27,7 @@ def register(subparsers) -> None:
                         help='serve on pseudo-terminals: print {"generator": PATH, "vibrometer": PATH} and serve until '
                         "interrupted (SIGTERM stops it cleanly)")
     add_bench_arguments(parser)
+    add_built_plate_arguments(parser)
     add_json_flag(parser)
     parser.set_defaults(handler=run)
 
@@ -30,6 +38,7 @@ def run(args):
     from instruments.simulator.ptyserver import open_ptys, serve
     from workflow.damping.laws import law_parameters
     from workflow.models.materials import DESIGN_VOLTAGE, PLATE_Q
+    from workflow.models.plate import ORIGINAL_PLATE
 
     settings = bench_settings(args)
     if args.pty:
@@ -50,7 +59,9 @@ def run(args):
                 pair.close()
         return None
     response = settings.response
-    v_work = working_point_velocity(q=PLATE_Q, voltage=DESIGN_VOLTAGE)
+    built = built_plate_from_args(args)
+    plate = ORIGINAL_PLATE if built is None else built.plate()
+    v_work = working_point_velocity(plate, q=PLATE_Q, voltage=DESIGN_VOLTAGE)
     result = {
         **settings.metadata(),
         "working_voltage_v": DESIGN_VOLTAGE,

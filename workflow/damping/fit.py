@@ -23,7 +23,16 @@ import numpy as np
 from scipy import optimize
 
 from workflow.damping.laws import LAWS
-from workflow.damping.likelihood import FitData, ParameterLayout, fit_data, log_probability, pointwise_log_likelihood
+from workflow.damping.likelihood import (
+    FitData,
+    ForwardModel,
+    ParameterLayout,
+    decay_estimates,
+    fit_data,
+    initial_effects,
+    log_probability,
+    pointwise_log_likelihood,
+)
 from workflow.damping.logs import CampaignLog, drop_short_sweeps
 from workflow.damping.posterior import DampingPosterior
 from workflow.progress import Progress
@@ -34,6 +43,8 @@ CRITERION = (
     "WAIC (widely applicable information criterion, deviance scale, from the posterior samples; "
     "lower is better); BIC at the MAP is also given"
 )
+VELOCITY_CONVENTION = "v: peak velocity amplitude at the antinodes (measured velocities divided by |phi| at their point)"
+"""The velocity Q(v) is a function of (docs/damping.md)."""
 CHAIN_TAUS = 50
 """A converged chain is at least this many autocorrelation times long [-]."""
 CONVERGENCE_RULE = f"n_steps >= {CHAIN_TAUS} tau_max and every tau changed < 1 % since the previous check"
@@ -172,7 +183,7 @@ class DampingFit:
 
 def sweep_estimates(log: CampaignLog) -> SweepEstimates:
     """Peak and half-power-bandwidth quality factor of every sweep (model-free)."""
-    rows = []
+    rows = [(np.nan,) * 4] if not log.n_sweeps else []
     for k in range(log.n_sweeps):
         mine = log.sweep == k
         order = np.argsort(log.frequency[mine])
@@ -208,8 +219,10 @@ def initial_guess(data: FitData, sweeps: SweepEstimates) -> Tuple[np.ndarray, np
     """
     layout = data.layout
     ok = np.isfinite(sweeps.quality_factor)
-    q = sweeps.quality_factor[ok] if ok.any() else np.array([50.0])
-    velocity = sweeps.peak_velocity[ok] if ok.any() else np.array([np.max(data.velocity)])
+    decay_velocity, decay_q = decay_estimates(data)
+    ok_q, ok_v = np.r_[sweeps.quality_factor[ok], decay_q], np.r_[sweeps.peak_velocity[ok], decay_velocity]
+    q = ok_q if ok_q.size else np.array([50.0])
+    velocity = ok_v if ok_v.size else np.array([np.max(data.velocity)])
     loss = 1 / q
     start, scale = {}, {}
     exponent = {"quadratic": 2, "linear": 1}.get(layout.law_name)
@@ -229,6 +242,9 @@ def initial_guess(data: FitData, sweeps: SweepEstimates) -> Tuple[np.ndarray, np
         start[f"f_r_{k}"], scale[f"f_r_{k}"] = sweeps.peak_frequency[k], sweeps.peak_frequency[k] / peak_q[k] / 10
     start["ln_sigma_rel"], scale["ln_sigma_rel"] = np.log(0.03), 0.5
     start["ln_sigma_abs"], scale["ln_sigma_abs"] = np.log(0.01 * np.max(data.velocity)), 0.5
+    effects = initial_effects(data)
+    start.update(effects[0])
+    scale.update(effects[1])
     theta = np.array([start[name] for name in layout.names])
     margin = 1e-6 * (data.upper - data.lower)
     return np.clip(theta, data.lower + margin, data.upper - margin), np.array([scale[name] for name in layout.names])
@@ -242,8 +258,7 @@ def maximum_a_posteriori(data: FitData, start: np.ndarray, scale: np.ndarray) ->
     gradient is a central difference computed as one batched evaluation; points are
     clipped into the prior box, so the objective stays finite up to the bounds.
     """
-    physical = np.ones(len(start), dtype=bool)
-    physical[-2:] = False
+    physical = np.array([not name.startswith("ln_sigma") for name in data.layout.names])
     theta = _maximise(data, start, scale, physical)
     return _maximise(data, theta, scale, np.ones(len(start), dtype=bool))
 
@@ -398,9 +413,9 @@ def bic(log_likelihood: float, n_parameters: int, n_points: int) -> float:
     return float(-2 * log_likelihood + n_parameters * np.log(n_points))
 
 
-def map_fit(log: CampaignLog, law_name: str, sweeps: Optional[SweepEstimates] = None):
+def map_fit(log: CampaignLog, law_name: str, sweeps: Optional[SweepEstimates] = None, forward: ForwardModel = ForwardModel()):
     """MAP of one law: (FitData, theta_map, scale, log-likelihood at the MAP)."""
-    data = fit_data(log, law_name)
+    data = fit_data(log, law_name, forward)
     start, scale = initial_guess(data, sweeps or sweep_estimates(log))
     theta = maximum_a_posteriori(data, start, scale)
     return data, theta, scale, float(pointwise_log_likelihood(theta, data).sum())
@@ -422,6 +437,7 @@ def fit_law(
     check_every: int = 100,
     progress: bool = False,
     sweeps: Optional[SweepEstimates] = None,
+    forward: ForwardModel = ForwardModel(),
 ) -> LawFit:
     """MAP, Laplace start and emcee posterior of one Q(v) law.
 
@@ -433,16 +449,20 @@ def fit_law(
     seed : int
         Seeds the initial walkers and emcee's generator.
     n_walkers : int, optional
-        Default: max(32, 4 D), even.
+        Default: max(32, 2 D + 2), even (twice the dimension suffices for the differential-evolution moves;
+        on the joint softening fit 42 walkers reach the same tau in steps as 80, at half the cost).
     max_steps, max_seconds, check_every : int, float, int
         Caps on the chain and the convergence-check interval [steps, s, steps].
     progress : bool
         Show the chain's progress towards convergence on stderr.
+    sweeps : SweepEstimates, optional
+    forward : ForwardModel
+        Softening and drift fitted beyond Q(v) (default: neither).
     """
-    data, theta_map, scale, log_likelihood = map_fit(log, law_name, sweeps)
+    data, theta_map, scale, log_likelihood = map_fit(log, law_name, sweeps, forward)
     rng = np.random.default_rng(seed)
     n_dim = data.layout.dimension
-    n_walkers = n_walkers or max(32, 4 * n_dim)
+    n_walkers = n_walkers or max(32, 2 * n_dim + 2)
     n_walkers += n_walkers % 2
     covariance = laplace_covariance(data, theta_map, scale)
     walkers = initial_walkers(data, theta_map, covariance, n_walkers, rng)
@@ -474,6 +494,7 @@ def fit_damping(
     max_seconds: Optional[float] = None,
     progress: bool = False,
     n_walkers: Optional[int] = None,
+    forward: ForwardModel = ForwardModel(),
 ) -> DampingFit:
     """Fit the sampled ``laws`` to the campaign; MAP and BIC for every known law.
 
@@ -491,7 +512,9 @@ def fit_damping(
         Cap on each chain's wall time [s].
     progress : bool
     n_walkers : int, optional
-        Walkers per chain (default max(32, 4 D)).
+        Walkers per chain (default max(32, 2 D + 2)).
+    forward : ForwardModel
+        Softening and drift fitted beyond Q(v) (default: neither).
 
     Returns
     -------
@@ -502,33 +525,35 @@ def fit_damping(
     sweeps = sweep_estimates(log)
     fits = {
         name: fit_law(
-            log, name, seed, n_walkers, max_steps, max_seconds, progress=progress, sweeps=sweeps
+            log, name, seed, n_walkers, max_steps, max_seconds, progress=progress, sweeps=sweeps, forward=forward
         )
         for name in laws
     }
     criteria = {}
+    n_points = len(log.velocity) + (0 if log.ringdown is None else len(log.ringdown.velocity))
     for name in LAWS:
         if name in fits:
             log_likelihood, n_parameters = fits[name].log_likelihood_map, fits[name].data.layout.dimension
         else:
-            data, _, _, log_likelihood = map_fit(log, name, sweeps)
+            data, _, _, log_likelihood = map_fit(log, name, sweeps, forward)
             n_parameters = data.layout.dimension
         criteria[name] = {
             "log_likelihood": log_likelihood,
             "n_parameters": n_parameters,
-            "bic": bic(log_likelihood, n_parameters, len(log.velocity)),
+            "bic": bic(log_likelihood, n_parameters, n_points),
         }
     preferred = min(fits, key=lambda name: fits[name].waic)
     return DampingFit(log=log, sweeps=sweeps, fits=fits, map_criteria=criteria, preferred=preferred)
 
 
-_UNITS = {"q0": "-", "gain": "m/V", "sigma_rel": "-", "sigma_abs": "m/s"}
+_UNITS = {"q0": "-", "gain": "m/V", "sigma_rel": "-", "sigma_abs": "m/s", "kappa": "s^2/m^2", "drift_rate": "Hz/s",
+          "sigma_decay_rel": "-", "sigma_decay_abs": "m/s"}
 _ALPHA_UNITS = {"quadratic": "s^2/m^2", "linear": "s/m"}
 
 
 def parameter_unit(law_name: str, name: str) -> str:
     """Unit of the fitted parameter ``name`` of the law ``law_name`` (``"-"`` when dimensionless)."""
-    return "Hz" if name.startswith("f_r_") else _ALPHA_UNITS.get(law_name) if name == "alpha" else _UNITS[name]
+    return "Hz" if name.startswith("f_r_") else "m/s" if name.startswith("v0_") else _ALPHA_UNITS.get(law_name) if name == "alpha" else _UNITS[name]
 
 
 def parameter_summary(law_fit: LawFit) -> dict:
@@ -560,8 +585,11 @@ def diagnostics_summary(law_fit: LawFit) -> dict:
 
 
 def velocity_grid(log: CampaignLog, n: int = 50) -> np.ndarray:
-    """n velocities spanning the measured ones [m/s]."""
-    return np.linspace(float(np.min(log.velocity)), float(np.max(log.velocity)), n)
+    """n antinode velocities spanning the measured ones (sweeps and ring-downs) [m/s]."""
+    velocity = log.velocity / log.measurement_factor()
+    if log.ringdown is not None:
+        velocity = np.r_[velocity, log.ringdown.velocity / log.ringdown.mode_factor]
+    return np.linspace(float(np.min(velocity)), float(np.max(velocity)), n)
 
 
 def fit_summary(fit: DampingFit) -> dict:
@@ -596,7 +624,9 @@ def fit_summary(fit: DampingFit) -> dict:
             "peak_velocity_m_s": fit.sweeps.peak_velocity,
             "half_power_q": [None if not np.isfinite(q) else float(q) for q in fit.sweeps.quality_factor],
         },
+        "velocity_convention": VELOCITY_CONVENTION,
         "n_points": int(len(fit.log.velocity)),
+        "n_ringdown_samples": 0 if fit.log.ringdown is None else int(len(fit.log.ringdown.velocity)),
         "n_sweeps": fit.log.n_sweeps,
         "sources": list(fit.log.sources),
     }

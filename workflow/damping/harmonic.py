@@ -15,6 +15,12 @@ Because every Q(v) law is non-increasing in v, T(w) = D(Q(omega w)) is non-incre
 the residual in u = ln w, H(u) = u - ln T(e^u), has slope dH/du >= 1: the root is unique
 (no second branch), bracketed by [ln T(w_0), ln w_0] with w_0 = D(Q(0)), and
 |ln w - ln w*| <= |H(ln w)| at any w, so the residual bounds the error.
+
+A resonance that softens with amplitude, f_r(v) = f_r0 (1 - kappa v^2), breaks that
+monotonicity: the curve can fold over and a frequency can have two stable amplitudes.
+:func:`softened_amplitudes` then solves a sweep's points in their measuring order, each from
+the previous one's amplitude (:func:`follow_branch`, :func:`root_near`), vectorised across
+walkers and sweeps; :func:`single_valued` proves where the order cannot matter.
 """
 
 import numpy as np
@@ -140,3 +146,221 @@ def self_consistent_deflection(deflection_at_q, quality_factor, angular_frequenc
         f"self-consistent deflection did not converge to rtol={rtol:g} in {max_iter} iterations; "
         "is Q(v) non-increasing in v and are the inputs finite?"
     )
+
+
+BRACKET_STEPS = np.array([0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0])
+"""Distances in ln w tried, in the direction the residual points, to bracket the nearest root [-]."""
+SECANT_STEPS = 8
+"""Secant steps tried from the previous root before the bracketed search takes over."""
+
+
+def root_near(residual, start, slope=1.0, rtol=1e-10, max_iter=60):
+    """A root of ``residual`` near ``start``, elementwise: the one a continuation from ``start`` reaches.
+
+    Used where the residual H(u) = u - ln T(e^u) can have several roots (a softening
+    resonance folds over, :func:`follow_branch`).  H -> -inf as u -> -inf and +inf as
+    u -> +inf, so from ``start`` a root lies in the direction -sign(H(start)).  A few
+    secant steps from the Newton step u_1 = u_0 - H(u_0) / ``slope`` settle the elements
+    whose branch continues; the others (a branch that ended at a fold, or a step that
+    left in the wrong direction) are bracketed by steps of :data:`BRACKET_STEPS` in that
+    direction and solved by the Illinois method.
+
+    Parameters
+    ----------
+    residual : callable
+        u -> H(u), vectorised, the shape of ``start``.
+    start : numpy.ndarray
+        Where the continuation starts (ln of the previous deflection) [-].
+    slope : array
+        Estimate of dH/du at the root (e.g. the previous point's); 1 is H's slope far from resonance.
+    rtol : float
+        Tolerance on |H| (relative error of w) [-].
+    max_iter : int
+        Illinois iterations at most.
+
+    Returns
+    -------
+    roots : numpy.ndarray
+        NaN where none was bracketed or ``start`` was not finite (the caller's
+        log-probability turns it into -inf).
+    slope : numpy.ndarray
+        The last secant slope, an estimate of dH/du for a neighbouring point's solve.
+    """
+    start = np.asarray(start, dtype=float)
+    u0, h0 = start, residual(start)
+    direction = -np.sign(h0)
+    slope = np.where(np.asarray(slope) >= 0.1, slope, 1.0)
+    u1 = u0 - h0 / slope
+    h1 = residual(u1)
+    for _ in range(SECANT_STEPS):
+        done = np.abs(h1) <= rtol
+        if np.all(done):
+            break
+        with np.errstate(divide="ignore", invalid="ignore"):
+            secant = (h1 - h0) / (u1 - u0)
+            step = u1 - h1 / secant
+        slope = np.where(done | ~np.isfinite(secant), slope, secant)
+        u0, h0 = u1, h1
+        u1 = np.where(done | ~np.isfinite(step), u1, step)
+        h1 = np.where(done, h1, residual(u1))
+    good = (np.abs(h1) <= rtol) & (np.sign(u1 - start) != -direction)
+    if not np.all(good):
+        u1 = np.where(good, u1, _bracketed_root(residual, start, direction, rtol, max_iter))
+    return u1, slope
+
+
+def _bracketed_root(residual, start, direction, rtol, max_iter):
+    """The root nearest ``start`` in ``direction`` (bracket by growing steps, then Illinois), NaN if none."""
+    h_start = residual(start)
+    trials = start + direction * BRACKET_STEPS.reshape((-1,) + (1,) * start.ndim)
+    h_trials = residual(trials)
+    flipped = np.sign(h_trials) != np.sign(h_start)
+    first = np.argmax(flipped, axis=0)
+    found = np.take_along_axis(flipped, first[None], axis=0)[0] | (h_start == 0)
+    b = np.take_along_axis(trials, first[None], axis=0)[0]
+    hb = np.take_along_axis(h_trials, first[None], axis=0)[0]
+    previous = np.where(first > 0, np.take_along_axis(trials, np.maximum(first - 1, 0)[None], axis=0)[0], start)
+    h_previous = np.where(first > 0, np.take_along_axis(h_trials, np.maximum(first - 1, 0)[None], axis=0)[0], h_start)
+    a, ha = previous, h_previous
+    for _ in range(max_iter):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            c = np.where(hb != ha, b - hb * (b - a) / (hb - ha), 0.5 * (a + b))
+        hc = residual(c)
+        done = np.abs(hc) <= rtol
+        if np.all(done | ~found):
+            return np.where(found, c, np.nan)
+        same = np.sign(hc) == np.sign(hb)
+        a, ha = np.where(same, a, b), np.where(same, 0.5 * ha, hb)
+        b, hb = c, hc
+    return np.where(found & (np.abs(hb) <= rtol), b, np.nan)
+
+
+def follow_branch(residual, start, n_points, rtol=1e-10):
+    """Roots u_p of ``residual(p, u) = 0`` for p = 0 .. n_points - 1, each continued from u_{p-1}.
+
+    The self-consistent solve along a sweep, in the order it was measured: with a softening
+    resonance a frequency can have two stable amplitudes, and the plate stays on the branch
+    it is on until that branch ends (jump, hysteresis), so the start of point p's iteration
+    is the amplitude of point p - 1 (:func:`root_near`).  Vectorised across everything but
+    the points (walkers and sweeps solve together).
+
+    Parameters
+    ----------
+    residual : callable
+        (p, u) -> H_p(u), vectorised over the shape of ``start``.
+    start : numpy.ndarray
+        Start of the first point's iteration (ln deflection) [-].
+    n_points : int
+    rtol : float
+        Tolerance on |H| [-].
+
+    Returns
+    -------
+    numpy.ndarray
+        u, shape ``start.shape + (n_points,)``; NaN where no root was found.
+    """
+    roots = []
+    u, slope = np.asarray(start, dtype=float), 1.0
+    for p in range(n_points):
+        u, slope = root_near(lambda x: residual(p, x), u, slope, rtol)
+        roots.append(u)
+        u = np.where(np.isfinite(u), u, np.asarray(start, dtype=float))
+    return np.stack(roots, axis=-1)
+
+
+MIN_SOFTENED_FRACTION = 1e-3
+"""f_r(v) = f_r0 (1 - kappa v^2) is held above this fraction of f_r0 (a guard far outside any fit's prior) [-]."""
+
+
+def softened_resonance(resonance_frequency, softening, velocity):
+    """f_r(v) = f_r0 (1 - kappa v^2) [Hz]: amplitude softening of the resonance.
+
+    Parameters
+    ----------
+    resonance_frequency : array
+        f_r0, the small-amplitude resonance [Hz].
+    softening : array
+        kappa [s^2/m^2], >= 0.
+    velocity : array
+        Peak velocity amplitude at the antinode [m/s].
+    """
+    return np.asarray(resonance_frequency) * np.maximum(1 - np.asarray(softening) * np.square(velocity), MIN_SOFTENED_FRACTION)
+
+
+def softened_amplitudes(static_amplitude, frequency, resonance_frequency, softening, quality_factor, start=None,
+                        follow=True, rtol=1e-10):
+    """Deflection amplitudes along a sweep with Q(v) and softening [m].
+
+    Solves w = w_s / sqrt((1 - r^2)^2 + (r / Q(v))^2), r = f / f_r(v), v = 2 pi f w,
+    f_r(v) = f_r0 (1 - kappa v^2) (:func:`softened_resonance`).  With ``follow``, the points
+    of the last axis are solved in the order they were measured, each continued from the
+    previous one (:func:`follow_branch`): up and down sweeps give different curves when the
+    resonance folds over.  Without it all points are solved at once (valid where
+    :func:`single_valued` holds: then there is one root and the order does not matter).
+
+    Parameters
+    ----------
+    static_amplitude, frequency, resonance_frequency : array (..., P)
+        w_s [m], drive frequency [Hz], f_r0 [Hz] at each point, the last axis in measuring order.
+    softening : array
+        kappa [s^2/m^2], broadcasting against (..., P) without the last axis (e.g. (W, 1)).
+    quality_factor : callable
+        Q(v), v the antinode peak velocity [m/s]; parameters broadcast against (...).
+    start : array, optional
+        Deflection the plate had before the first point [m] (default: its small-amplitude response).
+    follow : bool
+    rtol : float
+
+    Returns
+    -------
+    numpy.ndarray (..., P)
+        w [m]; NaN where no root was found.
+    """
+    w_s, f, f_r0 = (np.moveaxis(x, -1, 0) for x in np.broadcast_arrays(
+        *(np.asarray(x, dtype=float) for x in (static_amplitude, frequency, resonance_frequency))))
+    kappa = np.asarray(softening, dtype=float)
+    omega = 2 * np.pi * f
+    ln_static = np.log(np.where(w_s > 0, w_s, np.nan))
+
+    def residual_at(index, u):
+        velocity = omega[index] * np.exp(u)
+        ratio2 = (f[index] / softened_resonance(f_r0[index], kappa, velocity)) ** 2
+        return u - ln_static[index] + 0.5 * np.log((1 - ratio2) ** 2 + ratio2 / quality_factor(velocity) ** 2)
+
+    if not follow:
+        unsoftened = self_consistent_amplitude(w_s, f, f_r0, quality_factor, rtol=1e-3)
+        roots, _ = root_near(lambda u: residual_at(Ellipsis, u), np.log(unsoftened), 1.0, rtol)
+        return np.exp(np.moveaxis(roots, 0, -1))
+    if start is None:
+        start = response_amplitude(w_s[0], f[0] / f_r0[0], quality_factor(np.zeros_like(f[0])))
+    return np.exp(follow_branch(residual_at, np.log(start), len(f), rtol))
+
+
+SINGLE_VALUED_GRID = 16
+"""Velocities at which :func:`single_valued` checks its bound [-]."""
+
+
+def single_valued(static_amplitude, frequency, resonance_frequency, softening, quality_factor):
+    """Whether every point of each sweep (last axis) has one self-consistent deflection, by a sufficient bound.
+
+    With H(u) = u - ln w_s + ln A / 2, A = (1 - r^2)^2 + r^2 / Q^2, the softening term of
+    dH/du is bounded using A >= 2 |1 - r^2| r / Q: |d ln A / du| <= 4 kappa v^2 Q(v) r / s
+    with s = 1 - kappa v^2 (the loss term only adds to dH/du, Q being non-increasing), so
+    H increases (one root) if 2 kappa v^2 Q(v) r / s < 1 for all v a root can reach, r <= f_max / (f_r0 s).
+    A root has w <= w_s Q(v) / r, i.e. v / Q(v) <= 2 pi f_r0 w_s: the bound is checked on
+    :data:`SINGLE_VALUED_GRID` velocities up to the first beyond that (a 10 % margin).
+
+    Returns
+    -------
+    numpy.ndarray of bool, the shape of the inputs without the last axis.
+    """
+    w_s, f, f_r0 = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (static_amplitude, frequency, resonance_frequency)))
+    kappa = np.asarray(softening, dtype=float)
+    reach = 2 * np.pi * np.max(f_r0 * w_s, axis=-1)
+    bound = reach * quality_factor(np.zeros(f.shape[:-1]))
+    velocity = bound * np.linspace(0.0, 1.0, SINGLE_VALUED_GRID).reshape((-1,) + (1,) * bound.ndim)
+    q = quality_factor(velocity)
+    reachable = np.concatenate([np.ones_like(velocity[:1], dtype=bool), velocity[:-1] / q[:-1] <= 1.1 * reach])
+    s = np.maximum(1 - kappa * velocity**2, MIN_SOFTENED_FRACTION)
+    ratio = np.max(f, axis=-1) / np.min(f_r0, axis=-1) / s
+    return np.max(np.where(reachable, 2 * kappa * velocity**2 * q * ratio / s, 0.0), axis=0) < 1

@@ -1,18 +1,29 @@
-"""Forward model and log-probability of the sweeps, vectorised over walkers.
+"""Forward model and log-probability of the sweeps and ring-downs, vectorised over walkers.
 
-Forward model (one resonant mode, amplitude-dependent damping): a row measured at drive
-frequency f and peak voltage V in sweep k has the antinode deflection
+Forward model of the sweeps (one resonant mode, amplitude-dependent damping): a row
+measured at drive frequency f, peak voltage V and time t in sweep k has the antinode deflection
 
-    w = g V / sqrt((1 - r^2)^2 + (r / Q(2 pi f w))^2),   r = f / f_r,k,
+    w = g V / sqrt((1 - r^2)^2 + (r / Q(v))^2),   r = f / f_r(v, t),   v = 2 pi f w,
+    f_r(v, t) = (f_r,k + beta (t - t_k)) (1 - kappa v^2),
 
-solved self-consistently (:func:`~workflow.damping.harmonic.self_consistent_amplitude`, the
-bench simulator's solve), and the vibrometer reads the velocity amplitude v = 2 pi f w.
+solved self-consistently (:mod:`workflow.damping.harmonic`, the bench simulator's solve),
+with t_k the sweep's mean time; without softening (kappa) every row is solved at once,
+with it the rows of each sweep are solved in the order they were measured, each from the
+previous one's amplitude (branch following; walkers whose curves are provably
+single-valued skip the ordering).  The vibrometer reads v |phi| at its point (|phi| from
+the log's ``x_mm``, ``y_mm``, :mod:`~workflow.damping.mode_shape`), so the law is fitted
+in the antinode's peak velocity.  A ring-down sample at time t after burst j reads
+|phi| v_j(t), the free decay from v_j(0) = v0_j (:mod:`~workflow.damping.ringdown`).
+
 Parameters, in the order of :attr:`ParameterLayout.names`:
 
 - the law's parameters: ``ln_q0`` = ln Q0, and ``alpha`` (>= 0) for the velocity-dependent laws;
-- ``ln_gain``: ln g, g the quasi-static deflection per volt [m/V];
-- ``f_r_<k>``: one resonance frequency per sweep [Hz] (drift between sweeps is free);
-- ``ln_sigma_rel``, ``ln_sigma_abs``: the noise, Gaussian with variance
+- with sweeps: ``ln_gain`` (ln g, g the quasi-static deflection per volt [m/V]) and
+  ``f_r_<k>``, one resonance frequency per sweep [Hz] (drift between sweeps is free);
+- ``kappa`` (softening [s^2/m^2], >= 0) and ``drift_rate`` (beta [Hz/s]) when fitted;
+- with ring-downs: ``ln_v0_<j>``, each burst's initial antinode velocity [m/s], and the
+  ring-down record's noise ``ln_sigma_decay_rel``, ``ln_sigma_decay_abs``;
+- with sweeps: ``ln_sigma_rel``, ``ln_sigma_abs``: the noise, Gaussian with variance
   (sigma_rel v_model)^2 + sigma_abs^2 (sigma_abs in m/s).
 
 Priors are flat on these coordinates within :attr:`FitData.lower` .. :attr:`FitData.upper`.
@@ -20,16 +31,35 @@ Every function here is module-level and takes arrays, so emcee can pickle it.
 """
 
 from dataclasses import dataclass
-from typing import Tuple
+from typing import Optional, Tuple
 
 import numpy as np
 
-from workflow.damping.harmonic import self_consistent_amplitude
+from workflow.damping.harmonic import self_consistent_amplitude, single_valued, softened_amplitudes
 from workflow.damping.laws import LAWS, parameter_names
 from workflow.damping.logs import CampaignLog
+from workflow.damping.ringdown import decay_quality_factors, decay_velocity
+from workflow.errors import InputFileError
 
 SAMPLED_LAW_PARAMETERS = {"q0": "ln_q0", "alpha": "alpha"}
 """Law parameter -> the coordinate it is sampled in (Q0 in log, alpha linear >= 0)."""
+
+
+@dataclass(frozen=True)
+class ForwardModel:
+    """Which effects beyond Q(v) the sweeps' forward model fits.
+
+    Attributes
+    ----------
+    softening : bool
+        Fit kappa in f_r(v) = f_r0 (1 - kappa v^2) (branch-following solve along each sweep).
+    drift : bool
+        Fit a campaign-wide drift rate of f_r within each sweep (needs ``timestamp_s``).
+    """
+
+    softening: bool = False
+    drift: bool = False
+
 
 Q0_RANGE = (1.0, 1e5)
 """Prior range of Q0 [-]."""
@@ -43,12 +73,20 @@ SIGMA_ABS_RANGE = (1e-7, 1.0)
 """Prior range of the absolute noise, relative to the largest measured velocity [-]."""
 
 
+SOFTENING_MAX_SHIFT = 0.2
+"""kappa's prior stops where f_r at the highest antinode velocity measured would fall by this fraction [-]."""
+V0_RANGE = (0.1, 10.0)
+"""Prior range of a burst's initial velocity, relative to its largest sample's antinode velocity [-]."""
+
+
 @dataclass(frozen=True)
 class ParameterLayout:
-    """Names and positions of the sampled parameters for a law and a number of sweeps."""
+    """Names and positions of the sampled parameters for a law, the sweeps, the effects fitted and the bursts."""
 
     law_name: str
     n_sweeps: int
+    forward: ForwardModel = ForwardModel()
+    n_bursts: int = 0
 
     @property
     def law_parameters(self) -> Tuple[str, ...]:
@@ -59,8 +97,12 @@ class ParameterLayout:
     def names(self) -> Tuple[str, ...]:
         """All sampled coordinates, in order."""
         law = tuple(SAMPLED_LAW_PARAMETERS[name] for name in self.law_parameters)
-        sweeps = tuple(f"f_r_{k}" for k in range(self.n_sweeps))
-        return law + ("ln_gain",) + sweeps + ("ln_sigma_rel", "ln_sigma_abs")
+        sweeps = ("ln_gain",) + tuple(f"f_r_{k}" for k in range(self.n_sweeps)) if self.n_sweeps else ()
+        effects = ("kappa",) * self.forward.softening + ("drift_rate",) * self.forward.drift
+        bursts = tuple(f"ln_v0_{j}" for j in range(self.n_bursts))
+        decay_noise = ("ln_sigma_decay_rel", "ln_sigma_decay_abs") if self.n_bursts else ()
+        noise = ("ln_sigma_rel", "ln_sigma_abs") if self.n_sweeps else ()
+        return law + sweeps + effects + bursts + decay_noise + noise
 
     @property
     def dimension(self) -> int:
@@ -74,6 +116,16 @@ class ParameterLayout:
     def resonance_slice(self) -> slice:
         return slice(self.gain_index + 1, self.gain_index + 1 + self.n_sweeps)
 
+    def column(self, theta: np.ndarray, name: str) -> np.ndarray:
+        """The coordinate ``name`` of each walker, shape (W, 1)."""
+        i = self.names.index(name)
+        return np.atleast_2d(theta)[:, i : i + 1]
+
+    def block(self, theta: np.ndarray, prefix: str) -> np.ndarray:
+        """The coordinates ``<prefix>0``, ``<prefix>1``, ... of each walker, shape (W, count)."""
+        columns = [i for i, name in enumerate(self.names) if name.startswith(prefix) and name[len(prefix):].isdigit()]
+        return np.atleast_2d(theta)[:, columns]
+
     def law(self, theta: np.ndarray):
         """The Q(v) law with one parameter row per walker: parameters of shape (W, 1)."""
         theta = np.atleast_2d(theta)
@@ -84,7 +136,8 @@ class ParameterLayout:
         return LAWS[self.law_name](**values)
 
     def natural(self, theta: np.ndarray) -> dict:
-        """Parameter name -> values in natural units (q0, alpha, gain [m/V], f_r_k [Hz], sigma_rel, sigma_abs [m/s])."""
+        """Parameter name -> values in natural units (q0, alpha, gain [m/V], f_r_k [Hz], kappa [s^2/m^2],
+        drift_rate [Hz/s], v0_j [m/s], sigma_rel, sigma_abs [m/s] and their decay counterparts)."""
         theta = np.atleast_2d(theta)
         out = {}
         for i, name in enumerate(self.names):
@@ -96,18 +149,46 @@ class ParameterLayout:
 
 
 @dataclass(frozen=True)
+class DecayData:
+    """Ring-down samples for the log-probability.
+
+    Attributes
+    ----------
+    frequency : numpy.ndarray
+        Burst frequency [Hz] per sample.
+    burst : numpy.ndarray of int
+    time : numpy.ndarray
+        Time since the end of the burst [s].
+    mode_factor : numpy.ndarray
+        |phi| at the measurement point [-].
+    """
+
+    frequency: np.ndarray
+    burst: np.ndarray
+    time: np.ndarray
+    mode_factor: np.ndarray
+
+
+@dataclass(frozen=True)
 class FitData:
     """The measured rows, the parameter layout and the prior box, for the log-probability.
 
     Attributes
     ----------
-    frequency, voltage, velocity : numpy.ndarray
-        Drive frequency [Hz], peak voltage [V], measured velocity amplitude [m/s] per row.
+    frequency, voltage : numpy.ndarray
+        Drive frequency [Hz], peak voltage [V] per sweep row.
+    velocity : numpy.ndarray
+        Measured velocity amplitude [m/s]: the sweep rows, then the ring-down samples.
     sweep : numpy.ndarray of int
         Sweep index per row.
     layout : ParameterLayout
     lower, upper : numpy.ndarray
         Prior bounds of each sampled coordinate.
+    time_offset : numpy.ndarray or None
+        Time of each row from its sweep's mean time [s] (for the drift).
+    mode_factor : numpy.ndarray or None
+        |phi| at each row's measurement point [-] (None: 1).
+    decays : DecayData or None
     """
 
     frequency: np.ndarray
@@ -117,18 +198,38 @@ class FitData:
     layout: ParameterLayout
     lower: np.ndarray
     upper: np.ndarray
+    time_offset: Optional[np.ndarray] = None
+    mode_factor: Optional[np.ndarray] = None
+    decays: Optional[DecayData] = None
+
+    @property
+    def n_rows(self) -> int:
+        """Sweep rows [-] (the first entries of :attr:`velocity`)."""
+        return len(self.frequency)
 
 
-def fit_data(log: CampaignLog, law_name: str) -> FitData:
-    """The :class:`FitData` of a campaign for a law, with its prior box."""
-    layout = ParameterLayout(law_name, log.n_sweeps)
-    v_max = float(np.max(log.velocity))
+def fit_data(log: CampaignLog, law_name: str, forward: ForwardModel = ForwardModel()) -> FitData:
+    """The :class:`FitData` of a campaign (sweeps, and its ring-downs if any) for a law, with its prior box.
+
+    Raises
+    ------
+    InputFileError
+        Drift requested of logs without ``timestamp_s``, or softening and drift without sweeps.
+    """
+    decays = log.ringdown
+    layout = ParameterLayout(law_name, log.n_sweeps, forward, decays.n_bursts if decays else 0)
+    factor = log.measurement_factor()
+    antinode = np.concatenate([log.velocity / factor] + ([decays.velocity / decays.mode_factor] if decays else []))
+    v_max = float(np.max(antinode))
     exponent = {"quadratic": 2, "linear": 1}
     bounds = {
         "ln_q0": np.log(Q0_RANGE),
         "ln_gain": np.log(GAIN_RANGE),
         "ln_sigma_rel": np.log(SIGMA_REL_RANGE),
         "ln_sigma_abs": np.log(np.asarray(SIGMA_ABS_RANGE) * v_max),
+        "ln_sigma_decay_rel": np.log(SIGMA_REL_RANGE),
+        "ln_sigma_decay_abs": np.log(np.asarray(SIGMA_ABS_RANGE) * v_max),
+        "kappa": (0.0, SOFTENING_MAX_SHIFT / v_max**2),
     }
     if law_name in exponent:
         bounds["alpha"] = (0.0, 1.0 / MIN_Q_AT_MAX_VELOCITY / v_max ** exponent[law_name])
@@ -136,13 +237,42 @@ def fit_data(log: CampaignLog, law_name: str) -> FitData:
         f = log.frequency[log.sweep == k]
         span = max(f.max() - f.min(), 0.01 * f.mean())
         bounds[f"f_r_{k}"] = (max(f.min() - span, 0.5 * f.min()), f.max() + span)
+    time_offset = None
+    if (forward.softening or forward.drift) and not log.n_sweeps:
+        raise InputFileError(f"{', '.join(log.sources + (decays.sources if decays else ()))}: "
+                             "softening and drift are fitted from sweeps; no sweep log given")
+    if forward.drift:
+        if log.timestamp is None:
+            raise InputFileError(f"{', '.join(log.sources)}: fitting the drift needs the 'timestamp_s' column in every sweep log")
+        means = np.array([np.mean(log.timestamp[log.sweep == k]) for k in range(log.n_sweeps)])
+        time_offset = log.timestamp - means[log.sweep]
+        durations = np.array([np.ptp(time_offset[log.sweep == k]) for k in range(log.n_sweeps)])
+        spans = np.array([np.ptp(log.frequency[log.sweep == k]) for k in range(log.n_sweeps)])
+        limit = float(np.max(spans / np.maximum(durations, 1e-9)))
+        bounds["drift_rate"] = (-limit, limit)
+    decay_data = None
+    if decays:
+        decay_data = DecayData(decays.frequency, decays.burst, decays.decay_time, decays.mode_factor)
+        for j in range(decays.n_bursts):
+            largest = float(np.max((decays.velocity / decays.mode_factor)[decays.burst == j]))
+            bounds[f"ln_v0_{j}"] = np.log(np.asarray(V0_RANGE) * largest)
     lower = np.array([bounds[name][0] for name in layout.names], dtype=float)
     upper = np.array([bounds[name][1] for name in layout.names], dtype=float)
-    return FitData(log.frequency, log.drive_voltage, log.velocity, log.sweep, layout, lower, upper)
+    velocity = np.concatenate([log.velocity] + ([decays.velocity] if decays else []))
+    return FitData(log.frequency, log.drive_voltage, velocity, log.sweep, layout, lower, upper, time_offset,
+                   log.mode_factor, decay_data)
 
 
-def predicted_velocity(theta, layout: ParameterLayout, frequency, voltage, sweep) -> np.ndarray:
-    """Noise-free velocity amplitude 2 pi f w at each row, one row per walker [m/s].
+def sweep_order(sweep: np.ndarray) -> np.ndarray:
+    """Row indices of each sweep present, in measuring order (the rows' order), shape (S, P), each padded with its last index."""
+    rows = [np.nonzero(sweep == k)[0] for k in np.unique(sweep)]
+    width = max(len(r) for r in rows)
+    return np.array([np.r_[r, np.full(width - len(r), r[-1])] for r in rows])
+
+
+def predicted_velocity(theta, layout: ParameterLayout, frequency, voltage, sweep, time_offset=None,
+                       mode_factor=None) -> np.ndarray:
+    """Noise-free velocity amplitude at the measurement point, 2 pi f w |phi|, at each sweep row, one row per walker [m/s].
 
     Parameters
     ----------
@@ -150,29 +280,102 @@ def predicted_velocity(theta, layout: ParameterLayout, frequency, voltage, sweep
         Sampled coordinates.
     layout : ParameterLayout
     frequency, voltage : array (N,)
-        Drive frequency [Hz] and peak voltage [V].
+        Drive frequency [Hz] and peak voltage [V], rows of each sweep in measuring order.
     sweep : array of int (N,)
         Sweep index of each row (selects f_r).
+    time_offset : array (N,), optional
+        Time from the sweep's mean time [s] (drift); default 0.
+    mode_factor : array (N,), optional
+        |phi| at the measurement point [-]; default 1.
 
     Returns
     -------
     numpy.ndarray (W, N)
     """
     theta = np.atleast_2d(theta)
+    frequency, voltage = np.asarray(frequency, dtype=float), np.asarray(voltage, dtype=float)
     gain = np.exp(theta[:, layout.gain_index : layout.gain_index + 1])
     resonance = theta[:, layout.resonance_slice][:, sweep]
-    deflection = self_consistent_amplitude(gain * voltage, frequency, resonance, layout.law(theta).quality_factor)
-    return 2 * np.pi * frequency * deflection
+    if layout.forward.drift and time_offset is not None:
+        resonance = resonance + layout.column(theta, "drift_rate") * time_offset
+    if layout.forward.softening:
+        deflection = _softened_rows(theta, layout, gain * voltage, frequency, resonance, np.asarray(sweep))
+    else:
+        deflection = self_consistent_amplitude(gain * voltage, frequency, resonance, layout.law(theta).quality_factor)
+    return 2 * np.pi * frequency * deflection * (1.0 if mode_factor is None else mode_factor)
+
+
+def _softened_rows(theta, layout: ParameterLayout, static, frequency, resonance, sweep) -> np.ndarray:
+    """Deflection at each row with softening: sweeps in measuring order; branch following only for the walkers
+    whose curves may fold (:func:`~workflow.damping.harmonic.single_valued`)."""
+    order = sweep_order(sweep)
+    kappa = layout.column(theta, "kappa")
+    grid = (static[:, order], frequency[order], resonance[:, order])
+    single = single_valued(*grid, kappa, layout.law(theta).quality_factor).all(axis=1)
+    deflection = np.empty_like(static)
+    for follow in (False, True):
+        walkers = np.nonzero(single != follow)[0]
+        if walkers.size:
+            solved = softened_amplitudes(static[walkers][:, order], frequency[order], resonance[walkers][:, order],
+                                         kappa[walkers], layout.law(theta[walkers]).quality_factor, follow=follow)
+            deflection[np.ix_(walkers, order.ravel())] = solved.reshape(walkers.size, -1)
+    return deflection
+
+
+def predicted_decay(theta, layout: ParameterLayout, decays: DecayData) -> np.ndarray:
+    """Noise-free ring-down envelope at the measurement point, |phi| v_j(t), at each sample, one row per walker [m/s]."""
+    theta = np.atleast_2d(theta)
+    initial = np.exp(layout.block(theta, "ln_v0_"))[:, decays.burst]
+    return decay_velocity(layout.law(theta), decays.frequency, initial, decays.time) * decays.mode_factor
+
+
+def _gaussian(measured, model, sigma_rel, sigma_abs):
+    variance = (sigma_rel * model) ** 2 + sigma_abs**2
+    return -0.5 * ((measured - model) ** 2 / variance + np.log(2 * np.pi * variance))
 
 
 def pointwise_log_likelihood(theta, data: FitData) -> np.ndarray:
-    """ln p(v_i | theta) for each walker and row, shape (W, N)."""
+    """ln p(v_i | theta) for each walker and measured value (sweep rows, then ring-down samples), shape (W, N)."""
     theta = np.atleast_2d(theta)
-    model = predicted_velocity(theta, data.layout, data.frequency, data.voltage, data.sweep)
-    sigma_rel = np.exp(theta[:, -2:-1])
-    sigma_abs = np.exp(theta[:, -1:])
-    variance = (sigma_rel * model) ** 2 + sigma_abs**2
-    return -0.5 * ((data.velocity - model) ** 2 / variance + np.log(2 * np.pi * variance))
+    layout = data.layout
+    parts = []
+    if layout.n_sweeps:
+        model = predicted_velocity(theta, layout, data.frequency, data.voltage, data.sweep, data.time_offset, data.mode_factor)
+        noise = (np.exp(layout.column(theta, name)) for name in ("ln_sigma_rel", "ln_sigma_abs"))
+        parts.append(_gaussian(data.velocity[: data.n_rows], model, *noise))
+    if data.decays is not None:
+        model = predicted_decay(theta, layout, data.decays)
+        noise = (np.exp(layout.column(theta, name)) for name in ("ln_sigma_decay_rel", "ln_sigma_decay_abs"))
+        parts.append(_gaussian(data.velocity[data.n_rows :], model, *noise))
+    return np.concatenate(parts, axis=1)
+
+
+def initial_effects(data: FitData) -> Tuple[dict, dict]:
+    """Start and scale of the coordinates beyond the law, gain, resonances and noise: kappa, drift, bursts, decay noise."""
+    start, scale = {}, {}
+    names = data.layout.names
+    if "kappa" in names:
+        index = names.index("kappa")
+        start["kappa"], scale["kappa"] = 0.01 * data.upper[index], 0.01 * data.upper[index]
+    if "drift_rate" in names:
+        start["drift_rate"], scale["drift_rate"] = 0.0, 0.01 * data.upper[names.index("drift_rate")]
+    if data.decays is not None:
+        measured = data.velocity[data.n_rows :] / data.decays.mode_factor
+        for j in range(data.layout.n_bursts):
+            mine = data.decays.burst == j
+            start[f"ln_v0_{j}"] = np.log(measured[mine][np.argmin(data.decays.time[mine])])
+            scale[f"ln_v0_{j}"] = 0.02
+        start["ln_sigma_decay_rel"], scale["ln_sigma_decay_rel"] = np.log(0.03), 0.5
+        start["ln_sigma_decay_abs"], scale["ln_sigma_decay_abs"] = np.log(0.01 * np.max(measured)), 0.5
+    return start, scale
+
+
+def decay_estimates(data: FitData) -> Tuple[np.ndarray, np.ndarray]:
+    """Model-free (antinode velocity [m/s], Q [-]) points from the ring-downs (empty without them)."""
+    if data.decays is None:
+        return np.zeros(0), np.zeros(0)
+    d = data.decays
+    return decay_quality_factors(d.frequency, data.velocity[data.n_rows :] / d.mode_factor, d.burst, d.time)
 
 
 def in_prior(theta, data: FitData) -> np.ndarray:
@@ -191,11 +394,12 @@ def log_probability(theta, data: FitData) -> np.ndarray:
     result = np.full(len(theta), -np.inf)
     inside = in_prior(theta, data)
     if inside.any():
-        total = pointwise_log_likelihood(theta[inside], data).sum(axis=1)
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            total = pointwise_log_likelihood(theta[inside], data).sum(axis=1)
         result[inside] = np.where(np.isfinite(total), total, -np.inf)
     return result
 
 
 def log_probability_single(theta, data: FitData) -> float:
-    """The log-posterior of one parameter vector (D,), as a float (per-walker reference)."""
+    """The log-probability of one parameter vector (D,), as a float (per-walker reference)."""
     return float(log_probability(theta, data)[0])

@@ -14,12 +14,14 @@ import math
 from array import array
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence, Tuple
+from typing import Optional, Sequence, Tuple
 
 import numpy as np
 
 from workflow import logformat
+from workflow.damping.mode_shape import BeamMode, measurement_factor
 from workflow.errors import InputFileError
+from workflow.units import MM
 
 _QUANTITY_STEMS = {
     logformat.FREQUENCY: ("frequency", "freq"),
@@ -62,6 +64,13 @@ class CampaignLog:
         The files read.
     warnings : tuple of str
         One line per tolerated problem (dropped dropouts, ignored partial line).
+    timestamp : numpy.ndarray or None
+        Seconds since the start of the campaign per row (None when a log has none) [s].
+    mode_factor : numpy.ndarray or None
+        |phi| of the mode at each row's measurement point: measured velocity over the
+        antinode's (:mod:`~workflow.damping.mode_shape`); None means 1 (at an antinode) [-].
+    ringdown : RingdownLog or None
+        Ring-downs read with the sweeps (``tactile fit-damping SWEEPS RINGDOWNS``).
     """
 
     frequency: np.ndarray
@@ -70,15 +79,66 @@ class CampaignLog:
     sweep: np.ndarray
     sources: Tuple[str, ...]
     warnings: Tuple[str, ...] = ()
+    timestamp: Optional[np.ndarray] = None
+    mode_factor: Optional[np.ndarray] = None
+    ringdown: Optional["RingdownLog"] = None
 
     @property
     def n_sweeps(self) -> int:
-        """Number of sweeps [-]."""
-        return int(self.sweep.max()) + 1
+        """Number of sweeps [-] (0 for ring-downs alone)."""
+        return int(self.sweep.max()) + 1 if self.sweep.size else 0
+
+    def measurement_factor(self) -> np.ndarray:
+        """|phi| at each row's measurement point (1 where none was logged) [-]."""
+        return np.ones_like(self.velocity) if self.mode_factor is None else self.mode_factor
 
     def sweep_voltages(self) -> np.ndarray:
         """Median drive voltage of each sweep [V]."""
         return np.array([np.median(self.drive_voltage[self.sweep == k]) for k in range(self.n_sweeps)])
+
+    def subset(self, keep: np.ndarray, sweep: np.ndarray, warnings: Tuple[str, ...]) -> "CampaignLog":
+        """The rows ``keep`` (boolean mask) renumbered into ``sweep``, with ``warnings``."""
+        optional = {name: None if getattr(self, name) is None else getattr(self, name)[keep] for name in ("timestamp", "mode_factor")}
+        return CampaignLog(self.frequency[keep], self.drive_voltage[keep], self.velocity[keep], sweep, self.sources, warnings,
+                           ringdown=self.ringdown, **optional)
+
+
+@dataclass(frozen=True)
+class RingdownLog:
+    """Ring-downs (free decays after a burst) read from one or more logs, one entry per sample.
+
+    Attributes
+    ----------
+    frequency : numpy.ndarray
+        Drive frequency of the burst [Hz] (at resonance).
+    drive_voltage : numpy.ndarray
+        Burst level, peak voltage across the ceramics [V].
+    velocity : numpy.ndarray
+        Envelope of the velocity at the measurement point [m/s].
+    burst : numpy.ndarray of int
+        Burst index 0 .. n_bursts - 1.
+    decay_time : numpy.ndarray
+        Time since the end of the burst [s].
+    mode_factor : numpy.ndarray
+        |phi| at the measurement point [-].
+    temperature : numpy.ndarray
+        Plate temperature [deg C]; NaN where not reported.
+    sources : tuple of str
+    """
+
+    frequency: np.ndarray
+    drive_voltage: np.ndarray
+    velocity: np.ndarray
+    burst: np.ndarray
+    decay_time: np.ndarray
+    mode_factor: np.ndarray
+    temperature: np.ndarray
+    sources: Tuple[str, ...]
+
+    @property
+    def n_bursts(self) -> int:
+        """Number of bursts [-]."""
+        return int(self.burst.max()) + 1
 
 
 MIN_POINTS_PER_SWEEP = 5
@@ -108,13 +168,14 @@ def drop_short_sweeps(log: CampaignLog, min_points: int = MIN_POINTS_PER_SWEEP) 
         f"{', '.join(log.sources)}: ignored {short.size} sweep(s) with fewer than {min_points} rows "
         f"({int(counts[short].sum())} rows)"
     )
-    return CampaignLog(
-        log.frequency[keep], log.drive_voltage[keep], log.velocity[keep], renumbered, log.sources, log.warnings + (warning,)
-    )
+    return log.subset(keep, renumbered, log.warnings + (warning,))
 
 
 def read_logs(paths: Sequence) -> CampaignLog:
-    """Read and concatenate several logs; sweeps are renumbered so they never collide.
+    """Read and concatenate several logs; sweeps (and bursts) are renumbered so they never collide.
+
+    Ring-down logs (a ``decay_time_s`` column) are gathered in :attr:`CampaignLog.ringdown`;
+    with ring-down logs alone the sweeps are empty.
 
     Raises
     ------
@@ -123,23 +184,43 @@ def read_logs(paths: Sequence) -> CampaignLog:
     """
     if not paths:
         raise InputFileError("no log file given")
-    logs = [read_log(path) for path in paths]
+    read = [read_log(path) for path in paths]
+    logs = [log for log in read if isinstance(log, CampaignLog)]
+    decays = [log for log in read if isinstance(log, RingdownLog)]
     offsets = np.cumsum([0] + [log.n_sweeps for log in logs[:-1]])
+    timestamps = [log.timestamp for log in logs]
+    factors = [log.mode_factor for log in logs]
     return CampaignLog(
-        frequency=np.concatenate([log.frequency for log in logs]),
-        drive_voltage=np.concatenate([log.drive_voltage for log in logs]),
-        velocity=np.concatenate([log.velocity for log in logs]),
-        sweep=np.concatenate([log.sweep + offset for log, offset in zip(logs, offsets)]),
+        frequency=np.concatenate([log.frequency for log in logs] + [np.zeros(0)]),
+        drive_voltage=np.concatenate([log.drive_voltage for log in logs] + [np.zeros(0)]),
+        velocity=np.concatenate([log.velocity for log in logs] + [np.zeros(0)]),
+        sweep=np.concatenate([log.sweep + offset for log, offset in zip(logs, offsets)] + [np.zeros(0, dtype=int)]),
         sources=tuple(source for log in logs for source in log.sources),
-        warnings=tuple(warning for log in logs for warning in log.warnings),
+        warnings=tuple(warning for log in read for warning in getattr(log, "warnings", ())),
+        timestamp=np.concatenate(timestamps) if logs and all(t is not None for t in timestamps) else None,
+        mode_factor=None if all(m is None for m in factors) else np.concatenate([log.measurement_factor() for log in logs]),
+        ringdown=_concatenate_ringdowns(decays) if decays else None,
     )
 
 
-def read_log(path) -> CampaignLog:
+def _concatenate_ringdowns(logs: Sequence[RingdownLog]) -> RingdownLog:
+    offsets = np.cumsum([0] + [log.n_bursts for log in logs[:-1]])
+    columns = ("frequency", "drive_voltage", "velocity", "decay_time", "mode_factor", "temperature")
+    return RingdownLog(
+        **{name: np.concatenate([getattr(log, name) for log in logs]) for name in columns},
+        burst=np.concatenate([log.burst + offset for log, offset in zip(logs, offsets)]),
+        sources=tuple(source for log in logs for source in log.sources),
+    )
+
+
+def read_log(path):
     """Read one interferometer log, line by line (memory: the rows' numbers, about 50 bytes a row).
 
     Without a ``sweep`` column, a new sweep starts wherever the drive voltage changes
-    between consecutive rows.
+    between consecutive rows.  A log with a ``decay_time_s`` column is a ring-down log and
+    reads as a :class:`RingdownLog` (``sweep`` is the burst id); any other as a
+    :class:`CampaignLog`.  The measurement point (``x_mm``, ``y_mm`` columns or metadata)
+    needs the plate's ``lambda_mm`` metadata to be mapped onto the beam mode.
 
     Raises
     ------
@@ -150,13 +231,13 @@ def read_log(path) -> CampaignLog:
         fields; a non-numeric or non-physical value.
     """
     path = Path(path)
-    warnings = []
+    warnings, metadata = [], {}
     try:
         stream = open(path, "rb")
     except OSError as error:
         raise InputFileError(f"{path}: cannot read ({error.strerror or error})") from None
     with stream:
-        lines = _content_lines(path, stream, warnings)
+        lines = _content_lines(path, stream, warnings, metadata)
         header_number, header_line = next(lines, (None, None))
         if header_line is None:
             raise InputFileError(f"{path}: no header row (expected columns {', '.join(logformat.REQUIRED_COLUMNS)})")
@@ -193,6 +274,18 @@ def read_log(path) -> CampaignLog:
     line_numbers = np.frombuffer(line_numbers, dtype=np.int64)
     _check_physical(path, arrays, line_numbers)
     sweep = _sweep_index(path, arrays)
+    factor = _mode_factor(path, arrays, metadata, warnings)
+    if logformat.DECAY_TIME in arrays:
+        return RingdownLog(
+            frequency=arrays[logformat.FREQUENCY],
+            drive_voltage=arrays[logformat.DRIVE_VOLTAGE],
+            velocity=arrays[logformat.VELOCITY],
+            burst=sweep,
+            decay_time=arrays[logformat.DECAY_TIME],
+            mode_factor=np.ones_like(arrays[logformat.VELOCITY]) if factor is None else factor,
+            temperature=arrays.get(logformat.TEMPERATURE, np.full_like(arrays[logformat.VELOCITY], np.nan)),
+            sources=(str(path),),
+        )
     _check_peaks(path, arrays[logformat.VELOCITY], sweep, line_numbers)
     return CampaignLog(
         frequency=arrays[logformat.FREQUENCY],
@@ -201,13 +294,52 @@ def read_log(path) -> CampaignLog:
         sweep=sweep,
         sources=(str(path),),
         warnings=tuple(warnings),
+        timestamp=arrays.get(logformat.TIMESTAMP),
+        mode_factor=factor,
     )
 
 
-def _content_lines(path: Path, stream, warnings: list):
+def _mode_factor(path: Path, arrays: dict, metadata: dict, warnings: list):
+    """|phi| at each row's measurement point (columns, else metadata), or None when the log names no point
+    (or no wavelength to map it with: a warning is appended to ``warnings``)."""
+    n = len(arrays[logformat.VELOCITY])
+    position = {}
+    for name in logformat.POSITION_COLUMNS:
+        if name in arrays:
+            position[name] = arrays[name]
+        elif name in metadata:
+            position[name] = np.full(n, _metadata_number(path, metadata, name))
+    if not position:
+        return None
+    if logformat.LAMBDA_MM not in metadata:
+        warnings.append(f"{path}: a measurement point ({', '.join(position)}) without the plate's "
+                        f"'# {logformat.LAMBDA_MM}: ...' metadata cannot be mapped onto the mode; read as an antinode")
+        return None
+    mode = BeamMode(_metadata_number(path, metadata, logformat.LAMBDA_MM) * MM)
+    zeros = np.zeros(n)
+    try:
+        return measurement_factor(mode, position.get(logformat.X_POSITION, zeros) * MM,
+                                  position.get(logformat.Y_POSITION, zeros) * MM)
+    except ValueError as error:
+        raise InputFileError(f"{path}: {error}") from None
+
+
+def _metadata_number(path: Path, metadata: dict, key: str) -> float:
+    text, line = metadata[key]
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise InputFileError(f"{path}, line {line}: metadata {key} = {text!r} is not a finite number")
+    return value
+
+
+def _content_lines(path: Path, stream, warnings: list, metadata: dict):
     """(line number, text) of the header and data lines of a UTF-8 file read from ``stream``, one line
-    in memory at a time: comments and blank lines skipped, an incomplete last data line dropped (with a
-    warning appended to ``warnings``)."""
+    in memory at a time: comments and blank lines skipped (``# key: value`` lines before the header
+    collected into ``metadata`` as key -> (value, line number)), an incomplete last data line dropped
+    (with a warning appended to ``warnings``)."""
     head = stream.peek(_MAX_LINE_BYTES)  # the file's first block: a binary file is named so even if its first line is not UTF-8
     if head.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
         raise InputFileError(f"{path}: UTF-16 text, not UTF-8 (save the log as UTF-8)")
@@ -238,6 +370,9 @@ def _content_lines(path: Path, stream, warnings: list):
         seen_text = seen_text or bool(line.strip())
         line = line.rstrip("\r")
         if not line.strip() or line.lstrip().startswith("#"):
+            key, separator, value = line.lstrip()[1:].partition(":")
+            if separator and not header_seen:
+                metadata.setdefault(key.strip(), (value.strip(), number))
             continue
         if not complete and header_seen:  # the last line, cut short
             warnings.append(f"{path}, line {number}: ignored an incomplete last line (no newline; interrupted writer?)")
@@ -263,7 +398,7 @@ def _fields(path: Path, number: int, line: str) -> list:
 def _column_indices(path: Path, line: int, header) -> dict:
     """Required and known optional column name -> index in the header."""
     indices = {}
-    for name in logformat.COLUMNS:
+    for name in logformat.READ_COLUMNS:
         positions = [i for i, column in enumerate(header) if column == name]
         if len(positions) > 1:
             raise InputFileError(f"{path}, line {line}: column '{name}' appears {len(positions)} times (ambiguous)")
@@ -289,7 +424,7 @@ def _number(path: Path, line: int, column: str, cell: str) -> float:
     """A cell as a float; empty and nan are NaN (allowed only for the velocity)."""
     text = cell.strip()
     if text in _MISSING:
-        if column == logformat.VELOCITY:
+        if column in (logformat.VELOCITY, logformat.TEMPERATURE):
             return math.nan
         raise InputFileError(f"{path}, line {line}: missing value in column '{column}'")
     try:

@@ -3,7 +3,11 @@
 The same physics as the fit's forward model (:mod:`workflow.damping.likelihood`): one
 mode, w = g V / sqrt((1 - r^2)^2 + (r / Q(2 pi f w))^2) solved self-consistently,
 velocity 2 pi f w, the resonance drifting between sweeps (a random walk), Gaussian noise
-with relative and absolute parts.  Seeded: the same arguments give the same rows.
+with relative and absolute parts.  Optionally the resonance softens with amplitude
+(f_r0 (1 - kappa v^2), each sweep solved in its measuring order, branch following),
+drifts linearly in time within the sweeps, sweeps alternate up and down, and the
+vibrometer reads the velocity times |phi| at an off-antinode point.  Seeded: the same
+arguments give the same rows.
 """
 
 from typing import Sequence
@@ -11,7 +15,7 @@ from typing import Sequence
 import numpy as np
 
 from workflow import logformat
-from workflow.damping.harmonic import self_consistent_amplitude
+from workflow.damping.harmonic import softened_amplitudes
 from workflow.damping.laws import QuadraticLoss
 from workflow.damping.logs import CampaignLog
 
@@ -30,6 +34,11 @@ def simulate_campaign(
     relative_noise: float = 0.02,
     absolute_noise: float = 1e-3,
     seed: int = 0,
+    softening: float = 0.0,
+    drift_rate: float = 0.0,
+    seconds_per_point: float = 1.0,
+    alternate: bool = False,
+    mode_factor: float = 1.0,
 ) -> CampaignLog:
     """Sweeps at several voltages around a drifting resonance.
 
@@ -51,6 +60,16 @@ def simulate_campaign(
     relative_noise, absolute_noise : float
         Noise standard deviations: relative [-] and absolute [m/s].
     seed : int
+    softening : float
+        kappa in f_r(v) = f_r0 (1 - kappa v^2) [s^2/m^2].
+    drift_rate : float
+        Drift of the resonance in time, within and across sweeps [Hz/s].
+    seconds_per_point : float
+        Time between rows (the ``timestamp_s`` of row i is i times this) [s].
+    alternate : bool
+        Odd sweeps run downwards in frequency (rows in measuring order).
+    mode_factor : float
+        |phi| at the measurement point: the velocity read over the antinode's [-].
 
     Returns
     -------
@@ -60,20 +79,25 @@ def simulate_campaign(
     rng = np.random.default_rng(seed)
     n = len(voltages)
     resonances = resonance_frequency + np.cumsum(np.r_[0.0, rng.normal(0.0, drift_per_sweep, n - 1)])
-    frequency = np.tile(np.linspace(resonance_frequency - half_span, resonance_frequency + half_span, points_per_sweep), n)
-    sweep = np.repeat(np.arange(n), points_per_sweep)
-    voltage = np.asarray(voltages, dtype=float)[sweep]
-    deflection = self_consistent_amplitude(gain * voltage, frequency, resonances[sweep], law.quality_factor)
-    velocity = 2 * np.pi * frequency * deflection
+    upward = np.linspace(resonance_frequency - half_span, resonance_frequency + half_span, points_per_sweep)
+    frequency = np.array([upward[::-1] if alternate and k % 2 else upward for k in range(n)])
+    time = seconds_per_point * np.arange(n * points_per_sweep).reshape(n, points_per_sweep)
+    static = gain * np.asarray(voltages, dtype=float)[:, None]
+    deflection = softened_amplitudes(static, frequency, resonances[:, None] + drift_rate * time, softening,
+                                     law.quality_factor)
+    velocity = (2 * np.pi * frequency * deflection * mode_factor).ravel()
     noise = np.sqrt((relative_noise * velocity) ** 2 + absolute_noise**2)
     measured = np.abs(velocity + noise * rng.standard_normal(velocity.shape))
-    return CampaignLog(frequency, voltage, measured, sweep, ("synthetic",))
+    sweep = np.repeat(np.arange(n), points_per_sweep)
+    return CampaignLog(frequency.ravel(), np.asarray(voltages, dtype=float)[sweep], measured, sweep, ("synthetic",),
+                       timestamp=time.ravel(), mode_factor=None if mode_factor == 1.0 else np.full(sweep.size, mode_factor))
 
 
 def campaign_csv(log: CampaignLog, title: str = "synthetic Q(v) campaign") -> str:
     """The campaign as log-format text (docs/log-format.md), timestamps one second apart."""
     header = ",".join((logformat.SWEEP, logformat.TIMESTAMP, logformat.FREQUENCY, logformat.DRIVE_VOLTAGE, logformat.VELOCITY))
     lines = [f"{logformat.METADATA_PREFIX}{title}", f"{logformat.METADATA_PREFIX}format_version: {logformat.FORMAT_VERSION}", header]
-    for i, (k, f, v, u) in enumerate(zip(log.sweep, log.frequency, log.drive_voltage, log.velocity)):
-        lines.append(f"{k},{float(i):.1f},{f:.3f},{v:.6g},{u:.8g}")
+    times = np.arange(len(log.velocity), dtype=float) if log.timestamp is None else log.timestamp
+    for k, t, f, v, u in zip(log.sweep, times, log.frequency, log.drive_voltage, log.velocity):
+        lines.append(f"{k},{t:.1f},{f:.3f},{v:.6g},{u:.8g}")
     return "\n".join(lines) + "\n"

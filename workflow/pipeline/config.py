@@ -46,6 +46,11 @@ LIMITS = {
     "simulator.relative_noise": (0.0, 1.0),
     "simulator.floor_fraction": (0.0, 1.0),
     "simulator.phase_noise_deg": (0.0, 180.0),
+    "simulator.built_glue_um": (0.0, 500.0),
+    "simulator.built_ceramic_factor": (0.5, 1.5),
+    "simulator.built_resonator_factor": (0.5, 1.5),
+    "simulator.built_hi_offset_um": (-1000.0, 1000.0),
+    "simulator.built_ceramic_offset_mm": (-10.0, 10.0),
     "fem.width_min_mm": _mm(materials.WIDTH_RANGE),
     "fem.width_max_mm": _mm(materials.WIDTH_RANGE),
     "fem.fine_width_min_mm": _mm(materials.WIDTH_RANGE),
@@ -122,6 +127,7 @@ def simulator_defaults() -> dict:
     """The [simulator] section from the bench simulator's defaults."""
     from instruments.simulator.bench import DEFAULT_DRIFT_RATE, BenchSettings
     from instruments.simulator.physics import DEFAULT_LOW_VELOCITY_Q
+    from workflow.models.builtplate import DEMONSTRATION_DEVIATIONS as built
 
     bench = {f.name: f.default for f in fields(BenchSettings) if f.default is not MISSING}
     return {
@@ -133,6 +139,11 @@ def simulator_defaults() -> dict:
         "relative_noise": bench["relative_noise"],
         "floor_fraction": bench["floor_fraction"],
         "phase_noise_deg": bench["phase_noise"],
+        "built_glue_um": built.glue_thickness / UM,
+        "built_ceramic_factor": built.ceramic_modulus_factor,
+        "built_resonator_factor": built.resonator_modulus_factor,
+        "built_hi_offset_um": built.resonator_thickness_offset / UM,
+        "built_ceramic_offset_mm": built.ceramic_offset / MM,
     }
 
 

@@ -78,6 +78,20 @@ def bench_settings(config: dict):
     )
 
 
+def built_plate_deviations(config: dict):
+    """The hidden deviations of the simulated built plate: the ``built_*`` keys of the [simulator] section."""
+    from workflow.models.builtplate import PlateDeviations
+
+    simulator = config["simulator"]
+    return PlateDeviations(
+        glue_thickness=simulator["built_glue_um"] * UM,
+        ceramic_modulus_factor=simulator["built_ceramic_factor"],
+        resonator_modulus_factor=simulator["built_resonator_factor"],
+        resonator_thickness_offset=simulator["built_hi_offset_um"] * UM,
+        ceramic_offset=simulator["built_ceramic_offset_mm"] * MM,
+    )
+
+
 def campaign_logs(context: RunContext) -> List[Path]:
     """The interferometer logs to fit: the given ones, or a campaign on the simulated bench."""
     if context.logs:

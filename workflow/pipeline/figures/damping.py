@@ -112,7 +112,9 @@ def q_of_v_figure(fit: DampingFit, draws: int = 200, seed: int = 0):
 def _predicted_rows(law_fit: LawFit, log, draws: int, seed: int) -> np.ndarray:
     """Noise-free velocity at every logged row for posterior draws, shape (draws, rows) [m/s]."""
     theta = _posterior_draws(law_fit, draws, seed)
-    return predicted_velocity(theta, law_fit.data.layout, log.frequency, log.drive_voltage, log.sweep)
+    data = law_fit.data
+    return predicted_velocity(theta, data.layout, log.frequency, log.drive_voltage, log.sweep, data.time_offset,
+                              data.mode_factor)
 
 
 def resonance_curves_figure(fit: DampingFit, draws: int = 200, points: int = 200, seed: int = 0):
@@ -128,7 +130,8 @@ def resonance_curves_figure(fit: DampingFit, draws: int = 200, points: int = 200
         mine = log.sweep == k
         grid = np.linspace(log.frequency[mine].min(), log.frequency[mine].max(), points)
         voltage = np.full(points, np.median(log.drive_voltage[mine]))
-        predicted = predicted_velocity(theta, best.data.layout, grid, voltage, np.full(points, k))
+        factor = np.median(log.measurement_factor()[mine])
+        predicted = factor * predicted_velocity(theta, best.data.layout, grid, voltage, np.full(points, k))
         low, middle, high = np.quantile(predicted, [0.05, 0.5, 0.95], axis=0)
         top.fill_between(grid / KHZ, low, high, color=colours[k], alpha=0.3)
         top.plot(grid / KHZ, middle, color=colours[k], lw=1)
@@ -153,6 +156,8 @@ def _display_columns(law_fit: LawFit):
     plots: the law, gain, noise and the first sweep's resonance (shown as its offset from a round value)."""
     columns = []
     for name, entry in parameter_summary(law_fit).items():
+        if name.startswith("v0_") and name != "v0_0":
+            continue
         if name.startswith("f_r_"):
             if name != "f_r_0":
                 continue
@@ -250,7 +255,11 @@ FIT_FIGURES = {
 
 def fit_figures(fit: DampingFit) -> dict:
     """File name -> Figure for a fit: Q(v), resonance curves, and corner and trace plots of each law."""
-    figures = {name: function(fit) for name, function in FIT_FIGURES.items()}
+    from workflow.pipeline.figures.ringdown import ringdown_figure
+
+    figures = {name: function(fit) for name, function in FIT_FIGURES.items() if fit.log.n_sweeps}
+    if fit.log.ringdown is not None:
+        figures["ringdown.png"] = ringdown_figure(fit)
     for law_name, law_fit in fit.fits.items():
         figures[f"corner_{law_name}.png"] = corner_figure(law_fit)
         figures[f"trace_{law_name}.png"] = trace_figure(law_fit)

@@ -1,0 +1,158 @@
+"""Ring-down procedure: bursts at resonance, and the free decay of the velocity envelope after each.
+
+For each burst level the generator is put in triggered burst mode (``BURS:MODE TRIG``,
+``BURS:NCYC``, ``TRIG:SOUR BUS``, ``BURS:STAT ON``) at the plan's frequency and amplitude,
+fires one burst (``*TRG``), and the vibrometer's envelope record (``Get,Record,0,Envelope``,
+docs/instruments.md) gives the velocity from the burst's end on.  An over-range record steps
+the decoder range up and fires again.  Each burst's samples are appended in one write with
+the plate temperature where the bench reports it (docs/log-format.md, ring-down logs); a
+resumed log skips the bursts it holds in full and drops a burst cut short.
+"""
+
+from dataclasses import dataclass
+
+from instruments.drivers.errors import InstrumentError
+from instruments.drivers.vibrometer import EnvelopeRecord
+from instruments.procedures.logwriter import LogWriter
+from instruments.procedures.sweeps import PlanError, ProcedureResult, Station, check_frequencies, check_sizes
+from instruments.simulator.vibrometer import RECORD_INTERVAL_US_RANGE, RECORD_SAMPLES_RANGE
+from workflow import logformat
+from workflow.progress import Progress
+
+MAX_BURSTS = 1000
+"""Most bursts of one ring-down procedure."""
+
+
+@dataclass(frozen=True)
+class RingdownPlan:
+    """Bursts at one frequency, one per level (burst id = index).
+
+    Attributes
+    ----------
+    frequency : float
+        Burst frequency [Hz], usually the resonance.
+    voltages : tuple of float
+        Burst level of each burst [V peak across the ceramics].
+    cycles : int
+        Cycles per burst (enough to reach the steady state: a few Q / pi).
+    samples : int
+        Envelope samples recorded after each burst.
+    interval : float
+        Time between samples [s] (whole microseconds).
+    """
+
+    frequency: float
+    voltages: tuple = (5.0, 10.0, 15.0)
+    cycles: int = 2000
+    samples: int = 100
+    interval: float = 50e-6
+
+    def __post_init__(self):
+        check_frequencies(self.frequency, self.frequency, "ring-down plan")
+        check_sizes({}, len(self.voltages), "ring-down plan")
+        if not 1 <= len(self.voltages) <= MAX_BURSTS:
+            raise PlanError(f"ring-down plan: 1 to {MAX_BURSTS} burst levels, got {len(self.voltages)}")
+        if not (isinstance(self.cycles, int) and 1 <= self.cycles <= 100_000_000):
+            raise PlanError(f"ring-down plan: cycles must be an integer from 1 to 100000000, got {self.cycles!r}")
+        low, high = RECORD_SAMPLES_RANGE
+        if not low <= self.samples <= high:
+            raise PlanError(f"ring-down plan: samples must be {low} to {high}, got {self.samples}")
+        low, high = RECORD_INTERVAL_US_RANGE
+        if not low <= round(self.interval * 1e6) <= high:
+            raise PlanError(f"ring-down plan: interval must be {low} to {high} us, got {self.interval * 1e6:g} us")
+
+
+def record_ringdown(station: Station, frequency: float, voltage: float, cycles: int) -> EnvelopeRecord:
+    """Fire one burst of ``cycles`` at ``frequency`` [Hz] and ``voltage`` [V peak across the ceramics]; its decay record.
+
+    The limit is checked before anything is sent; the generator's error queue after the setup.
+    Over range steps the decoder range up and fires again.
+    """
+    station.check_voltage(voltage)
+    generator = station.generator
+    generator.output = False
+    generator.frequency = frequency
+    generator.amplitude_vpp = station.amplifier.generator_vpp(voltage)
+    generator.configure_burst(cycles)
+    generator.check_errors(f"configuring a burst of {cycles} cycles at {frequency:.12g} Hz, {voltage:g} V")
+    generator.output = True
+    while True:
+        generator.trigger()
+        record = station.vibrometer.read_record()
+        if not record.over_range:
+            return record
+        larger = [r for r in station.vibrometer.ranges if r > station.vibrometer.decoder_range]
+        if not larger:
+            raise InstrumentError("vibrometer over range on its largest range during a ring-down")
+        station.vibrometer.decoder_range = larger[0]
+
+
+def ringdown(station: Station, path, plan: RingdownPlan, metadata: dict | None = None, restart: bool = False,
+             fsync: bool = True) -> ProcedureResult:
+    """Ring-downs at the plan's levels; summary ``bursts``: voltage, initial velocity, temperature."""
+    for voltage in plan.voltages:
+        station.check_voltage(voltage)
+    ids = station.identify()
+    header = {
+        "procedure": "ringdown",
+        **ids,
+        "amplifier_gain": station.amplifier.gain,
+        "ceramic_voltage_limit_v": station.voltage_limit,
+        **{f"plan_{key}": value for key, value in vars(plan).items()},
+        **(metadata or {}),
+    }
+    with LogWriter(path, header, restart=restart, fsync=fsync, columns=logformat.RINGDOWN_COLUMNS) as log:
+        complete = _complete_bursts(log, plan.samples)
+        resumed = len(log.rows)
+        todo = [j for j in range(len(plan.voltages)) if j not in complete]
+        station.prepare()
+        try:
+            station.retry(lambda: _prepare_record(station, plan), "preparing the vibrometer's envelope record")
+            with Progress(len(todo), "ringdown", unit="bursts", enabled=bool(todo)) as bar:
+                for j in todo:
+                    voltage = plan.voltages[j]
+                    record = station.retry(lambda: record_ringdown(station, plan.frequency, voltage, plan.cycles),
+                                           f"ring-down at {voltage:g} V")
+                    temperature = station.retry(station.vibrometer.read_temperature, "reading the plate temperature")
+                    stamp = station.clock()
+                    log.append_rows([
+                        {logformat.SWEEP: j, logformat.TIMESTAMP: stamp, logformat.DECAY_TIME: t,
+                         logformat.FREQUENCY: plan.frequency, logformat.DRIVE_VOLTAGE: voltage,
+                         logformat.VELOCITY: v, logformat.TEMPERATURE: temperature}
+                        for t, v in zip(record.time, record.amplitude)
+                    ])
+                    bar.update()
+        finally:
+            station.shutdown()
+        rows = log.rows
+    bursts = []
+    for j, voltage in enumerate(plan.voltages):
+        mine = [row for row in rows if row[logformat.SWEEP] == str(j)]
+        bursts.append({"burst": j, "voltage_v": voltage, "initial_velocity_m_s": float(mine[0][logformat.VELOCITY]),
+                       "temperature_c": float(mine[0][logformat.TEMPERATURE]) if mine[0][logformat.TEMPERATURE] else None})
+    counts = dict(path=log.path, procedure="ringdown", planned=len(plan.voltages) * plan.samples,
+                  measured=len(todo) * plan.samples, resumed=resumed, truncated_bytes=log.truncated_bytes)
+    return ProcedureResult(**counts, summary={"bursts": bursts})
+
+
+def _prepare_record(station: Station, plan: RingdownPlan) -> None:
+    station.vibrometer.record_samples = plan.samples
+    station.vibrometer.record_interval = plan.interval
+
+
+def _complete_bursts(log: LogWriter, samples: int) -> set:
+    """Burst ids the log holds in full; rows after the first incomplete burst are dropped (a burst cut short)."""
+    complete, count, current = set(), 0, None
+    for index, row in enumerate(log.rows):
+        burst = int(row[logformat.SWEEP])
+        if burst != current:
+            if current is not None and count != samples:
+                log.keep_rows(index - count)
+                return complete
+            current, count = burst, 0
+        count += 1
+        if count == samples:
+            complete.add(burst)
+    if current is not None and count != samples:
+        log.keep_rows(len(log.rows) - count)
+    return complete

@@ -1,0 +1,106 @@
+"""Free decay of the vibration after a burst (ring-down), with amplitude-dependent damping.
+
+Once the drive stops, the velocity envelope v (peak velocity at the antinode) of a mode at
+f_r loses the fraction 2 pi / Q of its energy per cycle, so
+
+    dv/dt = -pi f_r v / Q(v).
+
+For the laws with a power-law loss, 1/Q = 1/Q0 + alpha |v|^n, this is a Bernoulli equation
+with a closed form (a = pi f_r / Q0, b = pi f_r alpha):
+
+    n = 2:  v(t)^2 = a v0^2 e^(-2at) / (a + b v0^2 (1 - e^(-2at)))
+    n = 1:  v(t)   = a v0 e^(-at) / (a + b v0 (1 - e^(-at)))
+
+and a constant Q decays exponentially.  Any other law is integrated in ln v by a fixed-step
+fourth-order Runge-Kutta scheme, vectorised over walkers and bursts (:func:`integrated_decay`).
+The resonance's small shift with amplitude (softening) is neglected during the decay.
+"""
+
+import numpy as np
+
+from workflow.damping.laws import ConstantQ, LinearLoss, QuadraticLoss
+
+RK4_STEPS_PER_SAMPLE = 4
+"""Runge-Kutta steps between consecutive record samples [-]."""
+
+
+def decay_velocity(law, frequency, initial_velocity, time):
+    """Envelope v(t) of the free decay [m/s], closed form where the law has one.
+
+    Parameters
+    ----------
+    law : Q(v) law
+        Parameters broadcasting against the other arguments (e.g. (W, 1)).
+    frequency : array
+        f_r during the decay [Hz].
+    initial_velocity : array
+        v0 at t = 0 (end of the burst), antinode peak velocity [m/s].
+    time : array
+        Time since the end of the burst [s], >= 0.
+    """
+    f, v0, t = (np.asarray(x, dtype=float) for x in (frequency, initial_velocity, time))
+    a = np.pi * f / np.asarray(law.q0)
+    if isinstance(law, ConstantQ):
+        return v0 * np.exp(-a * t)
+    b = np.pi * f * np.asarray(law.alpha)
+    if isinstance(law, QuadraticLoss):
+        decay = np.exp(-2 * a * t)
+        return np.sqrt(a * v0**2 * decay / (a + b * v0**2 * (1 - decay)))
+    if isinstance(law, LinearLoss):
+        decay = np.exp(-a * t)
+        return a * v0 * decay / (a + b * v0 * (1 - decay))
+    return integrated_decay(law.quality_factor, f, v0, t)
+
+
+def integrated_decay(quality_factor, frequency, initial_velocity, time, steps_per_sample=RK4_STEPS_PER_SAMPLE):
+    """v(t) of dv/dt = -pi f v / Q(v) by RK4 in ln v on the sorted distinct ``time`` values [m/s].
+
+    Vectorised over everything but time: the arguments broadcast to one shape, and the
+    integration runs once over the distinct times (a record's samples are shared by its
+    bursts), ``steps_per_sample`` steps between neighbours.
+    """
+    f, v0, t = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (frequency, initial_velocity, time)))
+    grid, where = np.unique(t, return_inverse=True)
+    where = where.reshape(t.shape)
+
+    def slope(ln_v):
+        return -np.pi * f / quality_factor(np.exp(ln_v))
+
+    ln_v = np.log(v0)
+    values = np.empty((len(grid),) + t.shape)
+    previous = 0.0
+    for i, target in enumerate(grid):
+        h = (target - previous) / steps_per_sample
+        for _ in range(steps_per_sample if h > 0 else 0):
+            k1 = slope(ln_v)
+            k2 = slope(ln_v + 0.5 * h * k1)
+            k3 = slope(ln_v + 0.5 * h * k2)
+            k4 = slope(ln_v + h * k3)
+            ln_v = ln_v + h * (k1 + 2 * k2 + 2 * k3 + k4) / 6
+        values[i] = ln_v
+        previous = target
+    return np.exp(np.take_along_axis(values, where[None], axis=0)[0])
+
+
+def decay_quality_factors(frequency, velocity, burst, time):
+    """Model-free Q(v) points from each ring-down: Q = pi f dt / -d ln v between neighbouring samples.
+
+    Returns
+    -------
+    velocity : numpy.ndarray
+        Geometric mean of each pair's velocities [m/s] (at the measurement point).
+    quality_factor : numpy.ndarray
+        [-]; pairs whose velocity did not fall are left out.
+    """
+    points_v, points_q = [], []
+    for j in np.unique(burst):
+        mine = burst == j
+        order = np.argsort(time[mine])
+        t, v, f = time[mine][order], velocity[mine][order], frequency[mine][order]
+        step = max(1, len(t) // 8)
+        t, v, f = t[::step], v[::step], f[::step]
+        fall = np.log(v[:-1]) - np.log(v[1:])
+        good = (fall > 0) & (v[1:] > 0)
+        points_v.append(np.sqrt(v[:-1] * np.abs(v[1:]))[good])
+        points_q.append((np.pi * f[:-1] * np.diff(t) / np.where(good, fall, 1.0))[good])
+    return np.concatenate(points_v), np.concatenate(points_q)

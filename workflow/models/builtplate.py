@@ -1,0 +1,246 @@
+"""Built plates: the nominal geometry a log names, and how a built plate deviates from it.
+
+A plate built from a design differs from the model by its bond (an epoxy layer), the scatter of
+the material constants, thickness tolerances and the placement of the ceramics (docs/instruments.md, "Built plates").
+:class:`PlateDeviations` holds such deviations and :func:`deviated_plate` applies them to a
+nominal :class:`~workflow.models.plate.Plate`: the plate the FEM solves when the bench simulator
+plays a built plate.  :class:`BuiltPlate` is the nominal geometry a built-plate log names in its
+metadata (docs/log-format.md), parsed and checked here, written back by :meth:`BuiltPlate.metadata`.
+"""
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from workflow import logformat
+from workflow.errors import InputFileError
+from workflow.models import materials
+from workflow.models.materials import Material, PiezoMaterial
+from workflow.models.plate import Plate
+from workflow.units import MM, UM
+
+
+def scaled_ceramic(ceramic: PiezoMaterial, factor: float) -> PiezoMaterial:
+    """The ceramic with its stiffness c^E scaled by ``factor`` [-] and its charge constants d kept.
+
+    The piezoelectric stress constants e = c^E d scale with it, so the free strain per volt
+    is unchanged while the ceramic is stiffer or softer; E (= 1/s11^E) scales by ``factor``.
+    """
+    return replace(
+        ceramic,
+        name=f"{ceramic.name} x{factor:g}",
+        youngs_modulus=ceramic.youngs_modulus * factor,
+        elastic_stiffness=tuple(tuple(c * factor for c in row) for row in ceramic.elastic_stiffness),
+        piezo_stress=tuple(tuple(e * factor for e in row) for row in ceramic.piezo_stress),
+    )
+
+
+def scaled_material(material: Material, factor: float) -> Material:
+    """The isotropic material with its Young's modulus scaled by ``factor`` [-]."""
+    return replace(material, name=f"{material.name} x{factor:g}", youngs_modulus=material.youngs_modulus * factor)
+
+
+@dataclass(frozen=True)
+class PlateDeviations:
+    """How a built plate differs from its nominal design.
+
+    Attributes
+    ----------
+    glue_thickness : float
+        Epoxy bond under each ceramic [m] (replaces the nominal plate's bond).
+    ceramic_modulus_factor : float
+        Ceramic stiffness c^E over the record's [-] (d kept, see :func:`scaled_ceramic`).
+    resonator_modulus_factor : float
+        Resonator Young's modulus over the record's [-].
+    resonator_thickness_offset : float
+        Built h_i minus nominal h_i [m].
+    ceramic_offset : float
+        Shift of the row of ceramics along x from the antinodes [m].  The quarter-plate FEM
+        keeps the plate symmetric, so the offset acts on the drive only: every ceramic then
+        covers a shifted stretch of the sinusoidal mode, and the modal drive falls by
+        :meth:`drive_factor` (the modes it would excite, antisymmetric in x, are not modelled).
+    """
+
+    glue_thickness: float = 0.0
+    ceramic_modulus_factor: float = 1.0
+    resonator_modulus_factor: float = 1.0
+    resonator_thickness_offset: float = 0.0
+    ceramic_offset: float = 0.0
+
+    def __post_init__(self):
+        for name in ("ceramic_modulus_factor", "resonator_modulus_factor"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and 0.5 <= value <= 1.5):
+                raise ValueError(f"{name} must be from 0.5 to 1.5, got {value!r}")
+        for name in ("glue_thickness", "resonator_thickness_offset", "ceramic_offset"):
+            if not math.isfinite(getattr(self, name)):
+                raise ValueError(f"{name} must be finite, got {getattr(self, name)!r}")
+        if self.glue_thickness < 0:
+            raise ValueError(f"glue_thickness must be >= 0, got {self.glue_thickness!r}")
+
+    def drive_factor(self, wavelength: float) -> float:
+        """cos(2 pi delta / lambda) [-]: the modal drive of ceramics shifted by delta along a mode of wavelength lambda [m].
+
+        A ceramic spanning [x_k + delta - l/2, x_k + delta + l/2] on w ~ cos(2 pi x / lambda) drives the
+        mode through w'(end) - w'(start), proportional to cos(2 pi delta / lambda).
+        """
+        return float(np.cos(2 * np.pi * self.ceramic_offset / wavelength))
+
+    def metadata(self) -> dict:
+        """Flat ``deviation_*`` items in the units of the logs (um, mm) for a simulated log's header."""
+        return {
+            "deviation_glue_um": self.glue_thickness / UM,
+            "deviation_ceramic_modulus_factor": self.ceramic_modulus_factor,
+            "deviation_resonator_modulus_factor": self.resonator_modulus_factor,
+            "deviation_hi_offset_um": self.resonator_thickness_offset / UM,
+            "deviation_ceramic_offset_mm": self.ceramic_offset / MM,
+        }
+
+
+DEMONSTRATION_DEVIATIONS = PlateDeviations(
+    glue_thickness=40 * UM,
+    ceramic_modulus_factor=0.95,
+    resonator_modulus_factor=0.95,
+    resonator_thickness_offset=-30 * UM,
+    ceramic_offset=0.3 * MM,
+)
+"""The demonstration built plate's hidden deviations (docs/instruments.md, "Built plates"): a 40 um
+epoxy bond, both moduli 5 % low, h_i 30 um thin, ceramics 0.3 mm off the antinodes.  They put a
+plate designed for 25 kHz about 8 % low, as the paper's built plates were (computed with the FEM,
+not fitted to the paper)."""
+
+
+def deviated_plate(plate: Plate, deviations: PlateDeviations) -> Plate:
+    """The plate as built: ``plate`` with the bond, moduli and resonator thickness of ``deviations``.
+
+    Raises
+    ------
+    GeometryError
+        If the resonator thickness offset leaves no resonator.
+    """
+    return plate.with_(
+        glue_thickness=deviations.glue_thickness,
+        ceramic=scaled_ceramic(plate.ceramic, deviations.ceramic_modulus_factor),
+        resonator=scaled_material(plate.resonator, deviations.resonator_modulus_factor),
+        resonator_thickness=plate.resonator_thickness + deviations.resonator_thickness_offset,
+    )
+
+
+@dataclass(frozen=True)
+class BuiltPlate:
+    """The nominal design of a built plate, as its logs name it.
+
+    Attributes
+    ----------
+    wavelength, resonator_thickness, ceramic_thickness, width : float
+        lambda, h_i, h_p, b [m].
+    ceramic, resonator : str or None
+        Material record names, when known (:mod:`workflow.models.materials`).
+    glue_thickness : float or None
+        Nominal bond thickness [m], when known.
+    """
+
+    wavelength: float
+    resonator_thickness: float
+    ceramic_thickness: float
+    width: float
+    ceramic: str | None = None
+    resonator: str | None = None
+    glue_thickness: float | None = None
+
+    @classmethod
+    def from_plate(cls, plate: Plate) -> "BuiltPlate":
+        """The record of a nominal :class:`Plate` (its material names and bond included)."""
+        return cls(float(plate.wavelength), float(plate.resonator_thickness), float(plate.ceramic_thickness),
+                   float(plate.width), plate.ceramic.name, plate.resonator.name, float(plate.glue_thickness))
+
+    def plate(self) -> Plate:
+        """The nominal :class:`Plate`: the paper's materials and no bond unless named."""
+        return Plate(
+            wavelength=self.wavelength,
+            resonator_thickness=self.resonator_thickness,
+            ceramic_thickness=self.ceramic_thickness,
+            width=self.width,
+            ceramic=materials.ceramic(self.ceramic or materials.PAPER),
+            resonator=materials.resonator(self.resonator or materials.PAPER),
+            glue_thickness=self.glue_thickness or 0.0,
+        )
+
+    def metadata(self) -> dict:
+        """The log metadata items naming this plate (docs/log-format.md), lengths in mm, the bond in um."""
+        items = {
+            logformat.LAMBDA_MM: self.wavelength / MM,
+            logformat.HI_MM: self.resonator_thickness / MM,
+            logformat.HP_MM: self.ceramic_thickness / MM,
+            logformat.B_MM: self.width / MM,
+            logformat.CERAMIC: self.ceramic,
+            logformat.RESONATOR: self.resonator,
+            logformat.GLUE_UM: None if self.glue_thickness is None else self.glue_thickness / UM,
+        }
+        return {key: f"{value:.12g}" if isinstance(value, float) else value for key, value in items.items() if value is not None}
+
+    @classmethod
+    def from_metadata(cls, metadata: dict, source: str) -> "BuiltPlate":
+        """Parse and check the built-plate keys of a log's metadata.
+
+        Parameters
+        ----------
+        metadata : dict
+            key -> (value text, line number) of the log's ``# key: value`` lines.
+        source : str
+            The log's path, for messages.
+
+        Raises
+        ------
+        InputFileError
+            A geometry key missing (naming the keys that are), a value that is not a positive
+            finite number (naming its line), or an unknown material name.
+        """
+        missing = [key for key in logformat.BUILT_PLATE_KEYS if key not in metadata]
+        if missing:
+            raise InputFileError(f"{source}: not a built-plate log: no '# {missing[0]}: ...' metadata line "
+                                 f"(a built-plate log names {', '.join(logformat.BUILT_PLATE_KEYS)})")
+        lengths = {key: _positive(metadata, key, source) for key in logformat.BUILT_PLATE_KEYS}
+        names = {}
+        for key, known in ((logformat.CERAMIC, materials.ceramic_names()), (logformat.RESONATOR, materials.resonator_names())):
+            if key in metadata:
+                value, line = metadata[key]
+                if value not in known:
+                    raise InputFileError(f"{source}, line {line}: {key} {value!r} is not a material record; "
+                                         f"known: {', '.join(known)}")
+                names[key] = value
+        glue = None
+        if logformat.GLUE_UM in metadata:
+            glue = _number(metadata, logformat.GLUE_UM, source)
+            if glue < 0:
+                raise InputFileError(f"{source}, line {metadata[logformat.GLUE_UM][1]}: {logformat.GLUE_UM} must be "
+                                     f">= 0, got {metadata[logformat.GLUE_UM][0]!r}")
+            glue *= UM
+        return cls(
+            wavelength=lengths[logformat.LAMBDA_MM] * MM,
+            resonator_thickness=lengths[logformat.HI_MM] * MM,
+            ceramic_thickness=lengths[logformat.HP_MM] * MM,
+            width=lengths[logformat.B_MM] * MM,
+            ceramic=names.get(logformat.CERAMIC),
+            resonator=names.get(logformat.RESONATOR),
+            glue_thickness=glue,
+        )
+
+
+def _number(metadata: dict, key: str, source: str) -> float:
+    text, line = metadata[key]
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise InputFileError(f"{source}, line {line}: {key} must be a finite number, got {text!r}")
+    return value
+
+
+def _positive(metadata: dict, key: str, source: str) -> float:
+    value = _number(metadata, key, source)
+    if value <= 0:
+        raise InputFileError(f"{source}, line {metadata[key][1]}: {key} must be positive, got {metadata[key][0]!r}")
+    return value
