@@ -162,7 +162,7 @@ def test_calibrate_cli_contract_and_evaluate_with_the_calibration(tmp_path, caps
 
 @pytest.mark.parametrize(
     "metadata, message",
-    [({"lambda_mm": None}, "lambda_mm"), ({"h_p_mm": "thick"}, "h_p_mm"), ({"ceramic": "unobtainium"}, "unknown ceramic")],
+    [({"lambda_mm": None}, "lambda_mm"), ({"h_p_mm": "thick"}, "h_p_mm"), ({"ceramic": "unobtainium"}, "not a material record")],
 )
 def test_calibrate_refuses_a_log_without_a_usable_geometry(tmp_path, capsys, metadata, message):
     log = write_log(tmp_path / "bad.csv", P1, 23e3, metadata)

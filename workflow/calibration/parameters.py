@@ -14,14 +14,14 @@ micrometres appear only in the settings file and in reports (:attr:`Parameter.di
 
 import math
 import sys
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from importlib import resources
 
 import numpy as np
 from scipy import stats
 
 from workflow.errors import InputFileError
-from workflow.models.materials import PiezoMaterial
+from workflow.models.builtplate import scaled_ceramic, scaled_material
 from workflow.models.plate import Plate
 from workflow.units import UM
 
@@ -148,11 +148,11 @@ def deviated_plate(plate: Plate, names, theta) -> Plate:
     changes = {}
     for name, value in zip(names, (float(v) for v in theta)):
         if name == "ceramic_modulus_factor":
-            changes["ceramic"] = scaled_ceramic(plate.ceramic, value)
+            changes["ceramic"] = plate.ceramic if value == 1.0 else scaled_ceramic(plate.ceramic, value)
         elif name == "resonator_modulus_factor":
-            changes["resonator"] = replace(plate.resonator, youngs_modulus=plate.resonator.youngs_modulus * value)
+            changes["resonator"] = scaled_material(plate.resonator, value)
         elif name == "glue_modulus_factor":
-            changes["glue"] = replace(plate.glue, youngs_modulus=plate.glue.youngs_modulus * value)
+            changes["glue"] = scaled_material(plate.glue, value)
         elif name == "glue_um":
             changes["glue_thickness"] = max(value, 0.0)
         elif name == "resonator_offset_um":
@@ -160,21 +160,6 @@ def deviated_plate(plate: Plate, names, theta) -> Plate:
         else:
             raise InputFileError(f"unknown calibration parameter {name!r}; known: {', '.join(FACTORS + LENGTHS)}")
     return plate.with_(**changes)
-
-
-def scaled_ceramic(ceramic: PiezoMaterial, factor: float) -> PiezoMaterial:
-    """The ceramic with c^E and e multiplied by ``factor`` [-]: stiffer, same d31 and permittivity."""
-    if factor == 1.0:
-        return ceramic
-    return PiezoMaterial.from_tensors(
-        ceramic.name,
-        ceramic.stiffness_matrix() * factor,
-        ceramic.piezo_matrix() * factor,
-        ceramic.permittivity_matrix(),
-        ceramic.density,
-        ceramic.mechanical_q,
-        ceramic.source,
-    )
 
 
 def default_settings() -> CalibrationSettings:
