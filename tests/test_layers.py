@@ -1,6 +1,6 @@
 """The folder tree is the architecture: imports point one way, and this test keeps them so.
 
-workflow: base <- models <- damping <- optimise <- pipeline <- cli, with execution (pool, Dask,
+workflow: base <- models <- damping <- calibration <- optimise <- pipeline <- cli, with execution (pool, Dask,
 cache) beside the models and below optimise.  instruments: drivers <- simulator <- procedures
 <- (pipeline, cli).  Command modules import no other command module, only ``cli.options``.
 """
@@ -20,6 +20,7 @@ LAYER_PREFIXES = {
     "models": "workflow.models",
     "execution": "workflow.execution",
     "damping": "workflow.damping",
+    "calibration": "workflow.calibration",
     "optimise": "workflow.optimise",
     "pipeline": "workflow.pipeline",
     "cli": "workflow.cli",
@@ -32,14 +33,15 @@ ALLOWED = {
     "models": {"base", "models"},
     "execution": {"base", "execution"},
     "damping": {"base", "models", "damping"},
-    "optimise": {"base", "models", "execution", "damping", "optimise"},
+    "calibration": {"base", "models", "damping", "calibration"},
+    "optimise": {"base", "models", "execution", "damping", "calibration", "optimise"},
     "drivers": {"base", "drivers"},
     "simulator": {"base", "models", "damping", "drivers", "simulator"},
     "procedures": {"base", "drivers", "simulator", "procedures"},
     "pipeline": set(LAYER_PREFIXES) - {"cli"} | {"base"},
     "cli": set(LAYER_PREFIXES) | {"base"},
 }
-PURE_LAYERS = ("models", "execution", "damping", "optimise")
+PURE_LAYERS = ("models", "execution", "damping", "calibration", "optimise")
 """Layers that never draw, parse arguments or print figures."""
 FORBIDDEN_IN_PURE = ("matplotlib", "argparse")
 

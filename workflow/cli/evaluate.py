@@ -4,6 +4,7 @@ import sys
 
 from instruments.drivers.amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT
 from workflow.cli.options import (
+    add_calibration_option,
     add_ceramic_option,
     add_damping_option,
     add_drive_options,
@@ -12,13 +13,18 @@ from workflow.cli.options import (
     add_model_option,
     add_width_option,
     accuracy_line,
+    calibration_fem_model,
+    calibration_line,
     damping_line,
     fem_accuracy,
+    load_calibration_option,
     load_damping,
     plate_from_args,
     positive_float,
 )
+from workflow.errors import TactileError
 from workflow.models import analytical
+from workflow.pipeline.calibration_files import calibrated_record
 from workflow.pipeline.records import (
     damping_record,
     fem_accuracy_record,
@@ -45,6 +51,7 @@ def register(subparsers) -> None:
     add_width_option(parser)
     add_drive_options(parser)
     add_damping_option(parser)
+    add_calibration_option(parser)
     add_fem_options(parser)
     add_json_flag(parser)
     parser.set_defaults(handler=run)
@@ -52,6 +59,9 @@ def register(subparsers) -> None:
 
 def run(args) -> dict:
     plate = plate_from_args(args)
+    calibration = load_calibration_option(args)
+    if calibration is not None and args.model != "fem":
+        raise TactileError("--calibration corrects the FEM: give --model fem")
     if args.voltage > DEFAULT_CERAMIC_VOLTAGE_LIMIT:
         print(
             f"tactile evaluate: warning: {args.voltage:g} V is above the bench's safety limit of "
@@ -85,6 +95,10 @@ def run(args) -> dict:
         posterior = load_damping(args)
         if posterior is not None:
             result.update(fem_damping_record(posterior, fem))
+        if calibration is not None:
+            result["nominal_f_r_khz"], result["nominal_w_dyn_um"] = result["f_r_khz"], result["w_dyn_um"]
+            model = calibration_fem_model(calibration, args.q, args.voltage)
+            result.update(calibrated_record(calibration, plate, model.evaluate_plates, args.calibration))
     if not args.json:
         _print_human(result, args.model, None if args.model == "analytical" else fem.best_index)
     return result
@@ -109,6 +123,8 @@ def _print_human(result: dict, model: str, working_mode) -> None:
         print(accuracy_line(result))
     if damped:
         print(damping_line(result))
+    if "nominal_f_r_khz" in result:
+        print(calibration_line(result))
     for index, mode in enumerate(result.get("modes", [])):
         mark = "  <- working mode (reported above)" if index == working_mode else ""
         print(f"  mode {mode['f_khz']:8.3f} kHz: {mode['w_um']:.4f} µm, transverse indicator {mode['transverse']:.2f}{mark}")

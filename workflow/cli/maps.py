@@ -9,6 +9,7 @@ from pathlib import Path
 
 from workflow.cli.options import (
     add_ceramic_option,
+    add_calibration_option,
     add_damping_option,
     add_drive_options,
     add_fem_options,
@@ -19,9 +20,11 @@ from workflow.cli.options import (
     add_width_option,
     bounded,
     build_plate,
+    calibration_fem_model,
     design_problem,
     fem_accuracy,
     limit_text,
+    load_calibration_option,
     load_damping,
 )
 from workflow.errors import TactileError
@@ -59,6 +62,7 @@ def register(subparsers) -> None:
     add_width_option(parser)
     add_drive_options(parser)
     add_damping_option(parser)
+    add_calibration_option(parser)
     add_fem_options(parser, accuracy=SURVEY_ACCURACY)
     parser.add_argument(
         "--grid",
@@ -85,6 +89,10 @@ def run(args) -> dict:
         raise TactileError("maps: --width-sweep needs --model fem (the beam model does not depend on b)")
     problem = design_problem(args, args.hp_mm * MM)
     posterior = load_damping(args)
+    calibration = load_calibration_option(args)
+    if calibration is not None and (args.model != "fem" or posterior is not None):
+        raise TactileError("maps: --calibration corrects the FEM with a constant Q: give --model fem and no --damping")
+    args.loaded_calibration = calibration
     with output_folder(args.out, OUTPUTS, force=args.force):
         record = _maps(args, problem, posterior, points)
     if not args.json:
@@ -167,12 +175,37 @@ def _constant_q_record(args, problem, model, points: int) -> dict:
     else:
         optimum = optimise_fem(problem, model, "space-mapping").optimum
     result = design_map(model, problem, points, args.model, optimum)
+    correction = {}
+    if getattr(args, "loaded_calibration", None) is not None:
+        result, optimum, correction = calibrated_map(args, result, optimum)
     figure = _save(map_figure(result), args.out / f"map_{args.model}_hp{args.hp_mm:g}mm.png")
     return {
         **_map_keys(args, result.wavelength, result.resonator_thickness, result.deflection, result.frequency),
         "optimum": _optimum_keys(optimum),
         "figures": [figure],
+        **correction,
     }
+
+
+def calibrated_map(args, result, optimum):
+    """The map and optimum scaled by the calibration's posterior-median over nominal f_r and w at the optimum,
+    and the ``calibration`` key stating it (a relative correction from one geometry, docs/calibration.md)."""
+    import dataclasses
+
+    from workflow.pipeline.calibration_files import calibrated_record
+
+    model = calibration_fem_model(args.loaded_calibration, args.q, args.voltage)
+    record = calibrated_record(args.loaded_calibration, optimum.plate, model.evaluate_plates, args.calibration)
+    f_factor = record["f_r_khz"] * KHZ / optimum.frequency
+    w_factor = record["w_dyn_um"] * UM / optimum.deflection
+    result = dataclasses.replace(result, frequency=result.frequency * f_factor, deflection=result.deflection * w_factor)
+    optimum = dataclasses.replace(optimum, frequency=optimum.frequency * f_factor, deflection=optimum.deflection * w_factor)
+    statement = (f"calibrated: every point scaled by the posterior-median / nominal FEM ratio at the nominal optimum "
+                 f"(f_r x {f_factor:.4f}, w_dyn x {w_factor:.4f}); the optimum marked is the nominal one")
+    return result, optimum, {"calibration": {**record["calibration"], "frequency_factor": f_factor,
+                                             "deflection_factor": w_factor, "statement": statement,
+                                             "optimum_f_r_khz_p05": record["f_r_khz_p05"],
+                                             "optimum_f_r_khz_p95": record["f_r_khz_p95"]}}
 
 
 def _damped_record(args, problem, model, points: int, posterior) -> dict:

@@ -2,6 +2,10 @@
 
 from workflow.cli.options import (
     accuracy_line,
+    add_calibration_option,
+    bounded,
+    calibration_fem_model,
+    load_calibration_option,
     add_ceramic_option,
     add_damping_option,
     add_drive_options,
@@ -16,6 +20,7 @@ from workflow.cli.options import (
     fem_accuracy,
     load_damping,
 )
+from workflow.errors import TactileError
 from workflow.optimise.damped import damped_fem_optimum, damped_optimum
 from workflow.optimise.fem_optimum import METHODS, optimise_fem
 from workflow.optimise.problem import optimise_analytical
@@ -47,9 +52,42 @@ def register(subparsers) -> None:
     add_width_option(parser)
     add_drive_options(parser)
     add_damping_option(parser)
+    add_calibration_option(parser)
+    robust = parser.add_argument_group("robust design (with --calibration and --model fem, docs/calibration.md)")
+    robust.add_argument("--reliability", type=bounded(float, 0.5, 0.999), default=0.95,
+                        help="required P(f_r >= 25 kHz) under the calibration posterior and the tolerances, 0.5 to 0.999 "
+                        "(default 0.95)")
+    robust.add_argument("--stock-hi-mm", type=stock_list, default=DEFAULT_STOCK_MM, metavar="LIST",
+                        help="comma-separated resonator thicknesses available [mm]; lambda is solved for each "
+                        f"(default {','.join(f'{t:g}' for t in DEFAULT_STOCK_MM)})")
+    for name, what, default in (("hi", "h_i", 10.0), ("hp", "h_p", 10.0), ("lambda", "lambda", 50.0), ("glue", "the glue", 5.0)):
+        robust.add_argument(f"--sigma-{name}-um", type=bounded(float, 0.0, 1000.0, "um"), default=default,
+                            help=f"manufacturing standard deviation of {what} [um], 0 to 1000 (default {default:g})")
+    robust.add_argument("--separation", type=bounded(float, 0.0, 0.5), default=0.03,
+                        help="no strongly transverse mode within this relative distance of the working frequency "
+                        "(default 0.03)")
+    robust.add_argument("--transverse-threshold", type=bounded(float, 0.0, 1.0), default=0.3,
+                        help="transverse indicator above which a mode counts as transverse, 0 to 1 (default 0.3)")
     add_fem_options(parser)
     add_json_flag(parser)
     parser.set_defaults(handler=run)
+
+
+DEFAULT_STOCK_MM = (0.5, 0.6, 0.7, 0.75, 0.8, 1.0)
+"""Resonator thicknesses assumed in stock when --stock-hi-mm is not given [mm]."""
+
+
+def stock_list(text: str) -> tuple:
+    """argparse type: comma-separated positive thicknesses [mm]."""
+    import argparse
+
+    try:
+        values = tuple(float(item) for item in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated thicknesses in mm, got {text!r}") from None
+    if not values or any(not (0 < v < 100) for v in values):
+        raise argparse.ArgumentTypeError(f"thicknesses must be positive numbers of mm, got {text!r}")
+    return values
 
 
 def _fem_model(args):
@@ -61,6 +99,9 @@ def _fem_model(args):
 
 
 def run(args) -> dict:
+    calibration = load_calibration_option(args)
+    if calibration is not None:
+        return _robust(args, calibration)
     records = []
     posterior = load_damping(args)
     for ceramic_thickness in ceramic_thicknesses(args):
@@ -111,3 +152,56 @@ def _print_human(record: dict) -> None:
             print("  WARNING: f_r >= limit not verified on the converged model (see the accuracy line)")
     if "damping" in record:
         print(damping_line(record))
+
+
+def _robust(args, calibration) -> dict:
+    """The robust optimum under --calibration for each h_p asked for."""
+    import time
+
+    from workflow.models.plate import check_design_space
+    from workflow.optimise.robust import RobustSettings, Tolerances, robust_design
+    from workflow.pipeline.calibration_files import robust_record
+    from workflow.units import MM, UM
+
+    if args.model != "fem":
+        raise TactileError("--calibration corrects the FEM: give --model fem")
+    if args.damping is not None:
+        raise TactileError("--calibration and --damping cannot be combined yet: the robust design uses the constant --q")
+    settings = RobustSettings(
+        reliability=args.reliability,
+        separation=args.separation,
+        transverse_threshold=args.transverse_threshold,
+        tolerances=Tolerances(args.sigma_hi_um * UM, args.sigma_hp_um * UM, args.sigma_lambda_um * UM, args.sigma_glue_um * UM),
+    )
+    model = calibration_fem_model(calibration, args.q, args.voltage)
+    records = []
+    for ceramic_thickness in ceramic_thicknesses(args):
+        problem = design_problem(args, ceramic_thickness)
+        stock = [t * MM for t in args.stock_hi_mm]
+        for thickness in stock:
+            if thickness < problem.min_resonator_thickness - 1e-12:
+                raise TactileError(f"--stock-hi-mm {thickness / MM:g} is below --hi-min-mm {args.hi_min_mm:g}")
+        nominal = check_design_space(problem.build.with_(ceramic_thickness=ceramic_thickness, width=problem.width,
+                                                          resonator_thickness=stock[0]))
+        started = time.perf_counter()
+        design = robust_design(calibration, nominal, stock, settings, model.evaluate_plates, args.q)
+        records.append({**robust_record(design, args.reliability, time.perf_counter() - started), "calibration": args.calibration})
+    if not args.json:
+        for record in records:
+            _print_robust(record)
+    return records[0] if len(records) == 1 else {"optima": records}
+
+
+def _print_robust(record: dict) -> None:
+    print(f"robust optimum, h_p {record['h_p_mm']:g} mm: h_i {record['h_i_mm']:g} mm (stock), lambda {record['lambda_mm']:.3f} mm "
+          f"-> f_r {record['f_r_khz']:.3f} kHz (p05 {record['f_r_khz_p05']:.3f}), w_dyn {record['w_dyn_um']:.4f} µm; "
+          f"P(f_r >= 25 kHz) = {record['probability']:.3f} ± {record['probability_se']:.3f} "
+          f"({record['probability_draws']} draws), margin {record['margin_khz'] * 1e3:+.0f} Hz; "
+          f"{record['fine_evaluations']} FEM evaluations, {record['wall_time_s']:.0f} s")
+    for c in record["candidates"]:
+        nearest = c["nearest_transverse"]
+        separation = "no transverse mode near" if nearest is None else (
+            f"transverse mode at {nearest['f_khz']:.3f} kHz ({nearest['relative_distance'] * 100:.1f} % away)")
+        print(f"  h_i {c['h_i_mm']:g} mm: lambda {c['lambda_mm']:.3f} mm, f_r {c['f_r_khz']:.3f} kHz (p05 {c['f_r_khz_p05']:.3f}), "
+              f"w_dyn {c['w_dyn_um']:.4f} µm, P {c['probability']:.3f}, {separation}"
+              f"{'' if c['separated'] else ' (REJECTED)'}, |w| spread {c['homogeneity_cv'] * 100:.0f} %")

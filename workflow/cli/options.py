@@ -211,8 +211,11 @@ def build_plate(args) -> Plate:
     )
 
 
-def add_fem_options(parser: argparse.ArgumentParser, overrides: bool = False, accuracy: float = DEFAULT_ACCURACY) -> None:
-    """--accuracy and --piezo (the FEM's target relative frequency error and piezo model), and the build options.
+def add_fem_options(
+    parser: argparse.ArgumentParser, overrides: bool = False, accuracy: float = DEFAULT_ACCURACY, build: bool = True
+) -> None:
+    """--accuracy and --piezo (the FEM's target relative frequency error and piezo model), and the build options
+    unless ``build`` is False (a command whose inputs name the materials).
 
     With ``overrides`` they default to None: the value of the run's configuration is kept;
     otherwise --accuracy defaults to ``accuracy``.
@@ -226,7 +229,8 @@ def add_fem_options(parser: argparse.ArgumentParser, overrides: bool = False, ac
         "or with the electric potential as an unknown (coupled: adds the antiresonance, the effective coupling "
         "and the admittance)" + kept.format(PIEZO_MODELS[0]),
     )
-    add_build_options(parser, overrides)
+    if build:
+        add_build_options(parser, overrides)
     low, high = ACCURACY_RANGE
     parser.add_argument(
         "--accuracy",
@@ -523,3 +527,40 @@ class StopSignals:
             self._holding = False
         if pending and self.received is not None:
             raise Stopped(self.received)
+
+
+def add_calibration_option(parser: argparse.ArgumentParser) -> None:
+    """``--calibration FILE``: predict with the posterior of 'tactile calibrate' instead of the nominal model."""
+    parser.add_argument(
+        "--calibration",
+        metavar="FILE",
+        help="calibration.json (or its folder) from 'tactile calibrate': FEM predictions become posterior medians "
+        "with 5-95 %% intervals, through a surrogate built at each geometry (docs/calibration.md)",
+    )
+
+
+def load_calibration_option(args):
+    """The :class:`~workflow.calibration.calibration.Calibration` named by ``--calibration``, or None."""
+    from workflow.pipeline.calibration_files import load_calibration
+
+    path = getattr(args, "calibration", None)
+    return None if path is None else load_calibration(path)
+
+
+def calibration_fem_model(calibration, q: float, voltage: float):
+    """The cached, in-process FEM at the calibration's accuracy and piezo model, driven at ``q`` and ``voltage``."""
+    from workflow.execution.cache import EvaluationCache
+    from workflow.optimise.fem_model import FemModel
+
+    accuracy = FemAccuracy(target=calibration.fem["accuracy"], piezo=calibration.fem["piezo"])
+    return FemModel(q=q, voltage=voltage, settings=accuracy, cache=EvaluationCache(), scheduler="synchronous", progress=True)
+
+
+def calibration_line(record: dict) -> str:
+    """The calibrated prediction of a record with ``calibrated_record`` keys, for people."""
+    c = record["calibration"]
+    return (
+        f"  calibrated ({c['file']}): f_r {record['f_r_khz']:.3f} kHz (90 %: {record['f_r_khz_p05']:.3f} to "
+        f"{record['f_r_khz_p95']:.3f}), w_dyn {record['w_dyn_um']:.4f} µm (90 %: {record['w_dyn_um_p05']:.4f} to "
+        f"{record['w_dyn_um_p95']:.4f}); surrogate error {c['surrogate_error'] * 100:.2f} % from {c['fem_evaluations']} FEM evaluations"
+    )

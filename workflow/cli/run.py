@@ -3,7 +3,14 @@
 import sys
 from pathlib import Path
 
-from workflow.cli.options import add_fem_options, add_force_option, add_json_flag, override_config
+from workflow.cli.options import (
+    add_calibration_option,
+    add_fem_options,
+    add_force_option,
+    add_json_flag,
+    load_calibration_option,
+    override_config,
+)
 from workflow.execution.cache import EvaluationCache
 from workflow.pipeline.config import load_config, to_toml
 from workflow.pipeline.outputs import output_folder
@@ -27,6 +34,7 @@ def register(subparsers) -> None:
     parser.add_argument("--scheduler", help="tcp://host:port of a Dask scheduler (default: local cores)")
     parser.add_argument("--print-config", action="store_true", help="print the effective configuration and exit")
     add_fem_options(parser, overrides=True)
+    add_calibration_option(parser)
     add_json_flag(parser)
     parser.set_defaults(handler=run)
 
@@ -36,6 +44,7 @@ def run(args):
     if args.print_config:
         print(to_toml(config), end="")
         return None
+    load_calibration_option(args)  # a bad file fails before any step
     with output_folder(args.out, RUN_OUTPUTS, force=args.force) as out:
         context = RunContext(
             config=config,
@@ -43,6 +52,7 @@ def run(args):
             scheduler=args.scheduler or config["run"]["scheduler"] or None,
             logs=list(args.logs or config["campaign"]["logs"]),
             cache=EvaluationCache() if config["run"]["cache"] else None,
+            calibration=None if args.calibration is None else Path(args.calibration),
         )
         if context.scheduler is not None:
             from workflow.execution.parallel import connect

@@ -119,7 +119,11 @@ class FemModel:
             Also compute the derivatives of each result's probe model with respect to lambda
             and h_i (``FemResult.tangents``; about 1.7 times the cost, cached separately).
         """
-        tasks = [FemTask(p, self.q, self.voltage, self.settings, with_tangents) for p in scalar_plates(plate)]
+        return self.evaluate_plates(scalar_plates(plate), with_tangents)
+
+    def evaluate_plates(self, plates: list[Plate], with_tangents: bool = False) -> list[FemResult]:
+        """The full FEM result of each scalar plate of a list (materials and bond may differ between them)."""
+        tasks = [FemTask(p, self.q, self.voltage, self.settings, with_tangents) for p in plates]
         self.evaluations += len(tasks)
         return cached_map(
             run_fem_task, tasks, describe_fem_task, self.cache, self.scheduler, self.progress, description="FEM evaluations"

@@ -290,6 +290,26 @@ def _beam_and_fem(designs) -> str:
     )
 
 
+def _calibrated_designs(context: RunContext, designs) -> str:
+    """The recommended designs as the calibration predicts them (nothing without ``--calibration``)."""
+    if not designs:
+        return ""
+    rows = [
+        (f"{hp / MM:g}", f"{d['nominal_f_r_khz']:.3f}", f"{d['f_r_khz']:.3f} ({d['f_r_khz_p05']:.3f} to {d['f_r_khz_p95']:.3f})",
+         f"{d['w_dyn_um']:.3f} ({d['w_dyn_um_p05']:.3f} to {d['w_dyn_um_p95']:.3f})")
+        for hp, d in sorted(designs.items())
+    ]
+    source = next(iter(designs.values()))["calibration"]["file"]
+    return (
+        "## The designs as the calibration predicts them\n\n"
+        f"With the calibration `{source}` (posterior of `tactile calibrate`, docs/calibration.md), the recommended "
+        "designs above are predicted as follows: posterior median and 90 % interval, through a surrogate of the FEM "
+        "built at each design.  Designs whose interval reaches below the frequency limit need the robust design "
+        "(`tactile optimize --model fem --calibration …`).\n\n"
+        + table(("h_p [mm]", "nominal FEM f_r [kHz]", "calibrated f_r [kHz] (90 %)", "calibrated w_dyn [µm] (90 %)"), rows)
+    )
+
+
 def _analytical_optima(context: RunContext, optima) -> str:
     rows = [
         (
@@ -722,6 +742,7 @@ def _configuration(context: RunContext) -> str:
 
 SECTIONS = [
     ("recommended_design", _recommended_design),
+    ("calibrated_designs", _calibrated_designs),
     ("logs", _logs),
     ("analytical_optima", _analytical_optima),
     ("damping_fit", _damping_fit),

@@ -43,6 +43,7 @@ class RunContext:
     timings: List[StepTiming] = field(default_factory=list)
     figures: Dict[str, str] = field(default_factory=dict)
     cache: Optional[EvaluationCache] = None
+    calibration: Optional[Path] = None
 
     def figure_path(self, name: str) -> Path:
         """Where the figure ``name`` (a PNG file name) is written; recorded for the report."""

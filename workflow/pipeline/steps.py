@@ -356,6 +356,25 @@ def recommended_design_figures(context: RunContext, recommendation) -> None:
         save_figure(admittance_figure(curves), context.figure_path("admittance.png"))
 
 
+def calibrated_designs(context: RunContext) -> dict:
+    """The recommended designs' f_r and w_dyn as the calibration (``--calibration``) predicts them, with 90 %
+    intervals (docs/calibration.md); empty without a calibration.  Q and voltage are the run's."""
+    from workflow.models.fem.accuracy import FemAccuracy
+    from workflow.optimise.fem_model import FemModel
+    from workflow.pipeline.calibration_files import calibrated_record, load_calibration
+
+    if context.calibration is None:
+        return {}
+    calibration = load_calibration(context.calibration)
+    design = context.config["design"]
+    model = FemModel(q=design["q"], voltage=design["voltage_v"], cache=context.cache, scheduler="synchronous",
+                     settings=FemAccuracy(target=calibration.fem["accuracy"], piezo=calibration.fem["piezo"]))
+    designs = context.results["recommended_design"].designs
+    return {hp: {"nominal_f_r_khz": d.frequency / KHZ,
+                 **calibrated_record(calibration, d.plate, model.evaluate_plates, str(context.calibration))}
+            for hp, d in designs.items()}
+
+
 def analytical_maps(context: RunContext):
     """Beam-model maps of w_dyn and f_r over (lambda, h_i) for every h_p, with the optimum."""
     from workflow.optimise.maps import design_map
@@ -442,6 +461,7 @@ STEPS: List[Step] = [
     Step("FEM optimum per h_p (space mapping)", "fem_optima", fem_optima, fem_optima_figures),
     Step("recommended design per h_p", "recommended_design", recommended_design, recommended_design_figures,
          cacheable=False),
+    Step("calibrated predictions of the designs (--calibration)", "calibrated_designs", calibrated_designs, cacheable=False),
     Step("analytical maps", "analytical_maps", analytical_maps, maps_figures, cacheable=False),
     Step("FEM maps", "fem_maps", fem_maps, maps_figures),
     Step("FEM width sweep of the original plate", "width_sweep", fem_width_sweep, width_sweep_figures),

@@ -1,0 +1,215 @@
+"""A calibration: surrogates of the built plates, the posterior, and predictions for other plates.
+
+Pure given an ``evaluate`` callable (plates -> FemResults; the caller binds Q, voltage, FEM
+accuracy and the cache).  :class:`Calibration` converts to and from plain data (the
+``calibration.json`` that ``--calibration`` reads: no code, no pickle).
+"""
+
+from dataclasses import asdict, dataclass
+from typing import Sequence
+
+import numpy as np
+
+from workflow.calibration.logs import BuiltPlateLog
+from workflow.calibration.parameters import CalibrationSettings, Parameter
+from workflow.calibration.plate_surrogate import Evaluate, PlateSurrogate, build_plate_surrogate
+from workflow.calibration.posterior import (
+    ChainDiagnostics,
+    calibration_data,
+    identifiability,
+    parameter_summary,
+    predictive_quantiles,
+    sample_posterior,
+)
+from workflow.errors import InputFileError
+from workflow.models import materials
+from workflow.models.plate import Plate
+
+FORMAT = "tactile-calibration"
+VERSION = 1
+PREDICTION_DEGREE = 1
+"""Degree of the surrogate built at a new geometry over the posterior's range (narrow: linear suffices, its
+leave-one-out error says how well)."""
+POSTERIOR_RANGE = (0.5, 99.5)
+"""Percentiles of the posterior that bound a prediction surrogate's box [%]."""
+
+
+def prediction_points(n_parameters: int) -> int:
+    """FEM evaluations of a prediction surrogate: twice the linear basis plus two [-]."""
+    return 2 * (n_parameters + 1) + 2
+
+
+@dataclass(frozen=True)
+class MeasuredPlate:
+    """A nominal plate and its measured resonance.
+
+    Attributes
+    ----------
+    name : str
+        Where the measurement comes from (a log file, a label).
+    plate : Plate
+        Nominal plate [m].
+    frequency : float
+        Measured resonance frequency [Hz].
+    """
+
+    name: str
+    plate: Plate
+    frequency: float
+
+
+def measured_plate(log: BuiltPlateLog) -> MeasuredPlate:
+    return MeasuredPlate(log.source, log.plate, log.frequency)
+
+
+@dataclass(frozen=True, eq=False)
+class Calibration:
+    """The posterior of a calibration and everything needed to use it.
+
+    Attributes
+    ----------
+    settings : CalibrationSettings
+    samples : numpy.ndarray
+        (n, n_parameters) posterior samples [SI].
+    plates : tuple of MeasuredPlate
+    surrogates : tuple of PlateSurrogate
+        One per plate, over the prior's box.
+    diagnostics : ChainDiagnostics
+    fem : dict
+        FEM conditions of the surrogates: ``q`` [-], ``voltage_v`` [V], ``accuracy`` [-], ``piezo``.
+    """
+
+    settings: CalibrationSettings
+    samples: np.ndarray
+    plates: tuple
+    surrogates: tuple
+    diagnostics: ChainDiagnostics
+    fem: dict
+
+    @property
+    def evaluations(self) -> int:
+        """FEM evaluations of the surrogates [-]."""
+        return sum(s.evaluations for s in self.surrogates)
+
+    def summary(self) -> dict:
+        """name -> {median, p05, p95, unit} (factors [-], lengths [um])."""
+        return parameter_summary(self.settings, self.samples)
+
+    def identifiability(self) -> dict:
+        return identifiability(self.settings, self.samples)
+
+    def to_dict(self) -> dict:
+        return {
+            "format": FORMAT,
+            "version": VERSION,
+            "settings": {**asdict(self.settings), "parameters": [asdict(p) for p in self.settings.parameters]},
+            "names": list(self.settings.names),
+            "samples": self.samples.tolist(),
+            "plates": [{"name": p.name, "plate": plate_record(p.plate), "frequency_hz": p.frequency} for p in self.plates],
+            "surrogates": [s.to_dict() for s in self.surrogates],
+            "diagnostics": self.diagnostics.to_dict(),
+            "fem": dict(self.fem),
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict, origin: str = "calibration") -> "Calibration":
+        """Inverse of :meth:`to_dict`; raises :class:`InputFileError` naming ``origin`` when it is not one."""
+        if not isinstance(data, dict) or data.get("format") != FORMAT or data.get("version") != VERSION:
+            raise InputFileError(f"{origin}: not a calibration file of 'tactile calibrate' ({FORMAT} version {VERSION})")
+        try:
+            settings = dict(data["settings"])
+            settings["parameters"] = tuple(Parameter(**p) for p in settings["parameters"])
+            samples = np.asarray(data["samples"], dtype=float)
+            if samples.ndim != 2 or samples.shape[1] != len(settings["parameters"]) or not np.all(np.isfinite(samples)):
+                raise ValueError("samples must be a finite table with one column per parameter")
+            return cls(
+                settings=CalibrationSettings(**settings),
+                samples=samples,
+                plates=tuple(MeasuredPlate(p["name"], plate_from_record(p["plate"]), float(p["frequency_hz"])) for p in data["plates"]),
+                surrogates=tuple(PlateSurrogate.from_dict(s) for s in data["surrogates"]),
+                diagnostics=ChainDiagnostics.from_dict(data["diagnostics"]),
+                fem=dict(data["fem"]),
+            )
+        except (KeyError, TypeError, ValueError) as error:
+            raise InputFileError(f"{origin}: damaged calibration file ({type(error).__name__}: {error})") from None
+
+
+def plate_record(plate: Plate) -> dict:
+    """A scalar plate as plain data (SI; materials by record name)."""
+    return {
+        "wavelength": float(plate.wavelength),
+        "resonator_thickness": float(plate.resonator_thickness),
+        "ceramic_thickness": float(plate.ceramic_thickness),
+        "width": float(plate.width),
+        "glue_thickness": float(plate.glue_thickness),
+        "ceramic": plate.ceramic.name,
+        "resonator": plate.resonator.name,
+    }
+
+
+def plate_from_record(record: dict) -> Plate:
+    """Inverse of :func:`plate_record`."""
+    fields = {key: float(record[key]) for key in ("wavelength", "resonator_thickness", "ceramic_thickness", "width", "glue_thickness")}
+    return Plate(**fields, ceramic=materials.ceramic(record["ceramic"]), resonator=materials.resonator(record["resonator"]))
+
+
+def nominal_theta(names: Sequence[str], plate: Plate) -> np.ndarray:
+    """The parameter values of the nominal plate itself: factors 1, its own bond, no offset [SI]."""
+    return np.array([float(plate.glue_thickness) if name == "glue_um" else 0.0 if name.endswith("offset_um") else 1.0
+                     for name in names])
+
+
+def prior_surrogates(plates: Sequence[Plate], settings: CalibrationSettings, evaluate: Evaluate) -> tuple:
+    """A surrogate of each plate over the prior's box (the settings' design size, degree and seed)."""
+    return tuple(
+        build_plate_surrogate(plate, settings.names, settings.bounds, evaluate, settings.surrogate_points,
+                              settings.surrogate_degree, settings.surrogate_seed)
+        for plate in plates
+    )
+
+
+def posterior_from(plates: Sequence[MeasuredPlate], surrogates: Sequence[PlateSurrogate], settings: CalibrationSettings,
+                   fem: dict) -> Calibration:
+    """Sample the posterior given measured plates and their surrogates (no FEM evaluation)."""
+    data = calibration_data(settings, surrogates, [p.frequency for p in plates])
+    samples, diagnostics = sample_posterior(data)
+    return Calibration(settings, samples, tuple(plates), tuple(surrogates), diagnostics, dict(fem))
+
+
+def calibrate(plates: Sequence[MeasuredPlate], settings: CalibrationSettings, evaluate: Evaluate, fem: dict) -> Calibration:
+    """Surrogates of the measured plates, then the posterior of the parameters.
+
+    Parameters
+    ----------
+    plates : sequence of MeasuredPlate
+    settings : CalibrationSettings
+    evaluate : callable
+        Plates -> FemResults.
+    fem : dict
+        The FEM conditions ``evaluate`` binds (recorded with the calibration).
+    """
+    surrogates = prior_surrogates([p.plate for p in plates], settings, evaluate)
+    return posterior_from(plates, surrogates, settings, fem)
+
+
+def prediction_surrogate(calibration: Calibration, plate: Plate, evaluate: Evaluate) -> PlateSurrogate:
+    """A linear surrogate of ``plate`` over the posterior's central 99 % range of each parameter."""
+    names = calibration.settings.names
+    low, high = np.percentile(calibration.samples, POSTERIOR_RANGE, axis=0)
+    span = np.maximum(high - low, 1e-3 * (calibration.settings.bounds[:, 1] - calibration.settings.bounds[:, 0]))
+    bounds = np.stack([low, low + span], axis=1)
+    return build_plate_surrogate(plate, names, bounds, evaluate, prediction_points(len(names)), PREDICTION_DEGREE,
+                                 calibration.settings.surrogate_seed)
+
+
+def predict(calibration: Calibration, plate: Plate, evaluate: Evaluate, surrogate: PlateSurrogate | None = None) -> dict:
+    """Posterior predictive f_r and w of a plate.
+
+    Returns
+    -------
+    dict
+        ``frequency`` and ``deflection``: arrays (p05, p50, p95) [Hz], [m]; ``surrogate``: the
+        surrogate used (a new one over the posterior's range unless given).
+    """
+    surrogate = surrogate or prediction_surrogate(calibration, plate, evaluate)
+    return {**predictive_quantiles(surrogate, calibration.samples), "surrogate": surrogate}

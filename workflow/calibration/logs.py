@@ -1,0 +1,78 @@
+"""Built-plate logs: a format-1 log whose metadata name the plate, and the resonance it measured.
+
+Metadata (docs/log-format.md): ``# lambda_mm``, ``# h_i_mm``, ``# h_p_mm``, ``# b_mm`` (required
+here), ``# ceramic``, ``# resonator`` (material record names), ``# glue_um`` (optional).  The
+rows are a resonance sweep (or several): the measured f_r is the velocity peak of each sweep,
+refined by a parabola through ln v at the three highest points, and the median over sweeps.
+"""
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from workflow.damping.logs import read_log
+from workflow.errors import InputFileError, TactileError
+from workflow.logformat import read_metadata
+from workflow.models.builtplate import BuiltPlate
+from workflow.models.plate import Plate
+
+
+@dataclass(frozen=True)
+class BuiltPlateLog:
+    """What one built-plate log says.
+
+    Attributes
+    ----------
+    source : str
+        The file.
+    plate : Plate
+        Nominal plate named by the metadata [m].
+    frequency : float
+        Measured resonance frequency [Hz].
+    sweep_frequencies : tuple of float
+        Peak frequency of each sweep [Hz].
+    """
+
+    source: str
+    plate: Plate
+    frequency: float
+    sweep_frequencies: tuple
+
+
+def peak_frequency(frequency: np.ndarray, velocity: np.ndarray) -> float | None:
+    """Frequency of the velocity maximum, refined by a parabola through ln v at it and its neighbours [Hz].
+
+    None when the maximum lies at either end of the swept range (the peak was not bracketed).
+    """
+    order = np.argsort(frequency)
+    f, v = frequency[order], velocity[order]
+    k = int(np.argmax(v))
+    if k == 0 or k == len(f) - 1:
+        return None
+    if np.any(v[k - 1:k + 2] <= 0):
+        return float(f[k])
+    a, b, _ = np.polyfit(f[k - 1:k + 2] - f[k], np.log(v[k - 1:k + 2]), 2)
+    return float(f[k] - b / (2 * a)) if a < 0 else float(f[k])
+
+
+def read_built_plate(path) -> BuiltPlateLog:
+    """Read a built-plate log: nominal plate from the metadata, measured f_r from the sweeps.
+
+    Raises
+    ------
+    InputFileError
+        A missing or non-numeric geometry key, an unknown material record, a geometry the
+        plate model refuses, a peak at the edge of every sweep, or any error of the log itself.
+    """
+    path = Path(path)
+    try:
+        plate = BuiltPlate.from_metadata(read_metadata(path), str(path)).plate()
+    except TactileError as error:
+        raise InputFileError(str(error) if str(path) in str(error) else f"{path}: {error}") from None
+    log = read_log(path)
+    located = (peak_frequency(log.frequency[log.sweep == k], log.velocity[log.sweep == k]) for k in range(log.n_sweeps))
+    peaks = [peak for peak in located if peak is not None]
+    if not peaks:
+        raise InputFileError(f"{path}: no sweep has its velocity peak inside the swept range; cannot locate f_r")
+    return BuiltPlateLog(str(path), plate, float(np.median(peaks)), tuple(peaks))

@@ -1,0 +1,135 @@
+"""Files and JSON records of a calibration: ``calibration.json`` (what ``--calibration`` reads) and the keys
+that ``calibrate``, ``evaluate``, ``optimize``, ``maps`` and ``run`` print."""
+
+import json
+from pathlib import Path
+
+from workflow.calibration.calibration import Calibration, predict
+from workflow.errors import InputFileError
+from workflow.optimise.robust import RobustDesign
+from workflow.pipeline.records import geometry_record
+from workflow.units import KHZ, UM
+
+CALIBRATION_FILE = "calibration.json"
+PAIRS_FIGURE = "calibration_pairs.png"
+CALIBRATION_OUTPUTS = (CALIBRATION_FILE, PAIRS_FIGURE)
+"""Files ``tactile calibrate`` writes into its folder (:mod:`workflow.pipeline.outputs`)."""
+
+
+def write_calibration(calibration: Calibration, out: Path, figures: bool = True, protect=()) -> dict:
+    """Write ``calibration.json`` and the pairs figure into ``out``; return their paths."""
+    files = {"calibration": str(out / CALIBRATION_FILE), "figures": []}
+    for name in CALIBRATION_OUTPUTS:
+        if (out / name).resolve() in protect:
+            raise InputFileError(f"--out: writing {out / name} would overwrite an input log; choose another folder")
+    (out / CALIBRATION_FILE).write_text(json.dumps(calibration.to_dict()) + "\n", encoding="utf-8")
+    if figures:
+        import matplotlib.pyplot as plt
+
+        from workflow.pipeline.figures.calibration import pairs_figure
+
+        figure = pairs_figure(calibration)
+        figure.savefig(out / PAIRS_FIGURE, dpi=110)
+        plt.close(figure)
+        files["figures"].append(str(out / PAIRS_FIGURE))
+    return files
+
+
+def load_calibration(path) -> Calibration:
+    """The calibration in ``path`` (``calibration.json`` or its folder).
+
+    Raises
+    ------
+    InputFileError
+        Missing, unreadable, not JSON, or not a calibration file, naming the path.
+    """
+    path = Path(path)
+    if path.is_dir():
+        path = path / CALIBRATION_FILE
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as error:
+        raise InputFileError(f"--calibration {path}: cannot read ({error.strerror or error})") from None
+    except (UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise InputFileError(f"--calibration {path}: not a JSON calibration file ({error})") from None
+    return Calibration.from_dict(data, f"--calibration {path}")
+
+
+def calibration_summary(calibration: Calibration, nominal_frequencies, files: dict, seconds: float) -> dict:
+    """The JSON of ``tactile calibrate``: parameters, plates, calibration file, diagnostics, identifiability.
+
+    Parameters
+    ----------
+    calibration : Calibration
+    nominal_frequencies : sequence of float
+        FEM f_r of each nominal plate [Hz].
+    files : dict
+        From :func:`write_calibration`.
+    seconds : float
+        Wall time of the whole calibration [s].
+    """
+    plates = []
+    for plate, surrogate, nominal in zip(calibration.plates, calibration.surrogates, nominal_frequencies):
+        predicted = predict(calibration, plate.plate, None, surrogate)["frequency"]
+        plates.append({
+            "log": plate.name,
+            **geometry_record(plate.plate),
+            "measured_f_khz": plate.frequency / KHZ,
+            "predicted_f_khz": predicted[1] / KHZ,
+            "predicted_f_khz_p05": predicted[0] / KHZ,
+            "predicted_f_khz_p95": predicted[2] / KHZ,
+            "nominal_f_khz": nominal / KHZ,
+            "surrogate_error": surrogate.log_frequency.loo_rms,
+            "fem_error": surrogate.fem_error,
+        })
+    return {
+        "parameters": calibration.summary(),
+        "plates": plates,
+        "calibration": files["calibration"],
+        "figures": files["figures"],
+        "diagnostics": calibration.diagnostics.to_dict(),
+        "identifiability": calibration.identifiability(),
+        "fem_evaluations": calibration.evaluations + len(calibration.plates),
+        "wall_time_s": seconds,
+        "fem": calibration.fem,
+    }
+
+
+def calibrated_record(calibration: Calibration, plate, evaluate, source: str) -> dict:
+    """Posterior-predictive keys of one plate: ``f_r_khz`` (median), ``f_r_khz_p05``/``_p95``, ``w_dyn_um`` likewise."""
+    prediction = predict(calibration, plate, evaluate)
+    f, w, surrogate = prediction["frequency"], prediction["deflection"], prediction["surrogate"]
+    return {
+        "f_r_khz": f[1] / KHZ, "f_r_khz_p05": f[0] / KHZ, "f_r_khz_p95": f[2] / KHZ,
+        "w_dyn_um": w[1] / UM, "w_dyn_um_p05": w[0] / UM, "w_dyn_um_p95": w[2] / UM,
+        "calibration": {"file": source, "surrogate_error": surrogate.log_frequency.loo_rms,
+                        "fem_evaluations": surrogate.evaluations, "samples": len(calibration.samples)},
+    }
+
+
+def robust_record(design: RobustDesign, reliability: float, seconds: float) -> dict:
+    """The JSON of a robust optimum: the best candidate's keys, every candidate, the counts."""
+    def candidate(c) -> dict:
+        return {
+            **geometry_record(c.plate),
+            "f_r_khz": c.frequency[1] / KHZ, "f_r_khz_p05": c.frequency[0] / KHZ, "f_r_khz_p95": c.frequency[2] / KHZ,
+            "w_dyn_um": c.deflection[1] / UM, "w_dyn_um_p05": c.deflection[0] / UM, "w_dyn_um_p95": c.deflection[2] / UM,
+            "probability": c.probability, "probability_se": c.probability_error, "probability_draws": c.draws,
+            "margin_khz": c.margin / KHZ, "separated": c.separated,
+            "nearest_transverse": None if c.nearest_transverse is None else {
+                "f_khz": c.nearest_transverse["f"] / KHZ,
+                "relative_distance": c.nearest_transverse["relative_distance"],
+                "indicator": c.nearest_transverse["indicator"],
+            },
+            "homogeneity_cv": c.homogeneity, "surrogate_error": c.surrogate_error,
+            "lambda_at_box_edge": c.lambda_at_edge, "fem_evaluations": c.evaluations,
+        }
+
+    best = candidate(design.best)
+    return {
+        **best,
+        "reliability": reliability,
+        "candidates": [candidate(c) for c in design.candidates],
+        "fine_evaluations": design.evaluations,
+        "wall_time_s": seconds,
+    }
