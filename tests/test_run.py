@@ -40,6 +40,8 @@ laws = ["quadratic"]
 walkers = 32
 max_steps = 3000
 posterior_draws = 8
+[loop]
+enabled = false
 """
 
 

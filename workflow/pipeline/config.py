@@ -65,6 +65,10 @@ LIMITS = {
     "fem.width_points": (2, 1000),
     "design.glue_um": (0.0, 500.0),
     "fem.accuracy": (0.0, 0.05),
+    "loop.scan_grid": (1, 100),
+    "loop.reliability": (0.5, 0.999),
+    "loop.stock_hi_mm": _mm(materials.RESONATOR_THICKNESS_RANGE),
+    "loop.search_start_khz": (1.0, 39.0),
     "fem.survey_accuracy": (0.0, 0.05),
 }
 """Accepted range of numeric keys, shared with the command-line options of the same quantity: drive
@@ -79,10 +83,11 @@ CHOICES = {
     "damping.laws": SAMPLED_LAWS,
     "design.ceramic_thicknesses_mm": _mm(materials.CERAMIC_THICKNESSES),
     "maps.fem_ceramic_thicknesses_mm": _mm(materials.CERAMIC_THICKNESSES),
+    "loop.hp_mm": _mm(materials.CERAMIC_THICKNESSES),
 }
 """Accepted values of the items of list keys."""
 
-NOT_EMPTY = ("damping.laws", "design.ceramic_thicknesses_mm", "campaign.voltages_v")
+NOT_EMPTY = ("damping.laws", "design.ceramic_thicknesses_mm", "campaign.voltages_v", "loop.stock_hi_mm")
 """List keys that need at least one item."""
 
 ORDERED = (
@@ -99,7 +104,8 @@ def default_config() -> dict:
     """The embedded defaults, as nested dicts: Table 1 for [design], ``defaults.toml`` for the rest."""
     embedded = tomllib.loads(resources.files(__package__).joinpath("defaults.toml").read_text(encoding="utf-8"))
     embedded["fem"] = {**fem_defaults(), **embedded["fem"]}
-    return {"design": design_defaults(), **embedded, "campaign": campaign_defaults(), "simulator": simulator_defaults()}
+    return {"design": design_defaults(), **embedded, "campaign": campaign_defaults(), "simulator": simulator_defaults(),
+            "loop": loop_defaults()}
 
 
 def fem_defaults() -> dict:
@@ -144,6 +150,22 @@ def simulator_defaults() -> dict:
         "built_resonator_factor": built.resonator_modulus_factor,
         "built_hi_offset_um": built.resonator_thickness_offset / UM,
         "built_ceramic_offset_mm": built.ceramic_offset / MM,
+    }
+
+
+def loop_defaults() -> dict:
+    """The [loop] section (docs/calibration.md, "The loop in tactile run"): the robust design's defaults."""
+    from workflow.cli.optimize import DEFAULT_STOCK_MM
+    from workflow.optimise.robust import RobustSettings
+
+    return {
+        "enabled": True,
+        "hp_mm": 1.0,
+        "scan_grid": [7, 3],
+        "reliability": RobustSettings().reliability,
+        "stock_hi_mm": list(DEFAULT_STOCK_MM),
+        "search_start_khz": 15.0,
+        "case_study": True,
     }
 
 
@@ -251,6 +273,9 @@ def _check_consistency(config: dict, source: str) -> None:
         if not config[section][low_key] < config[section][high_key]:
             raise InputFileError(f"{source}: '{low}' = {config[section][low_key]!r} must be below "
                                  f"'{high}' = {config[section][high_key]!r}")
+    if len(config["loop"]["scan_grid"]) != 2:
+        raise InputFileError(f"{source}: 'loop.scan_grid' must be [points along x, points across], "
+                             f"got {config['loop']['scan_grid']!r}")
     mesh = {name: config["fem"][name] for name in FemSettings().as_dict()}
     try:
         FemSettings(**mesh)

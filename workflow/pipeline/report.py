@@ -6,6 +6,7 @@ import numpy as np
 
 from workflow.models.analytical import BEAM_CALIBRATION
 from workflow.optimise.maps import TRANSVERSE_THRESHOLD
+from workflow.pipeline.loop_report import case_study_section, loop_section
 from workflow.pipeline.runner import RunContext
 from workflow.units import KHZ, MM, UM
 
@@ -743,6 +744,8 @@ def _configuration(context: RunContext) -> str:
 SECTIONS = [
     ("recommended_design", _recommended_design),
     ("calibrated_designs", _calibrated_designs),
+    ("loop_second_plate", loop_section),
+    ("case_study", case_study_section),
     ("logs", _logs),
     ("analytical_optima", _analytical_optima),
     ("damping_fit", _damping_fit),

@@ -14,6 +14,7 @@ import numpy as np
 
 from workflow.errors import InputFileError, TactileError
 from workflow.optimise.problem import DesignProblem, optimise_analytical
+from workflow.pipeline import loop
 from workflow.pipeline.damping_files import FIT_OUTPUTS, stated_noise, write_fit
 from workflow.pipeline.runner import RunContext, Step
 from workflow.units import KHZ, MM, UM
@@ -448,7 +449,8 @@ def width_sweep_figures(context: RunContext, sweep) -> None:
     save_figure(width_sweep_figure(sweep, design_width=design_width), context.figure_path("width_sweep_fem.png"))
 
 
-RUN_OUTPUTS = ("report.md", "simulated_campaign.csv", "*.png", *(f"damping/{pattern}" for pattern in FIT_OUTPUTS))
+RUN_OUTPUTS = ("report.md", "simulated_campaign.csv", "*.png", *(f"damping/{pattern}" for pattern in FIT_OUTPUTS),
+               *(f"{loop.LOOP_FOLDER}/{pattern}" for pattern in loop.LOOP_OUTPUTS))
 """Glob patterns of the files ``tactile run`` writes into its output folder (:mod:`workflow.pipeline.outputs`)."""
 
 STEPS: List[Step] = [
@@ -462,6 +464,12 @@ STEPS: List[Step] = [
     Step("recommended design per h_p", "recommended_design", recommended_design, recommended_design_figures,
          cacheable=False),
     Step("calibrated predictions of the designs (--calibration)", "calibrated_designs", calibrated_designs, cacheable=False),
+    Step("loop: plate #1 built and measured on the simulator", "loop_first_plate", loop.first_plate,
+         loop.first_plate_figures, cacheable=False),
+    Step("loop: calibration on plate #1 (emcee)", "loop_calibration", loop.loop_calibration, loop.loop_calibration_files),
+    Step("loop: robust re-design under the calibration", "loop_redesign", loop.redesign),
+    Step("loop: re-designed plate built and measured", "loop_second_plate", loop.second_plate, cacheable=False),
+    Step("case study: P1 and P2 predict each other", "case_study", loop.case_study),
     Step("analytical maps", "analytical_maps", analytical_maps, maps_figures, cacheable=False),
     Step("FEM maps", "fem_maps", fem_maps, maps_figures),
     Step("FEM width sweep of the original plate", "width_sweep", fem_width_sweep, width_sweep_figures),
