@@ -52,6 +52,10 @@ def test_a_user_file_overrides_only_its_keys(tmp_path):
         ("[campaign]\nvoltages_v = []\n", "'campaign.voltages_v' is empty"),
         ("[fem]\nn_modes = 0\n", "[fem] FEM settings must be positive integers"),
         ('[fem]\nelement = "hex99"\n', "[fem] unknown FEM element 'hex99'"),
+        ("[loop]\nscan_grid = [7]\n", "'loop.scan_grid' must be [points along x, points across]"),
+        ("[loop]\nreliability = 1.5\n", "'loop.reliability' = 1.5 is outside the accepted range"),
+        ("[loop]\nhp_mm = 0.7\n", "'loop.hp_mm' holds 0.7"),
+        ("[loop]\nstock_hi_mm = []\n", "'loop.stock_hi_mm' is empty"),
     ],
 )
 def test_configuration_errors_name_the_key(tmp_path, text, words):
