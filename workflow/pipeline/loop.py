@@ -97,12 +97,14 @@ def build_and_measure(context: RunContext, plate: Plate, name: str, scan: bool) 
 
 
 def calibration_model(context: RunContext):
-    """(FEM model, its conditions) of the loop's calibration: the run's Q and voltage, the survey accuracy."""
-    from workflow.models.fem.accuracy import FemAccuracy
+    """(FEM model, its conditions) of the loop's calibration: the run's Q and voltage, the survey accuracy
+    (:data:`~workflow.models.fem.accuracy.SURVEY_ACCURACY` when [fem] survey_accuracy is 0: a fixed mesh)."""
+    from workflow.models.fem.accuracy import SURVEY_ACCURACY, FemAccuracy
     from workflow.optimise.fem_model import FemModel
 
     design = context.config["design"]
-    fem = {"q": design["q"], "voltage_v": design["voltage_v"], "accuracy": context.config["fem"]["survey_accuracy"] or 0.01,
+    accuracy = context.config["fem"]["survey_accuracy"] or SURVEY_ACCURACY
+    fem = {"q": design["q"], "voltage_v": design["voltage_v"], "accuracy": accuracy,
            "piezo": context.config["fem"]["piezo"]}
     model = FemModel(q=fem["q"], voltage=fem["voltage_v"], settings=FemAccuracy(target=fem["accuracy"], piezo=fem["piezo"]),
                      cache=context.cache, scheduler="synchronous", progress=True)
