@@ -77,3 +77,36 @@ def test_the_redesigned_plate_meets_25_khz_where_the_first_missed(tmp_path):
     text = writers["loop_second_plate"](run, second) + writers["case_study"](run, run.results["case_study"])
     assert "## Closing the loop on a built plate" in text and "## Case study: the published plates" in text
     assert (run.out / "loop" / "calibration.json").is_file() and (run.out / "loop_scan.png").is_file()
+
+
+def test_the_report_tables_each_stage_and_the_case_study(tmp_path):
+    """The sections from stand-in results (the slow test renders them from real ones)."""
+    from pathlib import Path
+
+    run = context(tmp_path)
+    redesigned = PLATE_1.with_(wavelength=20.93 * MM, resonator_thickness=1.0 * MM)
+    run.results["loop_first_plate"] = loop.BuiltMeasurement(PLATE_1, 25.04e3, 23.06e3, 23.057e3, Path("r.csv"), Path("s.csv"), 0.9994)
+    calibration = types.SimpleNamespace(
+        summary=lambda: {"glue_um": {"median": 44.0, "p05": 15.0, "p95": 58.0, "unit": "um"}},
+        identifiability=lambda: {"statement": "One combination is constrained."})
+    run.results["loop_calibration"] = (calibration, (22.79e3, 23.057e3, 23.36e3))
+    best = types.SimpleNamespace(plate=redesigned, frequency=(25.01e3, 25.48e3, 25.9e3), probability=0.954, probability_error=0.0015)
+    run.results["loop_redesign"] = types.SimpleNamespace(best=best)
+    second = loop.BuiltMeasurement(redesigned, 27.0e3, 25.3e3, 25.31e3, Path("r2.csv"), None, None)
+    run.figures.update({"loop_scan.png": "loop_scan.png", "loop/calibration_pairs.png": "loop/calibration_pairs.png"})
+    writers = dict(SECTIONS)
+    text = writers["loop_second_plate"](run, second)
+    assert "## Closing the loop on a built plate" in text
+    assert "| 2. plate #1 built, measured |  | 23.057 | misses 25 kHz |" in text
+    assert "| 5. re-designed plate built, measured |  | 25.310 | meets 25 kHz |" in text
+    assert "23.057 (22.790 to 23.360)" in text and "P(f_r ≥ 25 kHz) = 0.954 ± 0.002" in text
+    assert "](loop/calibration_pairs.png)" in text and "MAC 0.9994" in text
+    directions = [
+        {"calibrated_on": "data/built_plates/paper_P1.csv", "predicted": "data/built_plates/paper_P2.csv",
+         "measured_hz": 23.95e3, "predicted_hz": (23.37e3, 23.90e3, 24.41e3), "error": -0.002, "inside": True},
+        {"calibrated_on": "data/built_plates/paper_P2.csv", "predicted": "data/built_plates/paper_P1.csv",
+         "measured_hz": 23.16e3, "predicted_hz": (22.92e3, 23.40e3, 23.93e3), "error": 0.010, "inside": True},
+    ]
+    text = writers["case_study"](run, directions)
+    assert "## Case study: the published plates" in text and "| paper_P1.csv | paper_P2.csv | 23.950 |" in text
+    assert "within 1.0 % of its measured frequency" in text and "in 2 of the 2 directions" in text
