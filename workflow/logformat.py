@@ -5,6 +5,7 @@ line), then one header row and the data rows.  Readers live in
 :mod:`workflow.damping.logs`; the writer in :mod:`instruments.procedures.logwriter`.
 """
 
+import math
 from pathlib import Path
 
 from workflow.errors import InputFileError
@@ -96,3 +97,15 @@ def read_metadata(path: Path) -> dict:
     except UnicodeDecodeError as error:
         raise InputFileError(f"{path}: not UTF-8 (byte {error.start} of a line)") from None
     return metadata
+
+
+def metadata_number(metadata: dict, key: str, source) -> float:
+    """The finite number of a metadata line read by :func:`read_metadata`, or an error naming ``source``'s line."""
+    text, line = metadata[key]
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise InputFileError(f"{source}, line {line}: metadata {key} = {text!r} is not a finite number")
+    return value

@@ -308,31 +308,20 @@ def _mode_factor(path: Path, arrays: dict, metadata: dict, warnings: list):
         if name in arrays:
             position[name] = arrays[name]
         elif name in metadata:
-            position[name] = np.full(n, _metadata_number(path, metadata, name))
+            position[name] = np.full(n, logformat.metadata_number(metadata, name, path))
     if not position:
         return None
     if logformat.LAMBDA_MM not in metadata:
         warnings.append(f"{path}: a measurement point ({', '.join(position)}) without the plate's "
                         f"'# {logformat.LAMBDA_MM}: ...' metadata cannot be mapped onto the mode; read as an antinode")
         return None
-    mode = BeamMode(_metadata_number(path, metadata, logformat.LAMBDA_MM) * MM)
+    mode = BeamMode(logformat.metadata_number(metadata, logformat.LAMBDA_MM, path) * MM)
     zeros = np.zeros(n)
     try:
         return measurement_factor(mode, position.get(logformat.X_POSITION, zeros) * MM,
                                   position.get(logformat.Y_POSITION, zeros) * MM)
     except ValueError as error:
         raise InputFileError(f"{path}: {error}") from None
-
-
-def _metadata_number(path: Path, metadata: dict, key: str) -> float:
-    text, line = metadata[key]
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not math.isfinite(value):
-        raise InputFileError(f"{path}, line {line}: metadata {key} = {text!r} is not a finite number")
-    return value
 
 
 def _content_lines(path: Path, stream, warnings: list, metadata: dict):

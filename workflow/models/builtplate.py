@@ -212,7 +212,7 @@ class BuiltPlate:
                 names[key] = value
         glue = None
         if logformat.GLUE_UM in metadata:
-            glue = _number(metadata, logformat.GLUE_UM, source)
+            glue = logformat.metadata_number(metadata, logformat.GLUE_UM, source)
             if glue < 0:
                 raise InputFileError(f"{source}, line {metadata[logformat.GLUE_UM][1]}: {logformat.GLUE_UM} must be "
                                      f">= 0, got {metadata[logformat.GLUE_UM][0]!r}")
@@ -228,19 +228,8 @@ class BuiltPlate:
         )
 
 
-def _number(metadata: dict, key: str, source: str) -> float:
-    text, line = metadata[key]
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not math.isfinite(value):
-        raise InputFileError(f"{source}, line {line}: {key} must be a finite number, got {text!r}")
-    return value
-
-
 def _positive(metadata: dict, key: str, source: str) -> float:
-    value = _number(metadata, key, source)
+    value = logformat.metadata_number(metadata, key, source)
     if value <= 0:
         raise InputFileError(f"{source}, line {metadata[key][1]}: {key} must be positive, got {metadata[key][0]!r}")
     return value
