@@ -76,9 +76,9 @@ def build_and_measure(context: RunContext, plate: Plate, name: str, scan: bool) 
     nominal = built_plate_model(plate, PlateDeviations(), cache=context.cache)
     simulator = bench_settings(context.config)
     settings = built_bench_settings(
-        model, drift_rate=context.config["simulator"]["drift_hz_per_s"], amplifier_gain=simulator.amplifier_gain, ceramic_voltage_limit=simulator.ceramic_voltage_limit,
-        relative_noise=simulator.relative_noise, floor_fraction=simulator.floor_fraction,
-        phase_noise=simulator.phase_noise, seed=simulator.seed,
+        model, drift_rate=context.config["simulator"]["drift_hz_per_s"], amplifier_gain=simulator.amplifier_gain,
+        ceramic_voltage_limit=simulator.ceramic_voltage_limit, relative_noise=simulator.relative_noise,
+        floor_fraction=simulator.floor_fraction, phase_noise=simulator.phase_noise, seed=simulator.seed,
     )
     station, _ = simulated_station(settings, settle_time=0.0)
     metadata = simulation_metadata(settings)
