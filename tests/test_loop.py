@@ -58,12 +58,13 @@ def test_plate_one_as_built_is_measured_through_the_procedures(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1800)
 def test_the_redesigned_plate_meets_25_khz_where_the_first_missed(tmp_path):
-    run = context(tmp_path, stock_hi_mm=[0.75, 0.8, 1.0])
+    """About 40 FEM evaluations at 1 % (5 min on two free cores): one stock thickness, no case study."""
+    run = context(tmp_path, stock_hi_mm=[1.0], case_study=False)
     steps = [("loop_first_plate", loop.first_plate, loop.first_plate_figures),
              ("loop_calibration", loop.loop_calibration, loop.loop_calibration_files),
-             ("loop_redesign", loop.redesign, None), ("loop_second_plate", loop.second_plate, None),
-             ("case_study", loop.case_study, None)]
+             ("loop_redesign", loop.redesign, None), ("loop_second_plate", loop.second_plate, None)]
     for key, compute, files in steps:
         run.results[key] = compute(run)
         if files:
@@ -74,8 +75,7 @@ def test_the_redesigned_plate_meets_25_khz_where_the_first_missed(tmp_path):
     assert predicted[0] <= first.measured_frequency <= predicted[2]
     assert run.results["loop_redesign"].best.probability >= 0.95 - 0.01
     writers = dict(SECTIONS)
-    text = writers["loop_second_plate"](run, second) + writers["case_study"](run, run.results["case_study"])
-    assert "## Closing the loop on a built plate" in text and "## Case study: the published plates" in text
+    assert "## Closing the loop on a built plate" in writers["loop_second_plate"](run, second)
     assert (run.out / "loop" / "calibration.json").is_file() and (run.out / "loop_scan.png").is_file()
 
 
