@@ -9,6 +9,7 @@ predictive density of the mixture.  Pareto k above :data:`PARETO_K_BAD` marks ro
 the LOO estimate is unreliable (a warning, counted per law).
 """
 
+import warnings
 from dataclasses import dataclass
 from typing import Dict
 
@@ -54,14 +55,19 @@ class LawComparison:
 
 def compare_laws(idatas: Dict[str, az.InferenceData]) -> LawComparison:
     """PSIS-LOO of every law's InferenceData, their stacking weights and the selection."""
-    loos = {name: az.loo(idata, pointwise=True) for name, idata in idatas.items()}
+    with warnings.catch_warnings(), np.errstate(over="ignore", invalid="ignore"):
+        # ArviZ warns of Pareto k > 0.7 on stderr; it is counted per law (n_pareto_k_bad) and reported instead
+        warnings.simplefilter("ignore")
+        loos = {name: az.loo(idata, pointwise=True) for name, idata in idatas.items()}
     bad = {name: int(np.sum(np.asarray(loo.pareto_k) > PARETO_K_BAD)) for name, loo in loos.items()}
     if len(loos) == 1:
         (name, loo), = loos.items()
         entry = {"elpd_loo": float(loo.elpd_loo), "se": float(loo.se), "p_loo": float(loo.p_loo),
                  "elpd_diff": 0.0, "dse": 0.0, "weight": 1.0, "n_pareto_k_bad": bad[name], "warning": bool(loo.warning)}
         return LawComparison({name: entry}, name, "best", {name: 1.0})
-    table = az.compare(loos, ic="loo", method="stacking", scale="log")
+    with warnings.catch_warnings(), np.errstate(over="ignore", invalid="ignore"):
+        warnings.simplefilter("ignore")  # and its pandas deprecations are not the user's business
+        table = az.compare(loos, ic="loo", method="stacking", scale="log")
     laws = {
         str(name): {
             "elpd_loo": float(row["elpd_loo"]),

@@ -349,6 +349,12 @@ def _maximise(data: FitData, start: np.ndarray, scale: np.ndarray, free: np.ndar
     return np.clip(theta_of(result.x), data.lower, data.upper)
 
 
+def autocorrelation_times(sampler) -> np.ndarray:
+    """Integrated autocorrelation time per parameter [steps]; nan where a parameter has not moved yet."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return sampler.get_autocorr_time(tol=0)
+
+
 def laplace_covariance(data: FitData, theta: np.ndarray, scale: np.ndarray) -> np.ndarray:
     """Covariance -H^-1 of the log-posterior at ``theta`` (finite-difference Hessian, one batch).
 
@@ -367,7 +373,8 @@ def laplace_covariance(data: FitData, theta: np.ndarray, scale: np.ndarray) -> n
                 z[j] += sj * h
                 rows.append(z)
     values = log_probability(theta + np.array(rows) * scale, data).reshape(n, n, 4)
-    hessian = (values[..., 0] - values[..., 1] - values[..., 2] + values[..., 3]) / (4 * h * h)
+    with np.errstate(invalid="ignore", over="ignore"):  # -inf at a prior edge: handled below
+        hessian = (values[..., 0] - values[..., 1] - values[..., 2] + values[..., 3]) / (4 * h * h)
     precision = -0.5 * (hessian + hessian.T)
     if not np.all(np.isfinite(precision)):
         return np.diag(scale**2)
@@ -426,7 +433,7 @@ def sample_posterior(
         while sampler.iteration < max_steps:
             chunk = min(check_every, max_steps - sampler.iteration)
             state = sampler.run_mcmc(state, chunk, progress=False)
-            tau = sampler.get_autocorr_time(tol=0)
+            tau = autocorrelation_times(sampler)
             needed = chain_taus * np.max(tau)
             if np.all(np.isfinite(tau)) and needed <= sampler.iteration and np.all(np.abs(previous - tau) < 0.01 * tau):
                 converged = True
@@ -442,7 +449,7 @@ def sample_posterior(
             if max_seconds is not None and time.perf_counter() - start > max_seconds:
                 break
     seconds = time.perf_counter() - start
-    tau = sampler.get_autocorr_time(tol=0)
+    tau = autocorrelation_times(sampler)
     finite_tau = np.where(np.isfinite(tau), tau, sampler.iteration)
     burn_in = int(min(2 * np.max(finite_tau), sampler.iteration // 2))
     thin = max(1, int(0.5 * np.min(finite_tau)))
