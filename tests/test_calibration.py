@@ -319,3 +319,18 @@ def test_run_step_predicts_the_recommended_designs_with_the_calibration(tmp_path
     section = _calibrated_designs(context, {1e-3: predicted})
     assert "as the calibration predicts them" in section and f"{predicted['f_r_khz']:.3f}" in section
     assert calibrated_designs(SimpleNamespace(calibration=None)) == {}
+
+
+def test_a_resonance_search_log_gives_its_fine_sweeps_peak(tmp_path):
+    """The coarse sweep of a resonance search (wide spacing, peak off by up to a step) does not bias f_r."""
+    header = "# lambda_mm: 20.56\n# h_i_mm: 0.75\n# h_p_mm: 1.0\n# b_mm: 49\nfrequency_hz,drive_voltage_v,velocity_m_s,sweep\n"
+    rows = []
+    for sweep, (start, stop, n) in enumerate(((22000.0, 24000.0, 11), (22900.0, 23200.0, 61))):
+        for f in np.linspace(start, stop, n):
+            rows.append(f"{f},5,{0.1 / (1 + ((f - 23057.0) / 60.0) ** 2)},{sweep}")
+    path = tmp_path / "search.csv"
+    path.write_text(header + "\n".join(rows) + "\n")
+    log = read_built_plate(path)
+    assert len(log.sweep_frequencies) == 2
+    assert log.frequency == pytest.approx(23057.0, abs=2.0)
+    assert abs(log.sweep_frequencies[0] - 23057.0) > abs(log.frequency - 23057.0)

@@ -29,9 +29,9 @@ class BuiltPlateLog:
     plate : Plate
         Nominal plate named by the metadata [m].
     frequency : float
-        Measured resonance frequency [Hz].
+        Measured resonance frequency: median peak of the finest-spaced sweeps [Hz].
     sweep_frequencies : tuple of float
-        Peak frequency of each sweep [Hz].
+        Peak frequency of each sweep with a peak inside its range [Hz].
     """
 
     source: str
@@ -59,6 +59,9 @@ def peak_frequency(frequency: np.ndarray, velocity: np.ndarray) -> float | None:
 def read_built_plate(path) -> BuiltPlateLog:
     """Read a built-plate log: nominal plate from the metadata, measured f_r from the sweeps.
 
+    f_r is the median of the peaks of the finest-spaced sweeps (a resonance search's fine sweep, not its
+    coarse one; every sweep of a campaign with equal spacing).
+
     Raises
     ------
     InputFileError
@@ -71,8 +74,17 @@ def read_built_plate(path) -> BuiltPlateLog:
     except TactileError as error:
         raise InputFileError(str(error) if str(path) in str(error) else f"{path}: {error}") from None
     log = read_log(path)
-    located = (peak_frequency(log.frequency[log.sweep == k], log.velocity[log.sweep == k]) for k in range(log.n_sweeps))
-    peaks = [peak for peak in located if peak is not None]
-    if not peaks:
+    sweeps = [(log.frequency[log.sweep == k], log.velocity[log.sweep == k]) for k in range(log.n_sweeps)]
+    located = [(frequency_step(f), peak_frequency(f, v)) for f, v in sweeps]
+    located = [(step, peak) for step, peak in located if peak is not None]
+    if not located:
         raise InputFileError(f"{path}: no sweep has its velocity peak inside the swept range; cannot locate f_r")
-    return BuiltPlateLog(str(path), plate, float(np.median(peaks)), tuple(peaks))
+    finest = min(step for step, _ in located)
+    peaks = [peak for step, peak in located if step <= 1.01 * finest]
+    return BuiltPlateLog(str(path), plate, float(np.median(peaks)), tuple(peak for _, peak in located))
+
+
+def frequency_step(frequency: np.ndarray) -> float:
+    """Median spacing of a sweep's frequencies [Hz] (a resonance search's coarse sweep is much wider-spaced)."""
+    spacing = np.diff(np.sort(frequency))
+    return float(np.median(spacing)) if spacing.size else np.inf
