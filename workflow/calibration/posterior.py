@@ -186,7 +186,7 @@ def identifiability(settings: CalibrationSettings, samples: np.ndarray) -> dict:
         })
     n_constrained = sum(d["constrained"] for d in directions)
     statement = (
-        f"{n_constrained} of {len(names)} combinations of the parameters are constrained by the data "
+        f"{n_constrained} of {len(names)} combinations of the parameters {'is' if n_constrained == 1 else 'are'} constrained by the data "
         f"(posterior sd < {CONSTRAINED_RATIO:g} x prior sd along them); "
         + ("the others trade off and stay near their priors" if n_constrained < len(names) else "all are constrained")
     )

@@ -40,7 +40,8 @@ def loop_section(context: RunContext, second) -> str:
         ("5. re-designed plate built, measured", "", f"{second.measured_frequency / KHZ:.3f}",
          f"{verdict(second.measured_frequency)} {minimum / KHZ:g} kHz"),
     ]
-    parameters = "; ".join(f"{name} {p['median']:.4g} [{p['p05']:.4g}, {p['p95']:.4g}] {p['unit']}"
+    parameters = "; ".join(f"{name} {p['median']:.4g} [{p['p05']:.4g}, {p['p95']:.4g}]"
+                           + ("" if p["unit"] in ("", "-") else f" {p['unit']}")
                            for name, p in calibration.summary().items())
     return (
         "## Closing the loop on a built plate\n\n"
@@ -50,7 +51,7 @@ def loop_section(context: RunContext, second) -> str:
         f"(`{LOOP_FOLDER}/calibration.json`) reads only plate #1's resonance log; the robust re-design keeps plate #1's "
         "h_p and width and picks h_i from the stock list (docs/calibration.md).\n\n"
         + table(("stage", "geometry", "f_r [kHz]", "verdict"), rows)
-        + f"\n\nPosterior (median [90 %]): {parameters}.  {calibration.identifiability()['statement']}\n\n"
+        + f"\n\nPosterior (median [90 %]): {parameters}.  {calibration.identifiability()['statement']}.\n\n"
         f"The simulator's truth for plate #1 as built: {first.built_frequency / KHZ:.3f} kHz; for the re-designed "
         f"plate: {second.built_frequency / KHZ:.3f} kHz.\n\n"
         + figure(context, "loop_scan.png", f"Plate #1 as built, scanned on a {' × '.join(map(str, context.config['loop']['scan_grid']))} "
