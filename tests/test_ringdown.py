@@ -147,3 +147,18 @@ def test_joint_sweeps_and_ringdowns_recover_the_law_softening_and_drift(tmp_path
         assert _inside(summary, name, truth), (name, summary[name], truth)
     # Q0 is pinned to 0.1 % by the decays; its 90 % interval [150.003, 150.356] just misses the truth 150
     assert summary["q0"]["median"] == pytest.approx(law.q0, rel=0.003)
+
+
+def test_laws_without_a_closed_form_decay_are_integrated():
+    """The flexible law (the misfit fallback) has no alpha: its decay is integrated, not a closed form."""
+    from workflow.damping.laws import MonotoneSpline, QuadraticLoss
+    from workflow.damping.ringdown import decay_velocity
+
+    # a spline through the quadratic law's 1/Q at its knots decays like it (its chords lie above: 4 % lower at 5 ms)
+    quadratic = QuadraticLoss(q0=150.0, alpha=0.25)
+    knots = np.linspace(0, 0.3, 7)
+    rises = np.diff(quadratic.loss(knots))
+    flexible = MonotoneSpline(150.0, *rises, v_top=0.3)
+    time = np.linspace(0, 5e-3, 11)
+    expected = decay_velocity(quadratic, 25e3, 0.25, time)
+    assert decay_velocity(flexible, 25e3, 0.25, time) == pytest.approx(expected, rel=0.05)

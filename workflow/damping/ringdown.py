@@ -39,6 +39,8 @@ def decay_velocity(law, frequency, initial_velocity, time):
         Time since the end of the burst [s], >= 0.
     """
     f, v0, t = (np.asarray(x, dtype=float) for x in (frequency, initial_velocity, time))
+    if not isinstance(law, (ConstantQ, QuadraticLoss, LinearLoss)):
+        return integrated_decay(law.quality_factor, f, v0, t)
     a = np.pi * f / np.asarray(law.q0)
     if isinstance(law, ConstantQ):
         return v0 * np.exp(-a * t)
@@ -46,10 +48,8 @@ def decay_velocity(law, frequency, initial_velocity, time):
     if isinstance(law, QuadraticLoss):
         decay = np.exp(-2 * a * t)
         return np.sqrt(a * v0**2 * decay / (a + b * v0**2 * (1 - decay)))
-    if isinstance(law, LinearLoss):
-        decay = np.exp(-a * t)
-        return a * v0 * decay / (a + b * v0 * (1 - decay))
-    return integrated_decay(law.quality_factor, f, v0, t)
+    decay = np.exp(-a * t)  # LinearLoss
+    return a * v0 * decay / (a + b * v0 * (1 - decay))
 
 
 def integrated_decay(quality_factor, frequency, initial_velocity, time, steps_per_sample=RK4_STEPS_PER_SAMPLE):
