@@ -328,8 +328,8 @@ def softened_amplitudes(static_amplitude, frequency, resonance_frequency, soften
         return u - ln_static[index] + 0.5 * np.log((1 - ratio2) ** 2 + ratio2 / quality_factor(velocity) ** 2)
 
     if not follow:
-        unsoftened = self_consistent_amplitude(w_s, f, f_r0, quality_factor, rtol=1e-3)
-        roots, _ = root_near(lambda u: residual_at(Ellipsis, u), np.log(unsoftened), 1.0, rtol)
+        small = response_amplitude(w_s, f / f_r0, quality_factor(np.zeros_like(f)))
+        roots, _ = root_near(lambda u: residual_at(Ellipsis, u), np.log(small), 1.0, rtol)
         return np.exp(np.moveaxis(roots, 0, -1))
     if start is None:
         start = response_amplitude(w_s[0], f[0] / f_r0[0], quality_factor(np.zeros_like(f[0])))

@@ -36,6 +36,7 @@ Every function here is module-level and takes arrays, so emcee can pickle it.
 """
 
 from dataclasses import dataclass, replace
+from functools import cached_property
 from typing import Optional, Tuple
 
 import numpy as np
@@ -221,6 +222,11 @@ class FitData:
         """Sweep rows [-] (the first entries of :attr:`velocity`)."""
         return len(self.frequency)
 
+    @cached_property
+    def sweep_grid(self) -> "SweepGrid":
+        """The sweeps' rows in measuring order (:class:`SweepGrid`), computed once."""
+        return SweepGrid.of(self.sweep)
+
 
 def fit_data(log: CampaignLog, law_name: str, forward: ForwardModel = ForwardModel()) -> FitData:
     """The :class:`FitData` of a campaign (sweeps, and its ring-downs if any) for a law, with its prior box.
@@ -291,8 +297,29 @@ def sweep_order(sweep: np.ndarray) -> np.ndarray:
     return np.array([np.r_[r, np.full(width - len(r), r[-1])] for r in rows])
 
 
+@dataclass(frozen=True)
+class SweepGrid:
+    """The rows of each sweep in measuring order on a (sweeps, points) grid, and the way back.
+
+    Attributes
+    ----------
+    index : numpy.ndarray of int (S, P)
+        :func:`sweep_order`.
+    position : numpy.ndarray of int (N,)
+        Each row's first place in ``index.ravel()``.
+    """
+
+    index: np.ndarray
+    position: np.ndarray
+
+    @classmethod
+    def of(cls, sweep: np.ndarray) -> "SweepGrid":
+        index = sweep_order(np.asarray(sweep))
+        return cls(index, np.unique(index.ravel(), return_index=True)[1])
+
+
 def predicted_velocity(theta, layout: ParameterLayout, frequency, voltage, sweep, time_offset=None,
-                       mode_factor=None) -> np.ndarray:
+                       mode_factor=None, grid: Optional[SweepGrid] = None) -> np.ndarray:
     """Noise-free velocity amplitude at the measurement point, 2 pi f w |phi|, at each sweep row, one row per walker [m/s].
 
     Parameters
@@ -308,6 +335,8 @@ def predicted_velocity(theta, layout: ParameterLayout, frequency, voltage, sweep
         Time from the sweep's mean time [s] (drift); default 0.
     mode_factor : array (N,), optional
         |phi| at the measurement point [-]; default 1.
+    grid : SweepGrid, optional
+        ``SweepGrid.of(sweep)``, when already computed (with softening).
 
     Returns
     -------
@@ -320,27 +349,28 @@ def predicted_velocity(theta, layout: ParameterLayout, frequency, voltage, sweep
     if layout.forward.drift and time_offset is not None:
         resonance = resonance + layout.column(theta, "drift_rate") * time_offset
     if layout.forward.softening:
-        deflection = _softened_rows(theta, layout, gain * voltage, frequency, resonance, np.asarray(sweep))
+        deflection = _softened_rows(theta, layout, gain * voltage, frequency, resonance, grid or SweepGrid.of(sweep))
     else:
         deflection = self_consistent_amplitude(gain * voltage, frequency, resonance, layout.law(theta).quality_factor)
     return 2 * np.pi * frequency * deflection * (1.0 if mode_factor is None else mode_factor)
 
 
-def _softened_rows(theta, layout: ParameterLayout, static, frequency, resonance, sweep) -> np.ndarray:
+def _softened_rows(theta, layout: ParameterLayout, static, frequency, resonance, grid: SweepGrid) -> np.ndarray:
     """Deflection at each row with softening: sweeps in measuring order; branch following only for the walkers
     whose curves may fold (:func:`~workflow.damping.harmonic.single_valued`)."""
-    order = sweep_order(sweep)
-    kappa = layout.column(theta, "kappa")
-    grid = (static[:, order], frequency[order], resonance[:, order])
-    single = single_valued(*grid, kappa, layout.law(theta).quality_factor).all(axis=1)
-    deflection = np.empty_like(static)
-    for follow in (False, True):
-        walkers = np.nonzero(single != follow)[0]
-        if walkers.size:
-            solved = softened_amplitudes(static[walkers][:, order], frequency[order], resonance[walkers][:, order],
-                                         kappa[walkers], layout.law(theta[walkers]).quality_factor, follow=follow)
-            deflection[np.ix_(walkers, order.ravel())] = solved.reshape(walkers.size, -1)
-    return deflection
+    kappa, law = layout.column(theta, "kappa"), layout.law(theta)
+    points = (static[:, grid.index], frequency[grid.index], resonance[:, grid.index])
+    single = single_valued(*points, kappa, law.quality_factor).all(axis=1)
+    if single.all():
+        solved = softened_amplitudes(*points, kappa, law.quality_factor, follow=False)
+    else:
+        solved = np.empty(points[0].shape)
+        for follow in (False, True):
+            walkers = np.nonzero(single != follow)[0]
+            if walkers.size:
+                solved[walkers] = softened_amplitudes(points[0][walkers], points[1], points[2][walkers], kappa[walkers],
+                                                      layout.law(theta[walkers]).quality_factor, follow=follow)
+    return solved.reshape(len(solved), -1)[:, grid.position]
 
 
 def predicted_decay(theta, layout: ParameterLayout, decays: DecayData) -> np.ndarray:
@@ -361,7 +391,9 @@ def pointwise_log_likelihood(theta, data: FitData) -> np.ndarray:
     layout = data.layout
     parts = []
     if layout.n_sweeps:
-        model = predicted_velocity(theta, layout, data.frequency, data.voltage, data.sweep, data.time_offset, data.mode_factor)
+        grid = data.sweep_grid if layout.forward.softening else None
+        model = predicted_velocity(theta, layout, data.frequency, data.voltage, data.sweep, data.time_offset, data.mode_factor,
+                                   grid)
         noise = (np.exp(layout.column(theta, name)) for name in ("ln_sigma_rel", "ln_sigma_abs"))
         parts.append(_gaussian(data.velocity[: data.n_rows], model, *noise))
     if data.decays is not None:
