@@ -35,6 +35,8 @@ fine_width_max_mm = 50.0
 [campaign]
 voltages_v = [5.0, 15.0]
 points_per_sweep = 21
+ringdown_voltages_v = [5.0, 15.0]
+ringdown_samples = 40
 [damping]
 laws = ["quadratic"]
 walkers = 32

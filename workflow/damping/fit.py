@@ -20,7 +20,7 @@ autocorrelation times are about 2.5 times shorter than the default stretch move'
 """
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Dict, Optional, Sequence, Tuple
 
 import arviz as az
@@ -38,6 +38,7 @@ from workflow.damping.likelihood import (
     ParameterLayout,
     decay_estimates,
     fit_data,
+    in_prior,
     initial_effects,
     log_probability,
     pointwise_log_likelihood,
@@ -209,6 +210,8 @@ class DampingFit:
         having failed its checks).
     answer : DampingPosterior
         The posterior the design uses (``posterior.npz``).
+    agreement : RingdownAgreement or None
+        Q(v) of the sweeps alone against the ring-downs alone (preferred law), when the log has both.
     """
 
     log: CampaignLog
@@ -220,6 +223,7 @@ class DampingFit:
     checks: Dict[str, MisfitCheck]
     selection: str
     answer: DampingPosterior
+    agreement: Optional["RingdownAgreement"] = None
 
     @property
     def best(self) -> LawFit:
@@ -512,10 +516,11 @@ def aic(log_likelihood: float, n_parameters: int) -> float:
     return float(-2 * log_likelihood + 2 * n_parameters)
 
 
-def minimum_walkers(laws: Sequence[str], n_sweeps: int) -> int:
-    """Fewest walkers emcee's differential-evolution moves accept for ``laws`` fitted to ``n_sweeps``
-    sweeps: twice the largest number of sampled parameters (law, gain, one resonance per sweep, noise)."""
-    return 2 * max(ParameterLayout(name, n_sweeps).dimension for name in laws)
+def minimum_walkers(laws: Sequence[str], n_sweeps: int, forward: ForwardModel = ForwardModel(), n_bursts: int = 0) -> int:
+    """Fewest walkers emcee's differential-evolution moves accept for ``laws`` fitted to ``n_sweeps`` sweeps and
+    ``n_bursts`` ring-downs: twice the largest number of sampled parameters (law, gain, one resonance per sweep,
+    softening and drift, one initial velocity per burst, noise)."""
+    return 2 * max(ParameterLayout(name, n_sweeps, forward, n_bursts).dimension for name in laws)
 
 
 def fit_law(
@@ -683,7 +688,79 @@ def fit_damping(
         selection, answer = "stacking", stacked_posterior(posteriors, comparison.weights, STACKED_DRAWS, seed)
     else:
         selection, answer = "best", fits[preferred].posterior()
-    return DampingFit(log, sweeps, fits, criteria, preferred, comparison, checks, selection, answer)
+    agreement = ringdown_agreement(log, preferred, forward, seed) if log.n_sweeps and log.ringdown is not None else None
+    return DampingFit(log, sweeps, fits, criteria, preferred, comparison, checks, selection, answer, agreement)
+
+
+AGREEMENT_Z = 3.0
+"""Sweeps and ring-downs agree when their Q differs by less than this many combined standard deviations at every
+velocity compared [-]."""
+AGREEMENT_VELOCITIES = 5
+"""Antinode velocities compared, spanning the range both measurements cover [-]."""
+LAPLACE_DRAWS = 2000
+"""Draws of a Laplace approximation (MAP and covariance) for the agreement [-]."""
+
+
+@dataclass(frozen=True)
+class RingdownAgreement:
+    """Q(v) of one law fitted to the sweeps alone and to the ring-downs alone: two independent measurements of Q.
+
+    Each side is its MAP with a Laplace covariance (:func:`laplace_covariance`; draws inside the prior), not a chain.
+
+    Attributes
+    ----------
+    law_name : str
+    velocity : numpy.ndarray
+        Antinode velocities compared, spanning the range both measurements cover [m/s] (empty: no common range).
+    sweeps, ringdowns : numpy.ndarray (3, V)
+        Q at ``velocity``: p05, p50, p95 [-].
+    z : numpy.ndarray (V,)
+        Difference of the medians over the combined standard deviation (p95 - p05 = 3.29 sigma) [-].
+    """
+
+    law_name: str
+    velocity: np.ndarray
+    sweeps: np.ndarray
+    ringdowns: np.ndarray
+    z: np.ndarray
+
+    @property
+    def agree(self) -> Optional[bool]:
+        """|z| below :data:`AGREEMENT_Z` everywhere; None without a common velocity range."""
+        return bool(np.all(np.abs(self.z) < AGREEMENT_Z)) if self.velocity.size else None
+
+    def summary(self) -> dict:
+        """JSON-able: velocities, both sides' quantiles, z, the verdict and how it was computed."""
+        sides = {name: {"q_p05": q[0], "q_p50": q[1], "q_p95": q[2]} for name, q in (("sweeps", self.sweeps),
+                                                                                     ("ringdowns", self.ringdowns))}
+        return {"law": self.law_name, "v_m_s": self.velocity, **sides, "z": self.z, "agree": self.agree,
+                "max_abs_z": float(np.max(np.abs(self.z))) if self.z.size else None,
+                "rule": f"|z| < {AGREEMENT_Z:g} at every velocity; each side its MAP with a Laplace covariance"}
+
+
+def laplace_quality_factors(log: CampaignLog, law_name: str, velocity: np.ndarray, forward: ForwardModel = ForwardModel(),
+                            seed: int = 0) -> np.ndarray:
+    """Q at ``velocity`` [m/s] from the MAP and Laplace covariance of ``law_name`` on ``log``: p05, p50, p95, shape (3, V)."""
+    data, theta, scale, _ = map_fit(log, law_name, forward=forward)
+    draws = np.random.default_rng(seed).multivariate_normal(theta, laplace_covariance(data, theta, scale), LAPLACE_DRAWS,
+                                                            method="eigh")
+    inside = draws[in_prior(draws, data)]
+    return np.quantile(data.layout.law(inside).quality_factor(velocity[None, :]), (0.05, 0.5, 0.95), axis=0)
+
+
+def ringdown_agreement(log: CampaignLog, law_name: str, forward: ForwardModel = ForwardModel(), seed: int = 0) -> RingdownAgreement:
+    """Q(v) of ``law_name`` from the sweeps alone against the ring-downs alone, where both measured (:class:`RingdownAgreement`)."""
+    decays = log.ringdown
+    sweeps_only = replace(log, ringdown=None)
+    ringdowns_only = CampaignLog(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, dtype=int), decays.sources,
+                                 ringdown=decays)
+    swept, decayed = log.velocity / log.measurement_factor(), decays.velocity / decays.mode_factor
+    low, high = max(swept.min(), decayed.min()), min(swept.max(), decayed.max())
+    velocity = np.linspace(low, high, AGREEMENT_VELOCITIES) if low < high else np.zeros(0)
+    sides = [laplace_quality_factors(part, law_name, velocity, effects, seed)
+             for part, effects in ((sweeps_only, forward), (ringdowns_only, ForwardModel()))]
+    sigma = np.hypot(*((q[2] - q[0]) / 3.29 for q in sides))
+    return RingdownAgreement(law_name, velocity, *sides, (sides[0][1] - sides[1][1]) / sigma)
 
 
 _UNITS = {"q0": "-", "gain": "m/V", "sigma_rel": "-", "sigma_abs": "m/s", "kappa": "s^2/m^2", "drift_rate": "Hz/s",
@@ -732,6 +809,28 @@ def velocity_grid(log: CampaignLog, n: int = 50) -> np.ndarray:
     return np.linspace(float(np.min(velocity)), float(np.max(velocity)), n)
 
 
+def ringdown_summary(fit: DampingFit) -> Optional[dict]:
+    """The ring-downs in ``fit.json``: per burst its level, fitted initial velocity and temperature; the decay
+    noise fitted; the agreement of sweeps and ring-downs (None without ring-downs)."""
+    decays = fit.log.ringdown
+    if decays is None:
+        return None
+    parameters = parameter_summary(fit.best)
+    bursts = []
+    for j in range(decays.n_bursts):
+        mine = decays.burst == j
+        temperature = float(np.nanmedian(decays.temperature[mine])) if np.any(np.isfinite(decays.temperature[mine])) else None
+        bursts.append({"burst": j, "voltage_v": float(np.median(decays.drive_voltage[mine])), "samples": int(mine.sum()),
+                       "v0_m_s": parameters[f"v0_{j}"], "temperature_c": temperature})
+    return {
+        "n_bursts": decays.n_bursts,
+        "n_samples": int(len(decays.velocity)),
+        "bursts": bursts,
+        "sigma_decay_rel": parameters["sigma_decay_rel"],
+        "agreement": None if fit.agreement is None else fit.agreement.summary(),
+    }
+
+
 def fit_summary(fit: DampingFit) -> dict:
     """The JSON of ``tactile fit-damping`` (docs/cli.md): the answer, the preferred law, the comparison and the checks."""
     best = fit.best
@@ -768,6 +867,8 @@ def fit_summary(fit: DampingFit) -> dict:
             "peak_velocity_m_s": fit.sweeps.peak_velocity,
             "half_power_q": [None if not np.isfinite(q) else float(q) for q in fit.sweeps.quality_factor],
         },
+        "forward_model": {"softening": best.data.layout.forward.softening, "drift": best.data.layout.forward.drift},
+        "ringdown": ringdown_summary(fit),
         "velocity_convention": VELOCITY_CONVENTION,
         "n_points": int(len(fit.log.velocity)),
         "n_ringdown_samples": 0 if fit.log.ringdown is None else int(len(fit.log.ringdown.velocity)),

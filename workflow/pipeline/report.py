@@ -359,7 +359,7 @@ def _damping_fit(context: RunContext, fit) -> str:
     parameters = [
         (name, f"{p['median']:.4g}", f"[{p['p05']:.4g}, {p['p95']:.4g}]", p["unit"])
         for name, p in summary["parameters"].items()
-        if not name.startswith("f_r_")
+        if not name.startswith(("f_r_", "v0_"))
     ]
     d = summary["diagnostics"]
     loo = summary["comparison"]["loo"]
@@ -407,6 +407,8 @@ def _damping_fit(context: RunContext, fit) -> str:
         "drive-to-deflection gain and the noise are nuisance parameters.\n\n"
         + table(["parameter", "median", "90 % interval", "unit"], parameters)
         + "\n\n"
+        + _effects(summary)
+        + _ringdowns(summary)
         + table(["law", "elpd_loo ± se", "elpd_diff ± dse", "stacking weight", "Pareto k > 0.7", "AIC at MAP",
                  "BIC at MAP", "parameters"], comparison)
         + "\n\nMisfit checks (posterior predictive, per sweep; docs/damping.md):\n\n"
@@ -422,9 +424,56 @@ def _damping_fit(context: RunContext, fit) -> str:
     )
 
 
+def _interval_text(p: dict, digits: int = 4) -> str:
+    return f"{p['median']:.{digits}g} [{p['p05']:.{digits}g}, {p['p95']:.{digits}g}] {p['unit']}"
+
+
+def _effects(summary: dict) -> str:
+    """The softening and drift of the resonance fitted beyond Q(v), in words (empty when neither was fitted)."""
+    forward, parameters = summary["forward_model"], summary["parameters"]
+    parts = []
+    if forward["softening"]:
+        parts.append(f"amplitude softening f_r(v) = f_r0 (1 − κ v²), κ = {_interval_text(parameters['kappa'])}")
+    if forward["drift"]:
+        parts.append(f"drift of the resonance within a sweep β = {_interval_text(parameters['drift_rate'], 3)}")
+    if not parts:
+        return ""
+    return ("Fitted beyond Q(v) (median [90 % interval]; docs/damping.md#softening-and-drift-within-a-sweep): "
+            + "; ".join(parts) + ".\n\n")
+
+
+def _ringdowns(summary: dict) -> str:
+    """The ring-downs: each burst, the decay noise and the agreement of sweeps and ring-downs (empty without them)."""
+    ringdown = summary["ringdown"]
+    if ringdown is None:
+        return ""
+    rows = [(b["burst"], f"{b['voltage_v']:g}", b["samples"], _interval_text(b["v0_m_s"]),
+             "—" if b["temperature_c"] is None else f"{b['temperature_c']:.2f}") for b in ringdown["bursts"]]
+    noise = ringdown["sigma_decay_rel"]
+    text = (f"**Ring-downs** ({ringdown['n_bursts']} bursts, {ringdown['n_samples']} samples of the envelope, fitted jointly "
+            "with the sweeps; docs/damping.md#ring-down): relative noise of the envelope "
+            f"{_interval_text(noise, 3)}.\n\n"
+            + table(["burst", "level [V]", "samples", "initial antinode velocity v0 (median [90 %])", "plate temperature [°C]"],
+                    rows) + "\n\n")
+    agreement = ringdown["agreement"]
+    if agreement is None:
+        return text
+    if not len(agreement["v_m_s"]):
+        return text + "The sweeps and the ring-downs cover no common velocity range: their Q(v) are not compared.\n\n"
+    compared = [(f"{v:.3f}", f"{agreement['sweeps']['q_p50'][i]:.1f} [{agreement['sweeps']['q_p05'][i]:.1f}, "
+                 f"{agreement['sweeps']['q_p95'][i]:.1f}]", f"{agreement['ringdowns']['q_p50'][i]:.2f} "
+                 f"[{agreement['ringdowns']['q_p05'][i]:.2f}, {agreement['ringdowns']['q_p95'][i]:.2f}]",
+                 f"{agreement['z'][i]:+.2f}") for i, v in enumerate(agreement["v_m_s"])]
+    verdict = "agree" if agreement["agree"] else "**DISAGREE**"
+    return (text + f"Agreement of the two measurements of Q ({agreement['law']} law fitted to each alone): they {verdict} "
+            f"(largest |z| {agreement['max_abs_z']:.2f}; {agreement['rule']}).\n\n"
+            + table(["antinode v [m/s]", "Q from the sweeps", "Q from the ring-downs", "z"], compared) + "\n\n")
+
+
 _DAMPING_FIGURES = [
     ("damping/q_of_v.png", "Q(v) with its 90 % credible band and the per-sweep half-power estimate"),
     ("damping/resonance_curves.png", "resonance curves: data and posterior prediction"),
+    ("damping/ringdown.png", "ring-downs: envelopes with the law's decay, and the model-free Q from the decays"),
     ("damping/corner_quadratic.png", "posterior of the quadratic law (corner plot)"),
     ("damping/trace_quadratic.png", "chains of the quadratic law (trace plot)"),
     ("damping/corner_linear.png", "posterior of the linear law (corner plot)"),

@@ -71,6 +71,7 @@ def bench_settings(config: dict):
     return default_bench_settings(
         law=law,
         drift_rate=simulator["drift_hz_per_s"],
+        softening=simulator["softening_s2_m2"],
         amplifier_gain=simulator["amplifier_gain"],
         ceramic_voltage_limit=simulator["ceramic_voltage_limit_v"],
         relative_noise=simulator["relative_noise"],
@@ -95,24 +96,30 @@ def built_plate_deviations(config: dict):
 
 
 def campaign_logs(context: RunContext) -> List[Path]:
-    """The interferometer logs to fit: the given ones, or a campaign on the simulated bench."""
+    """The interferometer logs to fit: the given ones, or a campaign (sweeps, then ring-downs) on the simulated bench."""
     if context.logs:
         missing = [str(path) for path in context.logs if not Path(path).is_file()]
         if missing:
             raise TactileError(f"no such log file: {', '.join(missing)}")
         return [Path(path) for path in context.logs]
-    from instruments.procedures.simulated import simulate_campaign
+    from instruments.procedures.simulated import simulate_campaign, simulate_ringdown
 
     campaign = context.config["campaign"]
+    settings = bench_settings(context.config)
     path = context.out / "simulated_campaign.csv"
     simulate_campaign(
         path,
-        settings=bench_settings(context.config),
+        settings=settings,
         voltages=tuple(campaign["voltages_v"]),
         points_per_sweep=campaign["points_per_sweep"],
         span=campaign["span_hz"],
     )
-    return [path]
+    if not campaign["ringdown_voltages_v"]:
+        return [path]
+    ringdowns = context.out / "simulated_ringdown.csv"
+    simulate_ringdown(ringdowns, settings, voltages=tuple(campaign["ringdown_voltages_v"]),
+                      samples=campaign["ringdown_samples"], interval=campaign["ringdown_interval_us"] * 1e-6)
+    return [path, ringdowns]
 
 
 def damping_fit(context: RunContext):
@@ -126,19 +133,22 @@ def damping_fit(context: RunContext):
     log = drop_short_sweeps(read_logs(context.results["logs"]))
     for warning in log.warnings:
         print(f"warning: {warning}", file=sys.stderr)
-    fewest = minimum_walkers(damping["laws"], log.n_sweeps)
-    if damping["walkers"] < fewest:
+    forward = run_forward_model(damping, log)
+    bursts = 0 if log.ringdown is None else log.ringdown.n_bursts
+    fewest = minimum_walkers(damping["laws"], log.n_sweeps, forward, bursts)
+    if 0 < damping["walkers"] < fewest:
         raise InputFileError(
             f"configuration: 'damping.walkers' = {damping['walkers']} is outside the accepted range {fewest} to "
             f"{LIMITS['damping.walkers'][1]} for these logs (emcee needs twice the {fewest // 2} parameters "
-            f"sampled with {log.n_sweeps} sweeps)"
+            f"sampled with {log.n_sweeps} sweeps and {bursts} ring-downs; 0 chooses for each law)"
         )
     fit = fit_damping(
         log,
         laws=tuple(damping["laws"]),
         seed=damping["seed"],
         max_steps=damping["max_steps"],
-        n_walkers=damping["walkers"],
+        n_walkers=damping["walkers"] or None,
+        forward=forward,
         progress=True,
         stated_noise=stated_noise(context.results["logs"]),
         mapper=partial(map_evaluations, scheduler=context.scheduler, description="laws sampled"),
@@ -146,6 +156,19 @@ def damping_fit(context: RunContext):
     if fit.warning:
         print(f"warning: {fit.warning}", file=sys.stderr)
     return fit
+
+
+def run_forward_model(damping: dict, log):
+    """The effects the run fits beyond Q(v) (keys ``damping.softening``, ``damping.drift``): both need sweeps, the
+    drift also the logs' ``timestamp_s`` (without it a warning, and the drift is not fitted)."""
+    from workflow.damping.likelihood import ForwardModel
+
+    drift = damping["drift"] and log.n_sweeps > 0
+    if drift and log.timestamp is None:
+        print("warning: damping.drift: the logs have no timestamp_s column; the drift within a sweep is not fitted",
+              file=sys.stderr)
+        drift = False
+    return ForwardModel(softening=damping["softening"] and log.n_sweeps > 0, drift=drift)
 
 
 def damping_fit_files(context: RunContext, fit) -> None:
@@ -449,7 +472,7 @@ def width_sweep_figures(context: RunContext, sweep) -> None:
     save_figure(width_sweep_figure(sweep, design_width=design_width), context.figure_path("width_sweep_fem.png"))
 
 
-RUN_OUTPUTS = ("report.md", "simulated_campaign.csv", "*.png", *(f"damping/{pattern}" for pattern in FIT_OUTPUTS),
+RUN_OUTPUTS = ("report.md", "simulated_campaign.csv", "simulated_ringdown.csv", "*.png", *(f"damping/{pattern}" for pattern in FIT_OUTPUTS),
                *(f"{loop.LOOP_FOLDER}/{pattern}" for pattern in loop.LOOP_OUTPUTS))
 """Glob patterns of the files ``tactile run`` writes into its output folder (:mod:`workflow.pipeline.outputs`)."""
 
