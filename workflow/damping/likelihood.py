@@ -44,7 +44,7 @@ import numpy as np
 from workflow.damping.harmonic import self_consistent_amplitude, single_valued, softened_amplitudes
 from workflow.damping.laws import LAWS, MonotoneSpline, ThresholdLoss, parameter_names
 from workflow.damping.logs import CampaignLog
-from workflow.damping.ringdown import decay_quality_factors, decay_velocity
+from workflow.damping.ringdown import burst_decays, decay_quality_factors
 from workflow.errors import InputFileError
 
 SAMPLED_LAW_PARAMETERS = {"q0": "ln_q0", "alpha": "alpha", "v_t": "v_t", **{d: d for d in MonotoneSpline.INCREMENTS}}
@@ -182,6 +182,11 @@ class DecayData:
     burst: np.ndarray
     time: np.ndarray
     mode_factor: np.ndarray
+
+    @cached_property
+    def burst_frequency(self) -> np.ndarray:
+        """Frequency of each burst [Hz] (its first sample's), computed once."""
+        return self.frequency[np.unique(self.burst, return_index=True)[1]]
 
 
 @dataclass(frozen=True)
@@ -376,8 +381,8 @@ def _softened_rows(theta, layout: ParameterLayout, static, frequency, resonance,
 def predicted_decay(theta, layout: ParameterLayout, decays: DecayData) -> np.ndarray:
     """Noise-free ring-down envelope at the measurement point, |phi| v_j(t), at each sample, one row per walker [m/s]."""
     theta = np.atleast_2d(theta)
-    initial = np.exp(layout.block(theta, "ln_v0_"))[:, decays.burst]
-    return decay_velocity(layout.law(theta), decays.frequency, initial, decays.time) * decays.mode_factor
+    initial = np.exp(layout.block(theta, "ln_v0_"))
+    return burst_decays(layout.law(theta), decays.burst_frequency, initial, decays.burst, decays.time) * decays.mode_factor
 
 
 def _gaussian(measured, model, sigma_rel, sigma_abs):

@@ -61,13 +61,20 @@ def integrated_decay(quality_factor, frequency, initial_velocity, time, steps_pe
     """
     f, v0, t = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (frequency, initial_velocity, time)))
     grid, where = np.unique(t, return_inverse=True)
-    where = where.reshape(t.shape)
+    values = decay_on_grid(quality_factor, f, v0, grid, steps_per_sample)
+    return np.take_along_axis(values, where.reshape((1,) + t.shape), axis=0)[0]
+
+
+def decay_on_grid(quality_factor, frequency, initial_velocity, grid, steps_per_sample=RK4_STEPS_PER_SAMPLE):
+    """v at each time of the sorted ``grid`` [s] (>= 0) for every element of the broadcast ``frequency`` [Hz] and
+    ``initial_velocity`` [m/s] by RK4 in ln v: shape ``(len(grid),) + broadcast shape`` [m/s]."""
+    f, v0 = np.broadcast_arrays(np.asarray(frequency, dtype=float), np.asarray(initial_velocity, dtype=float))
 
     def slope(ln_v):
         return -np.pi * f / quality_factor(np.exp(ln_v))
 
     ln_v = np.log(v0)
-    values = np.empty((len(grid),) + t.shape)
+    values = np.empty((len(grid),) + ln_v.shape)
     previous = 0.0
     for i, target in enumerate(grid):
         h = (target - previous) / steps_per_sample
@@ -79,7 +86,31 @@ def integrated_decay(quality_factor, frequency, initial_velocity, time, steps_pe
             ln_v = ln_v + h * (k1 + 2 * k2 + 2 * k3 + k4) / 6
         values[i] = ln_v
         previous = target
-    return np.exp(np.take_along_axis(values, where[None], axis=0)[0])
+    return np.exp(values)
+
+
+def burst_decays(law, frequency, initial_velocity, burst, time):
+    """Envelope of every ring-down sample, one row per walker [m/s], shape (W, N).
+
+    Parameters
+    ----------
+    law : Q(v) law
+        Parameters of shape (W, 1).
+    frequency : array (B,)
+        f_r of each burst [Hz].
+    initial_velocity : array (W, B)
+        v0 of each burst [m/s].
+    burst, time : array (N,)
+        Burst index and time since the burst's end [s] of each sample.
+
+    Closed forms are evaluated at each sample; any other law is integrated once per walker and
+    burst over the distinct sample times (:func:`decay_on_grid`), not once per sample.
+    """
+    if isinstance(law, (ConstantQ, QuadraticLoss, LinearLoss)):
+        return decay_velocity(law, np.asarray(frequency)[burst], initial_velocity[:, burst], time)
+    grid, where = np.unique(time, return_inverse=True)
+    values = decay_on_grid(law.quality_factor, frequency, initial_velocity, grid)  # (G, W, B)
+    return values[where, :, burst].T
 
 
 def decay_quality_factors(frequency, velocity, burst, time):
