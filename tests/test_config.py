@@ -40,8 +40,13 @@ def test_a_user_file_overrides_only_its_keys(tmp_path):
         ('[fem]\nfine_width_step_mm = "one"\n', "fem.fine_width_step_mm"),
         ('[design]\nceramic_thicknesses_mm = [1.0, "two"]\n', "design.ceramic_thicknesses_mm[1]"),
         ("[design\n", "not valid TOML"),
-        ("[damping]\nwalkers = 0\n", "'damping.walkers' = 0 is outside the accepted range 2 to 10000"),
-        ("[damping]\nwalkers = -3\n", "'damping.walkers' = -3 is outside the accepted range 2 to 10000"),
+        ("[damping]\nwalkers = 10001\n", "'damping.walkers' = 10001 is outside the accepted range 0 to 10000"),
+        ("[damping]\nwalkers = -3\n", "'damping.walkers' = -3 is outside the accepted range 0 to 10000"),
+        ("[damping]\nsoftening = 1\n", "'damping.softening' must be true or false"),
+        ("[campaign]\nringdown_samples = 300\n", "'campaign.ringdown_samples' = 300 is outside the accepted range 2 to 256"),
+        ("[campaign]\nringdown_interval_us = 0\n", "'campaign.ringdown_interval_us' = 0 is outside the accepted range 1"),
+        ("[campaign]\nringdown_voltages_v = [5.0, -1.0]\n", "'campaign.ringdown_voltages_v' = -1.0 is outside the accepted range"),
+        ("[simulator]\nsoftening_s2_m2 = -0.1\n", "'simulator.softening_s2_m2' = -0.1 is outside the accepted range 0.0 to 100.0"),
         ('[damping]\nlaws = ["cubic"]\n', "'damping.laws' holds 'cubic'; accepted: 'quadratic', 'linear'"),
         ("[damping]\nlaws = []\n", "'damping.laws' is empty"),
         ("[design]\nceramic_thicknesses_mm = [0.7]\n", "'design.ceramic_thicknesses_mm' holds 0.7; accepted: 0.5, 1.0, 2.0"),
@@ -78,7 +83,7 @@ def test_too_few_walkers_for_the_logs_is_a_configuration_error_before_the_chain(
     config = default_config()
     config["damping"]["walkers"] = 15
     context = RunContext(config=config, out=tmp_path, results={"logs": [log]})
-    with pytest.raises(InputFileError, match=r"'damping.walkers' = 15 is outside the accepted range 26 to 10000 .* 3 sweeps"):
+    with pytest.raises(InputFileError, match=r"'damping.walkers' = 15 is outside the accepted range 30 to 10000 .* 3 sweeps"):
         damping_fit(context)
 
 
