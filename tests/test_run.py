@@ -181,3 +181,22 @@ def test_the_report_states_the_accuracy_of_its_fem_numbers(tiny_run):
     assert "f_r error estimate" in optima and re.search(r"\| [+-]\d+\.\d\d % \| (yes|\*\*no\*\*) \|", optima)
     assert "fixed mesh of the [fem] keys (error not estimated)" in text.split("## Width sweep")[1]
     assert "FEM accuracy: each FEM frequency above comes from a mesh refined" in text
+
+
+def test_the_run_fits_sweeps_and_ringdowns_jointly_and_reports_them(tiny_run):
+    """The tiny run's campaign has ring-downs and a softening plate: fitted jointly with the softening and the drift,
+    fit.json and the report show them, each burst and the agreement of sweeps and ring-downs."""
+    _, out, config, _ = tiny_run
+    assert (out / "simulated_ringdown.csv").is_file()
+    summary = json.loads((out / "damping" / "fit.json").read_text())
+    assert summary["forward_model"] == {"softening": True, "drift": True}
+    kappa = summary["parameters"]["kappa"]
+    assert kappa["p05"] <= default_config()["simulator"]["softening_s2_m2"] <= kappa["p95"]
+    ringdown = summary["ringdown"]
+    assert ringdown["n_bursts"] == 2 and ringdown["n_samples"] == 80
+    assert [b["voltage_v"] for b in ringdown["bursts"]] == [5.0, 15.0]
+    assert ringdown["agreement"]["agree"] and len(ringdown["agreement"]["v_m_s"]) == 5
+    report = (out / "report.md").read_text()
+    assert "**Ring-downs** (2 bursts, 80 samples" in report
+    assert "Agreement of the two measurements of Q" in report and "amplitude softening" in report
+    assert "damping/ringdown.png" in report and (out / "damping" / "ringdown.png").is_file()

@@ -11,7 +11,9 @@ from workflow.pipeline.runner import RunContext, run_steps
 from workflow.pipeline.steps import STEPS
 
 # a fixed tiny mesh (accuracy 0): the distribution of FEM evaluations is what is tested, not the accuracy control
-TINY = SMALL.replace("accuracy = 0.05", "accuracy = 0.0") + "[run]\ncache = false\n"
+# and the damping fit of sweeps alone (the ring-downs and softening are tested in test_run)
+TINY = (SMALL.replace("accuracy = 0.05", "accuracy = 0.0").replace("ringdown_voltages_v = [5.0, 15.0]", "ringdown_voltages_v = []")
+        .replace("[damping]\n", "[damping]\nsoftening = false\ndrift = false\n") + "[run]\ncache = false\n")
 
 DISTRIBUTED_STEPS = ("damped_design", "fem_optima", "fem_maps", "width_sweep")
 
