@@ -425,7 +425,9 @@ def _damping_fit(context: RunContext, fit) -> str:
 
 
 def _interval_text(p: dict, digits: int = 4) -> str:
-    return f"{p['median']:.{digits}g} [{p['p05']:.{digits}g}, {p['p95']:.{digits}g}] {p['unit']}"
+    """Median [p05, p95] and the unit (none when dimensionless)."""
+    unit = "" if p["unit"] == "-" else f" {p['unit']}"
+    return f"{p['median']:.{digits}g} [{p['p05']:.{digits}g}, {p['p95']:.{digits}g}]{unit}"
 
 
 def _effects(summary: dict) -> str:
