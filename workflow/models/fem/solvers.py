@@ -126,6 +126,14 @@ def _pardiso(handle, phase: int, matrix: tuple, iparm, rhs, solution, permutatio
         raise TactileError(f"PARDISO phase {phase} failed with error {error.value}; set {SOLVER_VARIABLE}=superlu")
 
 
+def _pattern_key(matrix) -> tuple:
+    """Key of a sparsity pattern in the ordering cache: its size, entries and per-column counts.
+
+    A matrix of another topology with the same key would only get a poorer ordering, never a wrong solve.
+    """
+    return matrix.shape[0], matrix.nnz, hashlib.sha1(np.asarray(matrix.indptr, dtype=np.int64).tobytes()).hexdigest()
+
+
 class _Pardiso:
     """A PARDISO factorisation of a symmetric matrix kept for repeated solves (MKL called directly).
 
@@ -134,7 +142,7 @@ class _Pardiso:
     sparsity pattern when there is one (the same factorisation, without its METIS step).
     """
 
-    def __init__(self, matrix):
+    def __init__(self, matrix, pattern=None):
         upper = upper_triangle(matrix)
         self._matrix = (
             upper.shape[0],
@@ -144,7 +152,7 @@ class _Pardiso:
         )
         self._handle = np.zeros(64, dtype=np.int64)
         self._iparm = _default_iparm()
-        key = hashlib.sha1(self._matrix[2].tobytes() + self._matrix[3].tobytes()).hexdigest()
+        key = _pattern_key(upper if pattern is None else sp.csc_matrix(pattern))
         permutation = _orderings.pop(key, None)
         self._iparm[4] = 2 if permutation is None else 1  # iparm(5): return the ordering, or use the one given
         if permutation is None:
@@ -174,12 +182,15 @@ class _SuperLU:
         return self._factor.solve(np.asarray(rhs, dtype=float))
 
 
-def factorise(matrix):
+def factorise(matrix, pattern=None):
     """Factorise a symmetric sparse matrix once; the result's ``solve(b)`` takes vectors or (n, k) blocks.
 
     Parameters
     ----------
     matrix : scipy.sparse matrix
         Symmetric (K - sigma M, any units).
+    pattern : scipy.sparse matrix, optional
+        A matrix whose sparsity identifies the topology for PARDISO's ordering cache (default: ``matrix``);
+        K for K - sigma M, whose exactly cancelling entries, dropped by scipy, depend on the values.
     """
-    return _Pardiso(matrix) if solver_name() == "pardiso" else _SuperLU(matrix)
+    return _Pardiso(matrix, pattern) if solver_name() == "pardiso" else _SuperLU(matrix)
