@@ -119,7 +119,7 @@ def reduce_system(mesh: BrickMesh, stiffness, mass, load) -> PlateSystem:
 
 
 PATTERN_CACHE_SIZE = 6
-"""Sparsity patterns kept in memory, one per mesh topology (about 60 MB at 73 000 dofs) [-]."""
+"""Sparsity patterns kept in memory, one per mesh topology (about 140 MB at 73 000 dofs) [-]."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -215,7 +215,7 @@ def _cached_pattern(connectivity: bytes, n_local: int, n_nodes: int, free: bytes
     diagonal = np.flatnonzero(stiffness_entries % 9 % 4 == 0)  # i == j: 3 i + j in (0, 4, 8)
     mass_lengths = np.bincount(3 * item_node + item_component, minlength=3 * n_nodes)[free]
     indices = item_row[item]
-    return ReducedPattern(
+    pattern = ReducedPattern(
         n_free=len(free),
         indptr=indptr.astype(np.int32),
         indices=indices,
@@ -225,6 +225,10 @@ def _cached_pattern(connectivity: bytes, n_local: int, n_nodes: int, free: bytes
         stiffness_entries=stiffness_entries,
         mass_entries=stiffness_entries[diagonal] // 9,
     )
+    for array in vars(pattern).values():  # shared by the matrices it assembles: never to be changed in place
+        if isinstance(array, np.ndarray):
+            array.flags.writeable = False
+    return pattern
 
 
 def assemble_system(mesh: BrickMesh, plate: Plate, voltage: float) -> PlateSystem:
