@@ -218,7 +218,7 @@ def cold_evaluation(tree: Path, plate_changes: dict, piezo: str) -> dict:
     environment = {**os.environ, "PYTHONPATH": str(tree)}
     out = subprocess.run(
         [sys.executable, "-c", COLD_SNIPPET, json.dumps(plate_changes), piezo],
-        capture_output=True, text=True, check=True, env=environment,
+        capture_output=True, text=True, check=True, env=environment, cwd=tree,  # python -c puts the cwd first
     )
     return json.loads(out.stdout.strip().splitlines()[-1])
 
