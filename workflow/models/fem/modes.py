@@ -57,7 +57,7 @@ def nearest_modes(system: PlateSystem, frequency: float, n_modes: int) -> Shifte
     returned even when the shift is low.
     """
     shift = (2 * np.pi * frequency) ** 2
-    factor = factorise(system.stiffness - shift * system.mass, pattern=system.stiffness)
+    factor = factorise(system.stiffness - shift * system.mass)
     return shift_invert_modes(system, shift, factor.solve, n_modes)
 
 

@@ -8,10 +8,8 @@ SuperLU is the fallback wherever pypardiso does not install.  ``$TACTILE_SPARSE_
 """
 
 import ctypes
-import hashlib
 import os
 import weakref
-from collections import OrderedDict
 from functools import lru_cache
 
 import numpy as np
@@ -47,31 +45,10 @@ def solver_name() -> str:
     return name
 
 
-ORDERING_CACHE_SIZE = 8
-"""Fill-reducing orderings kept, one per sparsity pattern (the METIS step is a third to a half of a factorisation) [-]."""
-_orderings: OrderedDict = OrderedDict()
-"""Sparsity-pattern digest -> PARDISO's fill-reducing permutation for it (least recently used first)."""
-
-
 @lru_cache(maxsize=1)
-def _mkl():
-    """MKL's runtime library with ``pardiso``'s argument types, found once (pypardiso's search takes ~0.1 s)."""
-    return PyPardisoSolver().libmkl
-
-
 def _mkl_pardiso():
-    return _mkl().pardiso
-
-
-def _default_iparm() -> np.ndarray:
-    """PARDISO's default parameters of real symmetric indefinite matrices (``pardisoinit``)."""
-    handle, iparm = np.zeros(64, dtype=np.int64), np.zeros(64, dtype=np.int32)
-    _mkl().pardisoinit(
-        handle.ctypes.data_as(ctypes.c_void_p),
-        ctypes.byref(ctypes.c_int32(SYMMETRIC_INDEFINITE)),
-        iparm.ctypes.data_as(ctypes.POINTER(ctypes.c_int32)),
-    )
-    return iparm
+    """MKL's ``pardiso`` with its argument types, found once (pypardiso searches the file system, ~0.1 s)."""
+    return PyPardisoSolver()._mkl_pardiso
 
 
 def upper_triangle(matrix) -> sp.csr_matrix:
@@ -84,7 +61,7 @@ def upper_triangle(matrix) -> sp.csr_matrix:
     return sp.csr_matrix((matrix.data[keep], matrix.indices[keep], indptr), shape=matrix.shape)
 
 
-def _pardiso(handle, phase: int, matrix: tuple, iparm, rhs, solution, permutation=None) -> None:
+def _pardiso(handle, phase: int, matrix: tuple, iparm, rhs, solution) -> None:
     """One call of MKL's ``pardiso`` on a real symmetric indefinite matrix (1-based CSR upper triangle).
 
     Parameters
@@ -98,8 +75,6 @@ def _pardiso(handle, phase: int, matrix: tuple, iparm, rhs, solution, permutatio
     iparm : (64,) int32 array
     rhs, solution : float arrays
         Fortran-ordered, shape (size,) or (size, k).
-    permutation : (size,) int32 array, optional
-        The fill-reducing ordering, given or returned as ``iparm(5)`` says.
     """
     size, data, ia, ja = matrix
     error = ctypes.c_int32(0)
@@ -114,7 +89,7 @@ def _pardiso(handle, phase: int, matrix: tuple, iparm, rhs, solution, permutatio
         data.ctypes.data_as(float_pointer),
         ia.ctypes.data_as(int_pointer),
         ja.ctypes.data_as(int_pointer),
-        (np.zeros(0, dtype=np.int32) if permutation is None else permutation).ctypes.data_as(int_pointer),
+        np.zeros(0, dtype=np.int32).ctypes.data_as(int_pointer),  # perm: PARDISO's own ordering
         ctypes.byref(ctypes.c_int32(1 if rhs.ndim == 1 else rhs.shape[1])),
         iparm.ctypes.data_as(int_pointer),
         ctypes.byref(ctypes.c_int32(0)),  # no messages
@@ -126,23 +101,14 @@ def _pardiso(handle, phase: int, matrix: tuple, iparm, rhs, solution, permutatio
         raise TactileError(f"PARDISO phase {phase} failed with error {error.value}; set {SOLVER_VARIABLE}=superlu")
 
 
-def _pattern_key(matrix) -> tuple:
-    """Key of a sparsity pattern in the ordering cache: its size, entries and per-column counts.
-
-    A matrix of another topology with the same key would only get a poorer ordering, never a wrong solve.
-    """
-    return matrix.shape[0], matrix.nnz, hashlib.sha1(np.asarray(matrix.indptr, dtype=np.int64).tobytes()).hexdigest()
-
-
 class _Pardiso:
     """A PARDISO factorisation of a symmetric matrix kept for repeated solves (MKL called directly).
 
-    PARDISO's defaults, but without iterative refinement in the solves (residuals stay ~1e-12 and a
-    solve costs a third), and with the fill-reducing ordering of an earlier matrix of the same
-    sparsity pattern when there is one (the same factorisation, without its METIS step).
+    PARDISO's defaults, but without iterative refinement in the solves: residuals stay ~1e-12 and a
+    solve costs a third.
     """
 
-    def __init__(self, matrix, pattern=None):
+    def __init__(self, matrix):
         upper = upper_triangle(matrix)
         self._matrix = (
             upper.shape[0],
@@ -151,17 +117,9 @@ class _Pardiso:
             upper.indices.astype(np.int32) + 1,
         )
         self._handle = np.zeros(64, dtype=np.int64)
-        self._iparm = _default_iparm()
-        key = _pattern_key(upper if pattern is None else sp.csc_matrix(pattern))
-        permutation = _orderings.pop(key, None)
-        self._iparm[4] = 2 if permutation is None else 1  # iparm(5): return the ordering, or use the one given
-        if permutation is None:
-            permutation = np.zeros(upper.shape[0], dtype=np.int32)
+        self._iparm = np.zeros(64, dtype=np.int32)  # iparm(1) = 0: PARDISO fills in its defaults
         empty = np.zeros(upper.shape[0])
-        _pardiso(self._handle, 12, self._matrix, self._iparm, empty, empty.copy(), permutation)
-        _orderings[key] = permutation
-        while len(_orderings) > ORDERING_CACHE_SIZE:
-            _orderings.popitem(last=False)
+        _pardiso(self._handle, 12, self._matrix, self._iparm, empty, empty.copy())
         self._iparm[7] = 0  # iparm(8): no iterative refinement in the solves (the default does 2 steps)
         weakref.finalize(self, _pardiso, self._handle, -1, self._matrix, self._iparm, empty, empty)
 
@@ -182,15 +140,12 @@ class _SuperLU:
         return self._factor.solve(np.asarray(rhs, dtype=float))
 
 
-def factorise(matrix, pattern=None):
+def factorise(matrix):
     """Factorise a symmetric sparse matrix once; the result's ``solve(b)`` takes vectors or (n, k) blocks.
 
     Parameters
     ----------
     matrix : scipy.sparse matrix
         Symmetric (K - sigma M, any units).
-    pattern : scipy.sparse matrix, optional
-        A matrix whose sparsity identifies the topology for PARDISO's ordering cache (default: ``matrix``);
-        K for K - sigma M, whose exactly cancelling entries, dropped by scipy, depend on the values.
     """
-    return _Pardiso(matrix, pattern) if solver_name() == "pardiso" else _SuperLU(matrix)
+    return _Pardiso(matrix) if solver_name() == "pardiso" else _SuperLU(matrix)
