@@ -12,7 +12,7 @@ model, all in the same run: ratios of times, and the results' agreement.
 
 ``--stages`` times the converged (0.2 %) evaluation stage by stage (mesh, assembly with its
 sparsity-pattern build, factorisation, eigen solve and its number of solves, responses; levels used;
-wall and CPU time), cold (first in the process) and warm (again: patterns and orderings cached), on
+wall and CPU time), cold (first in the process) and warm (again: sparsity patterns cached), on
 the original plate and a thin design, for both piezo models; with ``--against TREE`` one evaluation
 runs in a fresh process with this code and one with another checkout (e.g. ``main``), giving the
 ratio of times (wall and CPU: on a loaded machine the CPU time is the steadier) and the results'
