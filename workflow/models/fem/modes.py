@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
-from threadpoolctl import ThreadpoolController
+from threadpoolctl import threadpool_limits
 
 from workflow.models.fem.assembly import PlateSystem
 from workflow.models.fem.solvers import factorise
@@ -85,8 +85,9 @@ def shift_invert_modes(system: PlateSystem, shift: float, solve_shifted: Callabl
     start = np.ones(system.mass.shape[0])
     mass = system.mass.tocsc()
     mass_rows = sp.csr_matrix((mass.data, mass.indices, mass.indptr), shape=mass.shape)  # M = M^T: row-wise products are faster
-    with ThreadpoolController().select(internal_api="openblas").limit(limits=1):
-        # ARPACK's small dense steps (OpenBLAS) only lose from threads; the solves (MKL's PARDISO) keep theirs
+    with threadpool_limits(limits=1, user_api="blas"):
+        # ARPACK's small dense steps only lose from threads; PARDISO's solves (MKL) with two threads are
+        # not bitwise reproducible, and repeated evaluations of one plate must be equal
         # in shift-invert mode ARPACK uses only OPinv and M; the first argument gives shape and type
         eigenvalues, vectors = sla.eigsh(
             system.stiffness, k=n_modes, M=mass_rows, sigma=shift, which="LM", OPinv=operator, v0=start, tol=EIGEN_TOLERANCE
