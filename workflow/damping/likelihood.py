@@ -29,9 +29,9 @@ Parameters, in the order of :attr:`ParameterLayout.names`:
   (sigma_rel v_model)^2 + sigma_abs^2 (sigma_abs in m/s).
 
 Priors are flat on these coordinates within :attr:`FitData.lower` .. :attr:`FitData.upper`;
-the flexible law's increments have in addition a Gaussian random-walk prior,
-d_{j+1} - d_j ~ N(0, :data:`RANDOM_WALK_SCALE`^2) (:func:`log_prior`), which keeps 1/Q(v)
-smooth where the data do not say otherwise.
+the flexible law's slopes of 1/Q in (v / v_top)^2, b_j = d_j v_top^2 / (u_j^2 - u_(j-1)^2), have
+in addition a Gaussian random-walk prior, b_{j+1} - b_j ~ N(0, :data:`RANDOM_WALK_SCALE`^2)
+(:func:`log_prior`), which keeps 1/Q(v) close to the quadratic law where the data do not say otherwise.
 Every function here is module-level and takes arrays, so emcee can pickle it.
 """
 
@@ -81,11 +81,9 @@ THRESHOLD_RANGE = (0.02, 0.9)
 MAX_INCREMENT = 0.2
 """Prior bound of each increment of the flexible law's 1/Q [-]."""
 RANDOM_WALK_SCALE = 0.01
-"""Standard deviation of the step between consecutive increments of the flexible law's 1/Q [-]:
-weak for plates with Q above ~20 (1/Q changing by 0.01 or less between knots)."""
-FIRST_KNOT = 1.0
-"""The flexible law's first knot, relative to the smallest peak antinode velocity of the sweeps [-]: the
-slowest velocities whose Q a sweep resolves (its half-power rows reach about 0.7 of its peak)."""
+"""Standard deviation of the step between consecutive slopes of the flexible law's 1/Q in (v / v_top)^2 [-]:
+a change of slope that would move 1/Q(v_top) by 0.01, above the 0.005-0.008 a threshold's onset makes
+between two knots (the simulated threshold campaign: Q0 140, alpha 0.45 s^2/m^2, v_t 0.1 m/s)."""
 FIRST_KNOT_RANGE = (0.1, 0.6)
 """Bounds of the flexible law's first knot, relative to its last one (the largest antinode velocity) [-]."""
 
@@ -292,12 +290,13 @@ def fit_data(log: CampaignLog, law_name: str, forward: ForwardModel = ForwardMod
 def spline_knots(log: CampaignLog, v_top: float) -> Tuple[Tuple[str, float], ...]:
     """The flexible law's fixed knots (("v_top", v_top), ("v_first", u_1)) [m/s] for a campaign.
 
-    u_1 = :data:`FIRST_KNOT` times the smallest sweep peak (antinode velocity), kept within
+    u_1 is the smallest sweep peak (antinode velocity): below it no sweep reaches its resonance,
+    so the law there is the parabola the data just above it support; kept within
     :data:`FIRST_KNOT_RANGE` of ``v_top``; without sweeps, v_top / 3.
     """
     antinode = log.velocity / log.measurement_factor()
     peaks = [np.max(antinode[log.sweep == k]) for k in range(log.n_sweeps)]
-    first = FIRST_KNOT * min(peaks) if peaks else v_top / 3
+    first = min(peaks) if peaks else v_top / 3
     return ("v_top", v_top), ("v_first", float(np.clip(first, *(np.asarray(FIRST_KNOT_RANGE) * v_top))))
 
 
@@ -423,7 +422,7 @@ def in_prior(theta, data: FitData) -> np.ndarray:
 
 
 def log_prior(theta, layout: ParameterLayout) -> np.ndarray:
-    """ln of the prior's non-flat part, shape (W,): the flexible law's random walk on its increments."""
+    """ln of the prior's non-flat part, shape (W,): the flexible law's random walk on its slopes."""
     theta = np.atleast_2d(theta)
     if layout.law_name != MonotoneSpline.name:
         return np.zeros(len(theta))
