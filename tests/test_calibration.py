@@ -293,7 +293,8 @@ def test_robust_candidate_meets_the_reliability_on_a_known_model():
     calibration = Calibration(settings, samples, (MeasuredPlate("P1", P1, 23.2e3),), (surrogate,), None, {})
     candidate = robust_candidate(calibration, P1, RobustSettings(), lambda ps: [_BeamResult(p) for p in ps], 54.0)
     assert candidate.frequency[0] == pytest.approx(25e3, rel=2e-3)
-    assert abs(candidate.probability - 0.95) < 4 * candidate.probability_error + 0.005
+    assert candidate.probability >= 0.95 - candidate.probability_error, "the solve is conservative by its own MC error"
+    assert candidate.probability < 0.95 + 6 * candidate.probability_error, "but not wastefully so"
     assert candidate.margin == pytest.approx(candidate.frequency[0] - 25e3)
     assert not candidate.separated and candidate.nearest_transverse["relative_distance"] == pytest.approx(0.02)
     assert candidate.homogeneity == pytest.approx(0.0, abs=1e-12) and not candidate.lambda_at_edge
