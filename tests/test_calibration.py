@@ -135,14 +135,15 @@ def test_calibrate_cli_contract_and_evaluate_with_the_calibration(tmp_path, caps
     before = log.read_bytes()
     config = tmp_path / "fast.toml"
     config.write_text("[sampler]\nsteps = 2000\n[surrogate]\npoints = 18\n", encoding="utf-8")
-    assert main(["calibrate", str(log), "--out", str(tmp_path / "cal"), "--config", str(config), "--json"]) == 0
+    assert main(["calibrate", str(log), "--out", str(tmp_path / "cal"), "--config", str(config), "--json",
+                 "--no-deflection"]) == 0
     record = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert log.read_bytes() == before
     assert set(record["parameters"]) == set(FAST.names)
     for summary in record["parameters"].values():
         assert summary["p05"] <= summary["median"] <= summary["p95"]
     (plate,) = record["plates"]
-    assert plate["log"] == str(log)
+    assert plate["log"] == str(log) and plate["data_used"] == ["resonance frequency"]
     assert plate["measured_f_khz"] == pytest.approx(measured / KHZ, rel=2e-4)
     assert plate["predicted_f_khz_p05"] <= plate["measured_f_khz"] <= plate["predicted_f_khz_p95"]
     assert plate["nominal_f_khz"] > plate["measured_f_khz"]
