@@ -274,7 +274,7 @@ class _BeamResult:
 
         self.frequency = float(analytical.resonance_frequency(plate))
         self.deflection = float(analytical.dynamic_deflection(plate, 15.0, 54.0))
-        self.error, self.best_index = None, 0
+        self.error, self.best_index, self.q, self.voltage = None, 0, 54.0, 15.0
         self.modes = (SimpleNamespace(frequency=self.frequency, transverse_indicator=0.0),
                       SimpleNamespace(frequency=1.02 * self.frequency, transverse_indicator=0.9))
         self.probe_model = SimpleNamespace(response=lambda f, q: np.full(44, self.deflection))
