@@ -1,15 +1,19 @@
 """What a built plate's logs measure besides its resonance: deflection per volt per Q, and the scanned mode shape.
 
 Deflection per volt (docs/calibration.md, "The likelihood"): near a resonance the velocity of a
-single mode is the Lorentzian
+single mode with quality factor Q is the Lorentzian v = A / sqrt(1 + Q^2 u^2), u = f/f_0 - f_0/f,
+with A = 2 pi f_0 Q g V its peak and g the quasi-static deflection per volt.  Written for c = A / Q
+= 2 pi f_0 g V, every point obeys
 
-    v(f) = A / sqrt(1 + Q^2 u^2),   u = f / f_0 - f_0 / f,
+    (c / v)^2 = u^2 + (1 / Q(v))^2,
 
-with A = 2 pi f_0 Q g V the peak velocity, g the quasi-static deflection per volt.  So
-1 / v^2 = (1 + Q^2 u^2) / A^2 is a parabola in u: a least-squares line of 1/v^2 against u^2 over
-the sweep's top (the points above :data:`TOP_LEVEL` of the peak) gives A and Q, and
-g = A / (2 pi f_0 Q V) does not depend on the damping.  The top alone is used because the plate's Q
-depends on its velocity: the points near the peak see the peak's Q.
+also when Q depends on the velocity, as a glued plate's does.  With the quadratic loss
+1/Q(v) = a + b v^2 (b >= 0; b = 0 is the plain Lorentzian, which a top of fewer than
+:data:`MIN_POINTS_VELOCITY_DEPENDENCE` points is held to) a least-squares fit of c, a, b over
+the sweep's top (the points above :data:`TOP_LEVEL` of the peak, at least three) gives
+g = c / (2 pi f_0 V): the peak amplitude per volt divided by the Q at the peak, independent of
+the damping.  A plain Lorentzian would read the flattened top of an amplitude-dependent
+resonance as a broader one (8 % too large a g at the simulator's 2 V search).
 
 Scan shape: a scan's complex velocities are turned into a real signed pattern (rotated by the
 phase that makes them most nearly real) normalised to a root mean square of 1.  Plate and FEM
@@ -20,25 +24,30 @@ the pattern (vibrometer noise and whatever asymmetry the model lacks).
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import least_squares
 
-TOP_LEVEL = 0.7
+TOP_LEVEL = 0.5
 """Points of a sweep above this share of its peak velocity enter the Lorentzian fit [-]."""
+MIN_POINTS_VELOCITY_DEPENDENCE = 5
+"""With fewer top points the fit holds b = 0 (a plain Lorentzian) [-]."""
 MIRROR_TOLERANCE = 5e-5
 """Scan points whose |x| and |y| agree within this are mirror images of each other [m]."""
 
 
 @dataclass(frozen=True)
 class ResonanceFit:
-    """A Lorentzian through the top of one resonance sweep.
+    """A Lorentzian with velocity-dependent damping through the top of one resonance sweep.
 
     Attributes
     ----------
     frequency : float
         f_0 [Hz].
     peak_velocity : float
-        A [m/s].
+        Largest measured velocity of the sweep [m/s].
     quality_factor : float
-        Q of the velocity curve's top [-].
+        Q at that velocity, 1 / (a + b v^2) [-].
+    low_velocity_quality_factor : float
+        1 / a [-].
     points : int
         Sweep points in the fit [-].
     """
@@ -46,6 +55,7 @@ class ResonanceFit:
     frequency: float
     peak_velocity: float
     quality_factor: float
+    low_velocity_quality_factor: float
     points: int
 
     def deflection_per_volt(self, voltage: float) -> float:
@@ -54,12 +64,12 @@ class ResonanceFit:
 
 
 def lorentzian_top(frequency: np.ndarray, velocity: np.ndarray) -> ResonanceFit | None:
-    """Fit :class:`ResonanceFit` to a sweep's points above :data:`TOP_LEVEL` of its peak.
+    """Fit :class:`ResonanceFit` to a sweep's top (the module's equation).
 
-    f_0 is refined by a parabola through ln v at the highest point and its neighbours; then
-    1/v^2 = a + b u^2 by least squares gives A = a^-1/2 and Q = (b/a)^1/2.  None when the peak is at
-    an end of the sweep or fewer than three points are above the level (the sweep does not
-    resolve the resonance's width).
+    f_0 is refined by a parabola through ln v at the highest point and its neighbours; then c, a
+    and b are fitted by least squares on the relative residual of (c/v)^2 = u^2 + (a + b v^2)^2,
+    starting from the plain Lorentzian of the top points.  None when the peak is at an end of the
+    sweep or the top is not a peak.
 
     Parameters
     ----------
@@ -73,16 +83,28 @@ def lorentzian_top(frequency: np.ndarray, velocity: np.ndarray) -> ResonanceFit 
     k = int(np.argmax(v))
     if k == 0 or k == len(f) - 1 or np.any(v[k - 1:k + 2] <= 0):
         return None
-    a, b, _ = np.polyfit(f[k - 1:k + 2] - f[k], np.log(v[k - 1:k + 2]), 2)
-    f0 = float(f[k] - b / (2 * a)) if a < 0 else float(f[k])
+    curvature, slope_f, _ = np.polyfit(f[k - 1:k + 2] - f[k], np.log(v[k - 1:k + 2]), 2)
+    f0 = float(f[k] - slope_f / (2 * curvature)) if curvature < 0 else float(f[k])
     top = v >= TOP_LEVEL * v[k]
-    if np.count_nonzero(top) < 3:
-        return None
-    u2 = (f[top] / f0 - f0 / f[top]) ** 2
-    slope, intercept = np.polyfit(u2, 1 / v[top] ** 2, 1)
+    top[k - 1:k + 2] = True
+    u2, vt = (f[top] / f0 - f0 / f[top]) ** 2, v[top]
+    slope, intercept = np.polyfit(u2, 1 / vt**2, 1)
     if intercept <= 0 or slope <= 0:
         return None
-    return ResonanceFit(f0, float(intercept ** -0.5), float(np.sqrt(slope / intercept)), int(np.count_nonzero(top)))
+    peak = v[k]
+    loss = np.sqrt(intercept / slope)
+    start = np.array([loss, 1e-3 * loss, 1 / (np.sqrt(slope) * peak)])
+
+    def residual(p):
+        loss, stiffening, c = p[0], p[1], p[2] * peak
+        return (c / vt) ** 2 / (u2 + (loss + stiffening * (vt / peak) ** 2) ** 2) - 1
+
+    free = len(vt) >= MIN_POINTS_VELOCITY_DEPENDENCE
+    fit = least_squares(residual, start, bounds=([1e-6, 0.0, 1e-9], [1.0, 1.0 if free else 2e-3 * loss, np.inf]),
+                        x_scale="jac")
+    loss, stiffening, c = fit.x[0], fit.x[1], fit.x[2] * peak
+    q_peak = 1 / (loss + stiffening)
+    return ResonanceFit(f0, float(c * q_peak), float(q_peak), float(1 / loss), int(np.count_nonzero(top)))
 
 
 def real_pattern(phasors) -> np.ndarray:
