@@ -6,7 +6,8 @@ rows are a resonance sweep (or several): the measured f_r is the velocity peak o
 refined by a parabola through ln v at the three highest points, and the median over sweeps.
 The deflection per volt comes from the lowest-drive sweep that resolves its resonance
 (:func:`~workflow.calibration.measurements.lorentzian_top`), mapped onto the antinode when the
-log names a measurement point off it.
+log names a measurement point off it; a log whose ``# amplitude: synthesised`` says its velocities
+are not measured amplitudes (the published plates' logs) has none.
 """
 
 from dataclasses import dataclass
@@ -20,6 +21,9 @@ from workflow.errors import InputFileError, TactileError
 from workflow.logformat import read_metadata
 from workflow.models.builtplate import BuiltPlate
 from workflow.models.plate import Plate
+
+SYNTHESISED_AMPLITUDE = ("amplitude", "synthesised")
+"""Metadata item of a log whose velocity amplitudes are made up around a published frequency (no deflection per volt)."""
 
 
 @dataclass(frozen=True)
@@ -84,7 +88,8 @@ def read_built_plate(path) -> BuiltPlateLog:
     """
     path = Path(path)
     try:
-        plate = BuiltPlate.from_metadata(read_metadata(path), str(path)).plate()
+        metadata = read_metadata(path)
+        plate = BuiltPlate.from_metadata(metadata, str(path)).plate()
     except TactileError as error:
         raise InputFileError(str(error) if str(path) in str(error) else f"{path}: {error}") from None
     log = read_log(path)
@@ -95,8 +100,10 @@ def read_built_plate(path) -> BuiltPlateLog:
         raise InputFileError(f"{path}: no sweep has its velocity peak inside the swept range; cannot locate f_r")
     finest = min(step for step, _ in located)
     peaks = [peak for step, peak in located if step <= 1.01 * finest]
+    key, value = SYNTHESISED_AMPLITUDE
+    synthesised = metadata.get(key, ("",))[0].strip() == value
     return BuiltPlateLog(str(path), plate, float(np.median(peaks)), tuple(peak for _, peak in located),
-                         *lowest_drive_deflection(log))
+                         *((None, None, None) if synthesised else lowest_drive_deflection(log)))
 
 
 def lowest_drive_deflection(log) -> tuple:
