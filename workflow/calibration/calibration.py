@@ -20,6 +20,7 @@ from workflow.calibration.posterior import (
     identifiability,
     parameter_summary,
     predictive_quantiles,
+    prior_bounds,
     sample_posterior,
 )
 from workflow.errors import InputFileError
@@ -122,6 +123,10 @@ class Calibration:
 
     def identifiability(self) -> dict:
         return identifiability(self.settings, self.samples)
+
+    def at_prior_bounds(self) -> dict:
+        """Parameters whose posterior sits at a prior bound: name -> "at lower/upper prior bound"."""
+        return prior_bounds(self.settings, self.samples)
 
     def to_dict(self) -> dict:
         return {

@@ -10,7 +10,6 @@ from workflow.calibration.calibration import Calibration, MeasuredPlate, measure
 from workflow.calibration.logs import read_built_plate
 from workflow.calibration.measurements import scan_shape
 from workflow.calibration.parameters import CalibrationSettings
-from workflow.calibration.posterior import prior_bounds
 from workflow.errors import InputFileError
 from workflow.pipeline.builtplate import is_scan_log, read_scan
 from workflow.optimise.robust import RobustDesign
@@ -128,7 +127,7 @@ def calibration_summary(calibration: Calibration, nominal_frequencies, files: di
         "figures": files["figures"],
         "diagnostics": calibration.diagnostics.to_dict(),
         "identifiability": calibration.identifiability(),
-        "at_prior_bound": prior_bounds(calibration.settings, calibration.samples),
+        "at_prior_bound": calibration.at_prior_bounds(),
         "fem_evaluations": calibration.evaluations + len(calibration.plates),
         "fem_surface_evaluations": sum(s.evaluations for s in calibration.surrogates if s.shape is not None),
         "wall_time_s": seconds,
