@@ -30,7 +30,9 @@ CONSTRAINED_RATIO = 0.5
 BOUND_ZONE = 0.1
 """Share of a prior's range next to each bound in which :func:`prior_bounds` compares posterior and prior mass [-]."""
 BOUND_EXCESS = 2.0
-"""A posterior sits at a bound when it puts at least this many times the prior's mass in the bound's zone [-]."""
+"""A posterior sits at a bound when it puts at least this many times the prior's mass in the bound's zone [-]..."""
+BOUND_MIN_SHARE = 0.1
+"""... and at least this share of its samples [-] (a normal prior's thin tail next to its bound is not a pile-up)."""
 
 
 @dataclass(frozen=True)
@@ -199,8 +201,9 @@ def prior_bounds(settings: CalibrationSettings, samples: np.ndarray, seed: int =
     """Parameters whose posterior sits at a prior bound: name -> "at lower prior bound" or "at upper prior bound".
 
     A posterior sits at a bound when its mass in the outer :data:`BOUND_ZONE` of the prior's range next to
-    that bound is at least :data:`BOUND_EXCESS` times the prior's own mass there (the data push the
-    parameter against the bound; the bound, not the data, then limits it).
+    that bound is at least :data:`BOUND_EXCESS` times the prior's own mass there and at least
+    :data:`BOUND_MIN_SHARE` (the data push the parameter against the bound; the bound, not the data,
+    then limits it).
     """
     rng = np.random.default_rng(seed)
     flagged = {}
@@ -208,7 +211,7 @@ def prior_bounds(settings: CalibrationSettings, samples: np.ndarray, seed: int =
         prior = parameter.draw(20_000, rng)
         zone = BOUND_ZONE * (parameter.high - parameter.low)
         for side, near in (("lower", lambda v: v <= parameter.low + zone), ("upper", lambda v: v >= parameter.high - zone)):
-            if np.mean(near(samples[:, k])) >= BOUND_EXCESS * max(np.mean(near(prior)), 1e-3):
+            if np.mean(near(samples[:, k])) >= max(BOUND_EXCESS * np.mean(near(prior)), BOUND_MIN_SHARE):
                 flagged[parameter.name] = f"at {side} prior bound"
     return flagged
 
