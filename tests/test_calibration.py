@@ -62,9 +62,10 @@ def built_plate_frequency(model, plate, theta=TRUTH) -> float:
 
 
 def write_log(path: Path, plate: Plate, frequency: float, metadata: dict | None = None, q: float = 60.0) -> Path:
-    """A format-1 built-plate log: geometry metadata and one resonance sweep (Lorentzian velocity) around f_r."""
+    """A format-1 built-plate log: geometry metadata and one resonance sweep (Lorentzian velocity) around f_r, its
+    amplitude made up (``# amplitude: synthesised``: no deflection per volt)."""
     meta = {"lambda_mm": plate.wavelength / MM, "h_i_mm": plate.resonator_thickness / MM,
-            "h_p_mm": plate.ceramic_thickness / MM, "b_mm": plate.width / MM}
+            "h_p_mm": plate.ceramic_thickness / MM, "b_mm": plate.width / MM, "amplitude": "synthesised"}
     meta.update(metadata or {})
     f = np.linspace(frequency * 0.97, frequency * 1.03, 61)
     v = 0.1 / np.sqrt(1 + (q * (f / frequency - frequency / f)) ** 2)
@@ -135,8 +136,7 @@ def test_calibrate_cli_contract_and_evaluate_with_the_calibration(tmp_path, caps
     before = log.read_bytes()
     config = tmp_path / "fast.toml"
     config.write_text("[sampler]\nsteps = 2000\n[surrogate]\npoints = 18\n", encoding="utf-8")
-    assert main(["calibrate", str(log), "--out", str(tmp_path / "cal"), "--config", str(config), "--json",
-                 "--no-deflection"]) == 0
+    assert main(["calibrate", str(log), "--out", str(tmp_path / "cal"), "--config", str(config), "--json"]) == 0
     record = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert log.read_bytes() == before
     assert set(record["parameters"]) == set(FAST.names)

@@ -194,6 +194,10 @@ def test_calibrate_cli_uses_deflection_and_scan_and_says_so(tmp_path, capsys, mo
     assert record["fem_surface_evaluations"] == FAST.surrogate_points and isinstance(record["at_prior_bound"], dict)
     saved = json.loads((tmp_path / "cal" / "calibration.json").read_text())
     assert saved["plates"][0]["data_used"] == plate["data_used"]
+    assert main(["calibrate", str(resonance), str(scan), "--out", str(tmp_path / "cal2"), "--config", str(config),
+                 "--no-figures", "--json", "--no-deflection"]) == 0
+    (plate,) = json.loads(capsys.readouterr().out.strip().splitlines()[-1])["plates"]
+    assert plate["data_used"] == ["resonance frequency", "scan mode shape"] and "measured_deflection_nm_v" not in plate
 
     other = tmp_path / "other-scan.csv"
     other.write_text(scan.read_text().replace("# h_i_mm: 0.75", "# h_i_mm: 0.8"), encoding="utf-8")
