@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from instruments.procedures.sweeps import PlannedPoint, ProcedureResult, Station, _run, check_frequencies, check_sizes
+from instruments.procedures.sweeps import PlannedPoint, ProcedureResult, Station, check_frequencies, check_sizes, run_procedure
 from workflow import logformat
 from workflow.units import MM
 
@@ -88,7 +88,7 @@ def deflection_scan(station: Station, path, plan: ScanPlan, metadata: dict | Non
                     fsync: bool = True) -> ProcedureResult:
     """Measure the velocity at every point of ``plan``; summary: ``frequency_hz``, ``voltage_v``, ``points``,
     the largest deflection ``max_deflection_um`` and where it is (``max_x_mm``, ``max_y_mm``)."""
-    rows, counts = _run(station, path, "scan", plan.metadata(), [plan.voltage], lambda log: [plan.planned()],
+    rows, counts = run_procedure(station, path, "scan", plan.metadata(), [plan.voltage], lambda log: [plan.planned()],
                         metadata or {}, restart, fsync, columns=logformat.SCAN_COLUMNS)
     velocity = np.array([float(row[logformat.VELOCITY]) for row in rows])
     top = rows[int(np.argmax(velocity))]

@@ -301,7 +301,7 @@ def _measure_points(station: Station, log: LogWriter, points: list[PlannedPoint]
     return len(todo)
 
 
-def _run(station: Station, path, procedure: str, plan: dict, voltages, stages: Callable, metadata: dict, restart: bool,
+def run_procedure(station: Station, path, procedure: str, plan: dict, voltages, stages: Callable, metadata: dict, restart: bool,
          fsync: bool, columns: tuple = logformat.COLUMNS):
     """Common frame: safety check of ``voltages``, identify, open/resume the log, measure each stage's points.
 
@@ -405,7 +405,7 @@ def resonance_search(station: Station, path, plan: ResonancePlan = ResonancePlan
         centre, _ = peak_of(*_sweep_rows(log.rows, 0))
         yield [PlannedPoint(1, f, plan.voltage) for f in np.linspace(centre - 2 * step, centre + 2 * step, plan.fine_points)]
 
-    rows, counts = _run(station, path, "resonance", vars(plan), [plan.voltage], stages, metadata or {}, restart, fsync)
+    rows, counts = run_procedure(station, path, "resonance", vars(plan), [plan.voltage], stages, metadata or {}, restart, fsync)
     frequency, velocity = _sweep_rows(rows, 1)
     f_r, v_peak = peak_of(frequency, velocity)
     bandwidth = half_power_bandwidth(frequency, velocity, v_peak)
@@ -482,7 +482,7 @@ def q_campaign(station: Station, path, plan: CampaignPlan, metadata: dict | None
                fsync: bool = True) -> ProcedureResult:
     """Frequency sweeps at several voltages; summary ``sweeps``: voltage, peak frequency and velocity, Q estimate."""
     points = plan.points()
-    rows, counts = _run(station, path, "campaign", vars(plan), plan.voltages, lambda log: [points], metadata or {}, restart, fsync)
+    rows, counts = run_procedure(station, path, "campaign", vars(plan), plan.voltages, lambda log: [points], metadata or {}, restart, fsync)
     sweeps = []
     for sweep, voltage in enumerate(plan.voltages):
         frequency, velocity = _sweep_rows(rows, sweep)
@@ -517,7 +517,7 @@ def voltage_sweep(station: Station, path, plan: VoltageSweepPlan, metadata: dict
                   fsync: bool = True) -> ProcedureResult:
     """Velocity and deflection w = v / (2 pi f) at each voltage; summary lists ``voltage_v``, ``deflection_um``."""
     points = [PlannedPoint(0, plan.frequency, v) for v in plan.voltages]
-    rows, counts = _run(station, path, "voltage-sweep", vars(plan), plan.voltages, lambda log: [points], metadata or {}, restart, fsync)
+    rows, counts = run_procedure(station, path, "voltage-sweep", vars(plan), plan.voltages, lambda log: [points], metadata or {}, restart, fsync)
     voltage = [float(row[logformat.DRIVE_VOLTAGE]) for row in rows]
     deflection = [float(row[logformat.VELOCITY]) / (2 * np.pi * float(row[logformat.FREQUENCY])) / 1e-6 for row in rows]
     return ProcedureResult(**counts, summary={"voltage_v": voltage, "deflection_um": deflection})
