@@ -10,16 +10,33 @@ the default accuracy (0.2 %: the mesh refined until its estimated error meets it
 solves) with each installed sparse solver (SuperLU, PARDISO), and with the coupled piezoelectric
 model, all in the same run: ratios of times, and the results' agreement.
 
-    python bench/bench_fem.py [--repeat N] [--width-mm B] [--no-accurate]
+``--stages`` times the converged (0.2 %) evaluation stage by stage (mesh, assembly with its
+sparsity-pattern build, factorisation, eigen solve and its number of solves, responses; levels used;
+wall and CPU time), cold (first in the process) and warm (again: sparsity patterns cached), on
+the original plate and a thin design, for both piezo models; with ``--against TREE`` one evaluation
+runs in a fresh process with this code and one with another checkout (e.g. ``main``), giving the
+ratio of times (wall and CPU: on a loaded machine the CPU time is the steadier) and the results'
+agreement.  ``floor`` is the cost of the final level alone (one assembly, one factorisation and the
+solves ARPACK needs there): what an evaluation that guessed its level would still pay.
+
+    python bench/bench_fem.py [--repeat N] [--width-mm B] [--no-accurate] [--stages [--against TREE]]
 """
 
 import argparse
+import cProfile
 import json
 import os
+import pstats
+import subprocess
+import sys
 import time
+from pathlib import Path
 
+from workflow.models import analytical
 from workflow.models.fem import FemSettings, evaluate_fem
-from workflow.models.fem.accuracy import FemAccuracy
+from workflow.models.fem.accuracy import FemAccuracy, evaluate_to_accuracy, mesh_for_level
+from workflow.models.fem.evaluate import discretise
+from workflow.models.fem.modes import nearest_modes
 from workflow.models.fem.solvers import SOLVER_VARIABLE, available_solvers
 from workflow.models.fem.reference import evaluate_fem_reference
 from workflow.models.plate import ORIGINAL_PLATE
@@ -41,7 +58,13 @@ def main(argv=None) -> dict:
     parser.add_argument("--repeat", type=int, default=5, help="timed runs of the fast path (best is kept)")
     parser.add_argument("--width-mm", type=float, default=ORIGINAL_PLATE.width / MM, help="plate width [mm]")
     parser.add_argument("--no-accurate", action="store_true", help="skip the evaluations at the default accuracy")
+    parser.add_argument("--stages", action="store_true", help="only the stage-by-stage timing of converged evaluations")
+    parser.add_argument("--against", type=Path, help="with --stages: another checkout of the code to compare with")
     args = parser.parse_args(argv)
+    if args.stages:
+        figures = stage_figures(args.against)
+        print(json.dumps(figures))
+        return figures
     plate = ORIGINAL_PLATE.with_(width=args.width_mm * MM)
     settings = FemSettings()
     fast_time, fast = timed(lambda: evaluate_fem(plate, 54.0, 15.0, settings), args.repeat)
@@ -108,6 +131,122 @@ def accurate_paths(plate) -> dict:
         paths["pardiso_vs_superlu_f_rel_diff"] = abs(paths["pardiso"]["f_khz"] / paths["superlu"]["f_khz"] - 1)
     paths["coupled_over_eigenstrain"] = seconds / paths[fastest]["s"]
     return paths
+
+
+THIN_DESIGN = {"wavelength": 21.515 * MM, "resonator_thickness": 0.916 * MM, "ceramic_thickness": 1.0 * MM, "width": 49 * MM}
+"""The h_p = 1 mm FEM optimum (docs/fem.md) [m]."""
+STAGES = {
+    "mesh": ("mesh.py", "quarter_plate_mesh"),
+    "assembly": ("assembly.py", "assemble_system"),
+    "pattern_build": ("assembly.py", "_cached_pattern"),
+    "electric_assembly": ("piezoelectric.py", "electromechanical_system"),
+    "factorisation": ("solvers.py", "factorise"),
+    "eigen": ("modes.py", "shift_invert_modes"),
+    "solves": ("solvers.py", "solve"),
+    "responses": ("harmonic.py", "probe_modal_model"),
+}
+"""Stage name -> (file, function) whose cumulative time it is."""
+COLD_SNIPPET = """
+import json, sys, time
+from workflow.models.fem import evaluate_fem
+from workflow.models.fem.accuracy import FemAccuracy
+from workflow.models.plate import ORIGINAL_PLATE
+plate = ORIGINAL_PLATE.with_(**json.loads(sys.argv[1]))
+start, cpu = time.perf_counter(), time.process_time()
+result = evaluate_fem(plate, 54.0, 15.0, FemAccuracy(piezo=sys.argv[2]))
+print(json.dumps({"s": time.perf_counter() - start, "cpu_s": time.process_time() - cpu, "f": result.frequency,
+                  "w": result.deflection, "f_error": result.error.frequency, "level": result.error.level}))
+"""
+"""A converged evaluation in a fresh process (nothing cached) of the code on ``PYTHONPATH``."""
+
+
+def stage_times(profile: cProfile.Profile) -> dict:
+    """Cumulative seconds of each of :data:`STAGES` in a profile, and the number of solves."""
+    times = dict.fromkeys(STAGES, 0.0)
+    times["n_solves"] = 0
+    for (filename, _, function), (_, calls, _, cumulative, _) in pstats.Stats(profile).stats.items():
+        for name, (file, wanted) in STAGES.items():
+            if filename.endswith(file) and function == wanted:
+                times[name] += cumulative
+                if name == "solves":
+                    times["n_solves"] += calls
+    return times
+
+
+def profiled_evaluation(plate, piezo: str) -> dict:
+    """Stage times and levels of one converged evaluation in this process."""
+    levels = []
+
+    def evaluate_mesh(settings):
+        start = time.perf_counter()
+        result = evaluate_fem(plate, 54.0, 15.0, settings)
+        levels.append({"level": settings.elements_per_ceramic, "n_dofs": result.n_dofs, "s": time.perf_counter() - start})
+        return result
+
+    profile = cProfile.Profile()
+    start, cpu = time.perf_counter(), time.process_time()
+    profile.enable()
+    result = evaluate_to_accuracy(plate, FemAccuracy(piezo=piezo), evaluate_mesh)
+    profile.disable()
+    return {
+        "s": time.perf_counter() - start,
+        "cpu_s": time.process_time() - cpu,
+        "stages": stage_times(profile),
+        "levels": levels,
+        "f_khz": result.frequency / KHZ,
+        "w_um": result.deflection / UM,
+        "f_error_estimate": result.error.frequency,
+    }
+
+
+def final_level_floor(plate, level: int) -> dict:
+    """Seconds of the final level alone: assembly, one factorisation and ARPACK's solves (eigenstrain)."""
+    settings = mesh_for_level(plate, level)
+    start = time.perf_counter()
+    _, system, _ = discretise(plate, 15.0, settings)
+    assembled = time.perf_counter()
+    modes = nearest_modes(system, float(analytical.resonance_frequency(plate)), settings.n_modes)
+    solved = time.perf_counter()
+    modes.solve_shifted(system.load)
+    one_solve = time.perf_counter() - solved
+    return {"level": level, "n_dofs": system.stiffness.shape[0], "assembly_s": assembled - start,
+            "factorisation_and_eigen_s": solved - assembled, "one_solve_s": one_solve, "s": solved - start}
+
+
+def cold_evaluation(tree: Path, plate_changes: dict, piezo: str) -> dict:
+    """A converged evaluation in a fresh process running the code of ``tree``."""
+    environment = {**os.environ, "PYTHONPATH": str(tree)}
+    out = subprocess.run(
+        [sys.executable, "-c", COLD_SNIPPET, json.dumps(plate_changes), piezo],
+        capture_output=True, text=True, check=True, env=environment, cwd=tree,  # python -c puts the cwd first
+    )
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def stage_figures(against: Path | None) -> dict:
+    """Stage timing (cold and warm) of both piezo models on the original plate and the thin design."""
+    here = Path(__file__).resolve().parent.parent
+    figures = {"cpu_load_1min": os.getloadavg()[0]}
+    for name, changes in (("original", {}), ("thin", THIN_DESIGN)):
+        plate = ORIGINAL_PLATE.with_(**changes)
+        for piezo in ("eigenstrain", "coupled"):
+            key = f"{name}_{piezo}"
+            entry = {"cold": profiled_evaluation(plate, piezo), "warm": profiled_evaluation(plate, piezo)}
+            if against is not None:  # both in fresh processes, one after the other
+                cold = cold_evaluation(here, changes, piezo)
+                previous = cold_evaluation(against, changes, piezo)
+                entry["fresh_process"] = {"s": cold["s"], "cpu_s": cold["cpu_s"]}
+                entry["previous_fresh_process"] = {"s": previous["s"], "cpu_s": previous["cpu_s"]}
+                entry["previous_over_this"] = previous["s"] / cold["s"]
+                entry["previous_over_this_cpu"] = previous["cpu_s"] / cold["cpu_s"]
+                entry["f_rel_diff_to_previous"] = abs(cold["f"] / previous["f"] - 1)
+                entry["w_rel_diff_to_previous"] = abs(cold["w"] / previous["w"] - 1)
+                entry["f_error_diff_to_previous"] = abs(cold["f_error"] - previous["f_error"])
+            if piezo == "eigenstrain":
+                entry["floor"] = final_level_floor(plate, entry["warm"]["levels"][-1]["level"])
+            figures[key] = entry
+    figures["cpu_load_1min_after"] = os.getloadavg()[0]
+    return figures
 
 
 if __name__ == "__main__":

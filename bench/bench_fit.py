@@ -9,10 +9,12 @@ With ``--truths``, instead: for campaigns simulated from the quadratic, linear a
 laws (seeded, 2 % noise, stated to the fit), the whole choice (MAP screening, sampling side by
 side, PSIS-LOO, checks) with the chosen law, the selection, the coverage of the true Q(v) by the
 answer's 90 % band on 50 velocities spanning the measured ones, the band's median relative
-width and the fit time; one JSON line per truth.
+width and the fit time; one JSON line per truth.  With ``--flexible``, the same figures of the
+flexible law alone (``fit_law``, converged by the 50 tau rule) with its tau and steps.
 
     python bench/bench_fit.py [LOG.csv] [--seed N]
     python bench/bench_fit.py --truths [quadratic linear threshold] [--seed N]
+    python bench/bench_fit.py --flexible [quadratic linear threshold] [--seed N]
 """
 
 import argparse
@@ -25,7 +27,7 @@ import arviz as az
 import numpy as np
 from timing import best_time
 
-from workflow.damping.fit import fit_damping, fit_law, fit_summary
+from workflow.damping.fit import fit_damping, fit_law, fit_summary, velocity_grid
 from workflow.damping.harmonic import self_consistent_amplitude
 from workflow.damping.laws import LinearLoss, ThresholdLoss
 from workflow.damping.likelihood import fit_data, log_probability, log_probability_single
@@ -48,11 +50,13 @@ def main():
     parser.add_argument("logs", nargs="*", default=[str(SHIPPED)])
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--truths", nargs="*", choices=list(TRUTHS), help="study the law choice on simulated campaigns")
+    parser.add_argument("--flexible", nargs="*", choices=list(TRUTHS), help="the flexible law alone on simulated campaigns")
     args = parser.parse_args()
-    if args.truths is not None:
-        for name in args.truths or TRUTHS:
-            print(json.dumps(law_choice(name, args.seed)), flush=True)
-        return
+    for study, names in ((law_choice, args.truths), (flexible_coverage, args.flexible)):
+        if names is not None:
+            for name in names or TRUTHS:
+                print(json.dumps(study(name, args.seed)), flush=True)
+            return
     log = read_logs(args.logs)
     result = {"logs": args.logs, "n_points": int(len(log.velocity)), "n_sweeps": log.n_sweeps, "laws": {}}
     for law_name in ("quadratic", "linear"):
@@ -98,7 +102,6 @@ def law_choice(name: str, seed: int) -> dict:
     summary = fit_summary(fit)
     q = summary["q_of_v"]
     true_q = truth.quality_factor(np.asarray(q["v_m_s"]))
-    low, mid, high = (np.asarray(q[k]) for k in ("q_p05", "q_p50", "q_p95"))
     return {
         "truth": name,
         "preferred": summary["law"],
@@ -112,10 +115,28 @@ def law_choice(name: str, seed: int) -> dict:
             for k, f in fit.fits.items()
         },
         "checks_passed": {k: c.passed for k, c in fit.checks.items()},
-        "coverage": float(np.mean((true_q >= low) & (true_q <= high))),
-        "band_width_rel_median": float(np.median((high - low) / mid)),
+        **band_figures(true_q, *(np.asarray(q[k]) for k in ("q_p05", "q_p50", "q_p95"))),
         "fit_seconds": seconds,
     }
+
+
+def band_figures(true_q, low, mid, high) -> dict:
+    """Coverage of the true Q by the band [low, high] and the band's median width relative to ``mid``."""
+    return {"coverage": float(np.mean((true_q >= low) & (true_q <= high))),
+            "band_width_rel_median": float(np.median((high - low) / mid))}
+
+
+def flexible_coverage(name: str, seed: int) -> dict:
+    """The flexible law alone on a campaign simulated from ``TRUTHS[name]``: coverage, band width, tau, time."""
+    truth = TRUTHS[name]
+    log = simulate_campaign(law=truth, relative_noise=NOISE, seed=seed)
+    start = time.perf_counter()
+    law_fit = fit_law(log, "flexible", seed=seed)
+    seconds = time.perf_counter() - start
+    velocity = velocity_grid(log)
+    d = law_fit.diagnostics
+    return {"truth": name, "seed": seed, **band_figures(truth.quality_factor(velocity), *law_fit.quality_factor_quantiles(velocity)),
+            "tau_max": d.tau_max, "steps": d.n_steps, "walkers": d.n_walkers, "converged": d.converged, "fit_seconds": seconds}
 
 
 def law_fit_walkers(log, seed, n_walkers=44):

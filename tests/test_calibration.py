@@ -62,9 +62,10 @@ def built_plate_frequency(model, plate, theta=TRUTH) -> float:
 
 
 def write_log(path: Path, plate: Plate, frequency: float, metadata: dict | None = None, q: float = 60.0) -> Path:
-    """A format-1 built-plate log: geometry metadata and one resonance sweep (Lorentzian velocity) around f_r."""
+    """A format-1 built-plate log: geometry metadata and one resonance sweep (Lorentzian velocity) around f_r, its
+    amplitude made up (``# amplitude: synthesised``: no deflection per volt)."""
     meta = {"lambda_mm": plate.wavelength / MM, "h_i_mm": plate.resonator_thickness / MM,
-            "h_p_mm": plate.ceramic_thickness / MM, "b_mm": plate.width / MM}
+            "h_p_mm": plate.ceramic_thickness / MM, "b_mm": plate.width / MM, "amplitude": "synthesised"}
     meta.update(metadata or {})
     f = np.linspace(frequency * 0.97, frequency * 1.03, 61)
     v = 0.1 / np.sqrt(1 + (q * (f / frequency - frequency / f)) ** 2)
@@ -142,7 +143,7 @@ def test_calibrate_cli_contract_and_evaluate_with_the_calibration(tmp_path, caps
     for summary in record["parameters"].values():
         assert summary["p05"] <= summary["median"] <= summary["p95"]
     (plate,) = record["plates"]
-    assert plate["log"] == str(log)
+    assert plate["log"] == str(log) and plate["data_used"] == ["resonance frequency"]
     assert plate["measured_f_khz"] == pytest.approx(measured / KHZ, rel=2e-4)
     assert plate["predicted_f_khz_p05"] <= plate["measured_f_khz"] <= plate["predicted_f_khz_p95"]
     assert plate["nominal_f_khz"] > plate["measured_f_khz"]
@@ -273,7 +274,7 @@ class _BeamResult:
 
         self.frequency = float(analytical.resonance_frequency(plate))
         self.deflection = float(analytical.dynamic_deflection(plate, 15.0, 54.0))
-        self.error, self.best_index = None, 0
+        self.error, self.best_index, self.q, self.voltage = None, 0, 54.0, 15.0
         self.modes = (SimpleNamespace(frequency=self.frequency, transverse_indicator=0.0),
                       SimpleNamespace(frequency=1.02 * self.frequency, transverse_indicator=0.9))
         self.probe_model = SimpleNamespace(response=lambda f, q: np.full(44, self.deflection))
@@ -293,7 +294,8 @@ def test_robust_candidate_meets_the_reliability_on_a_known_model():
     calibration = Calibration(settings, samples, (MeasuredPlate("P1", P1, 23.2e3),), (surrogate,), None, {})
     candidate = robust_candidate(calibration, P1, RobustSettings(), lambda ps: [_BeamResult(p) for p in ps], 54.0)
     assert candidate.frequency[0] == pytest.approx(25e3, rel=2e-3)
-    assert abs(candidate.probability - 0.95) < 4 * candidate.probability_error + 0.005
+    assert candidate.probability >= 0.95 - candidate.probability_error, "the solve is conservative by its own MC error"
+    assert candidate.probability < 0.95 + 6 * candidate.probability_error, "but not wastefully so"
     assert candidate.margin == pytest.approx(candidate.frequency[0] - 25e3)
     assert not candidate.separated and candidate.nearest_transverse["relative_distance"] == pytest.approx(0.02)
     assert candidate.homogeneity == pytest.approx(0.0, abs=1e-12) and not candidate.lambda_at_edge

@@ -5,7 +5,7 @@ import pytest
 
 from workflow.damping.checks import misfit_check, runs_test
 from workflow.damping.comparison import compare_laws
-from workflow.damping.fit import fit_damping, fit_law, fit_summary, map_fit, sweep_estimates
+from workflow.damping.fit import fit_damping, fit_law, fit_summary, map_fit, sweep_estimates, velocity_grid
 from workflow.damping.inference_data import load_inference_data, save_inference_data
 from workflow.damping.laws import STACKED_COMPONENTS, MonotoneSpline, QuadraticLoss, StackedLaws, ThresholdLoss
 from workflow.damping.posterior import DampingPosterior, load_posterior, save_posterior, stacked_posterior
@@ -13,7 +13,8 @@ from workflow.damping.synthetic import TRUE_LAW, simulate_campaign
 from workflow.errors import InputFileError
 
 THRESHOLD_TRUTH = ThresholdLoss(q0=140.0, alpha=0.45, v_t=0.1)
-FLEXIBLE_TRUTH = MonotoneSpline(q0=160.0, d1=0.0005, d2=0.001, d3=0.003, d4=0.004, d5=0.004, d6=0.004, v_top=0.27)
+FLEXIBLE_TRUTH = MonotoneSpline(q0=160.0, d1=0.0005, d2=0.001, d3=0.003, d4=0.004, d5=0.004, d6=0.004, d7=0.003, d8=0.003,
+                                v_top=0.27, v_first=0.1)
 NOISE = 0.02
 
 
@@ -28,7 +29,8 @@ def coverage(law_fit_or_posterior, truth, velocity):
 @pytest.mark.parametrize("law", [THRESHOLD_TRUTH, FLEXIBLE_TRUTH, TRUE_LAW, StackedLaws(
     component=np.array([0, 2, 3]), quadratic_q0=150.0, quadratic_alpha=0.2, linear_q0=100.0, linear_alpha=0.0,
     threshold_q0=np.array([1e3, 120.0, 1e3]), threshold_alpha=0.5, threshold_v_t=0.05, flexible_q0=90.0,
-    flexible_d1=0.001, flexible_d2=0.0, flexible_d3=0.004, flexible_d4=0.0, flexible_d5=0.002, flexible_d6=0.001, flexible_v_top=0.2)])
+    flexible_d1=0.001, flexible_d2=0.0, flexible_d3=0.004, flexible_d4=0.0, flexible_d5=0.002, flexible_d6=0.001, flexible_d7=0.0,
+    flexible_d8=0.002, flexible_v_top=0.2, flexible_v_first=0.05)])
 def test_every_law_is_non_increasing_in_speed(law):
     velocity = np.linspace(0.0, 0.5, 401)[:, None]
     q = law.quality_factor(velocity)
@@ -43,13 +45,25 @@ def test_threshold_law_is_flat_below_and_quadratic_well_above_its_threshold():
     assert 1 / law.quality_factor(0.5) == pytest.approx(1 / shifted.quality_factor(0.4), rel=1e-6)
 
 
-def test_flexible_law_interpolates_its_knots_and_continues_the_last_slope():
+def test_flexible_law_interpolates_its_knots_linearly_in_v_squared_and_continues_the_last_slope():
     law = FLEXIBLE_TRUTH
-    knots = np.linspace(0, law.v_top, 7)
-    rises = np.cumsum([0.0, law.d1, law.d2, law.d3, law.d4, law.d5, law.d6])
+    knots = MonotoneSpline.knots(law.v_top, law.v_first)
+    assert knots[1] == law.v_first and knots[-1] == law.v_top and np.allclose(np.diff(knots[1:]), (0.27 - 0.1) / 7)
+    rises = np.cumsum([0.0] + [getattr(law, name) for name in MonotoneSpline.INCREMENTS])
     assert np.allclose(1 / law.quality_factor(knots), 1 / law.q0 + rises)
-    beyond = law.v_top * (1 + 1 / 6)  # one segment past the last knot
-    assert 1 / law.quality_factor(beyond) == pytest.approx(1 / law.q0 + rises[-1] + law.d6, rel=1e-12)
+    assert 1 / law.quality_factor(law.v_first / 2) == pytest.approx(1 / law.q0 + law.d1 / 4, rel=1e-12)  # a parabola below u_1
+    beyond = np.sqrt(2 * knots[-1] ** 2 - knots[-2] ** 2)  # one segment (in v^2) past the last knot
+    assert 1 / law.quality_factor(beyond) == pytest.approx(1 / law.q0 + rises[-1] + law.d8, rel=1e-12)
+    quadratic = QuadraticLoss(q0=150.0, alpha=0.234)  # equal slopes in v^2: the quadratic law exactly
+    spline = MonotoneSpline(150.0, *np.diff(quadratic.loss(knots)), v_top=law.v_top, v_first=law.v_first)
+    velocity = np.linspace(0.0, 0.4, 41)
+    assert np.allclose(spline.quality_factor(velocity), quadratic.quality_factor(velocity), rtol=1e-12)
+
+
+def test_flexible_law_knots_sit_on_the_measured_velocities(threshold_campaign):
+    fixed = dict(map_fit(threshold_campaign, "flexible")[0].layout.fixed)
+    peaks = [threshold_campaign.velocity[threshold_campaign.sweep == k].max() for k in range(threshold_campaign.n_sweeps)]
+    assert fixed["v_top"] == threshold_campaign.velocity.max() and fixed["v_first"] == pytest.approx(min(peaks))
 
 
 def test_runs_test_flags_runs_and_passes_alternation():
@@ -137,19 +151,24 @@ def test_a_wrong_only_law_is_flagged_and_the_answer_falls_back_to_the_flexible_l
     assert coverage(fit.answer, THRESHOLD_TRUTH, velocity) >= 0.6 > 0.3 >= coverage(fit.best.posterior(), THRESHOLD_TRUTH, velocity)
 
 
+@pytest.mark.parametrize("truth", [THRESHOLD_TRUTH, TRUE_LAW], ids=["threshold", "quadratic"])
+def test_flexible_law_covers_a_threshold_and_a_quadratic_truth_over_the_measured_range(truth):
+    """A short chain (2000 steps) on seed 1; the converged chains on more seeds are the slow test below."""
+    log = simulate_campaign(law=truth, relative_noise=NOISE, seed=1)
+    law_fit = fit_law(log, "flexible", seed=1, max_steps=2000)
+    assert coverage(law_fit.posterior(), truth, velocity_grid(log)) >= 0.9
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize(
-    "truth, least",
-    # measured (seed 4, 20000 steps, not converged: tau 420-890): quadratic 0.94; threshold 0.80, the band
-    # missing the truth below 0.022 m/s and at the onset's corner, 0.087-0.109 m/s (knots every 0.045 m/s)
-    [(THRESHOLD_TRUTH, 0.75), (TRUE_LAW, 0.9), (FLEXIBLE_TRUTH, 0.9)],
-    ids=["threshold", "quadratic", "flexible"],
-)
-def test_flexible_law_covers_the_truth_over_the_measured_range(truth, least):
-    log = simulate_campaign(law=truth, relative_noise=NOISE, seed=4)
-    law_fit = fit_law(log, "flexible", seed=4)
-    velocity = np.linspace(0.0, log.velocity.max(), 50)
-    assert coverage(law_fit.posterior(), truth, velocity) >= least
+@pytest.mark.parametrize("seed", [1, 4])
+@pytest.mark.parametrize("truth", [THRESHOLD_TRUTH, TRUE_LAW, FLEXIBLE_TRUTH], ids=["threshold", "quadratic", "flexible"])
+def test_flexible_law_converges_and_covers_the_truth_over_the_measured_range(truth, seed):
+    # measured (docs/damping.md): seeds 0-4 cover the threshold truth at 0.82-0.98 and the quadratic one at 0.80-1.00;
+    # the true laws' own bands cover them at 0.52-1.00 (on seeds 0 and 3 the noise pulls every band off the truth)
+    log = simulate_campaign(law=truth, relative_noise=NOISE, seed=seed)
+    law_fit = fit_law(log, "flexible", seed=seed)
+    assert law_fit.diagnostics.converged
+    assert coverage(law_fit.posterior(), truth, velocity_grid(log)) >= 0.9
 
 
 def test_map_screening_finds_the_flexible_law_close_to_the_threshold_truth(threshold_campaign):

@@ -88,7 +88,9 @@ def test_the_report_tables_each_stage_and_the_case_study(tmp_path):
     run.results["loop_first_plate"] = loop.BuiltMeasurement(PLATE_1, 25.04e3, 23.06e3, 23.057e3, Path("r.csv"), Path("s.csv"), 0.9994)
     calibration = types.SimpleNamespace(
         summary=lambda: {"glue_um": {"median": 44.0, "p05": 15.0, "p95": 58.0, "unit": "um"}},
-        identifiability=lambda: {"statement": "One combination is constrained."})
+        identifiability=lambda: {"statement": "One combination is constrained."},
+        plates=(types.SimpleNamespace(data_used=["resonance frequency", "deflection per volt", "scan mode shape"]),),
+        at_prior_bounds=lambda: {"glue_um": "at upper prior bound"})
     run.results["loop_calibration"] = (calibration, (22.79e3, 23.057e3, 23.36e3))
     best = types.SimpleNamespace(plate=redesigned, frequency=(25.01e3, 25.48e3, 25.9e3), probability=0.954, probability_error=0.0015)
     run.results["loop_redesign"] = types.SimpleNamespace(best=best)
@@ -101,6 +103,8 @@ def test_the_report_tables_each_stage_and_the_case_study(tmp_path):
     assert "| 5. re-designed plate built, measured |  | 25.310 | meets 25 kHz |" in text
     assert "23.057 (22.790 to 23.360)" in text and "P(f_r ≥ 25 kHz) = 0.954 ± 0.002" in text
     assert "](loop/calibration_pairs.png)" in text and "MAC 0.9994" in text
+    assert "it uses its resonance frequency, deflection per volt, scan mode shape;" in text
+    assert "glue_um is at upper prior bound: the prior, not the data, limits it." in text
     directions = [
         {"calibrated_on": "data/built_plates/paper_P1.csv", "predicted": "data/built_plates/paper_P2.csv",
          "measured_hz": 23.95e3, "predicted_hz": (23.37e3, 23.90e3, 24.41e3), "error": -0.002, "inside": True},

@@ -155,10 +155,9 @@ def test_laws_without_a_closed_form_decay_are_integrated():
     from workflow.damping.laws import MonotoneSpline, QuadraticLoss
     from workflow.damping.ringdown import decay_velocity
 
-    # a spline through the quadratic law's 1/Q at its knots decays like it (its chords lie above: 4 % lower at 5 ms)
+    # a spline through the quadratic law's 1/Q at its knots decays like it (it is the quadratic law, linear in v^2)
     quadratic = QuadraticLoss(q0=150.0, alpha=0.25)
-    knots = np.linspace(0, 0.3, 7)
-    rises = np.diff(quadratic.loss(knots))
+    rises = np.diff(quadratic.loss(MonotoneSpline.knots(0.3)))
     flexible = MonotoneSpline(150.0, *rises, v_top=0.3)
     time = np.linspace(0, 5e-3, 11)
     expected = decay_velocity(quadratic, 25e3, 0.25, time)

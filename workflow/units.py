@@ -8,3 +8,5 @@ KHZ = 1e3
 """One kilohertz [Hz]."""
 PM_PER_V = 1e-12
 """One picometre per volt [m/V]."""
+NM = 1e-9
+"""One nanometre [m]."""

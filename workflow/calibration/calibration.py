@@ -11,14 +11,16 @@ from typing import Sequence
 import numpy as np
 
 from workflow.calibration.logs import BuiltPlateLog
+from workflow.calibration.measurements import ScanShape
 from workflow.calibration.parameters import CalibrationSettings, Parameter
-from workflow.calibration.plate_surrogate import Evaluate, PlateSurrogate, build_plate_surrogate
+from workflow.calibration.plate_surrogate import Evaluate, EvaluateSurfaces, PlateSurrogate, build_plate_surrogate
 from workflow.calibration.posterior import (
     ChainDiagnostics,
     calibration_data,
     identifiability,
     parameter_summary,
     predictive_quantiles,
+    prior_bounds,
     sample_posterior,
 )
 from workflow.errors import InputFileError
@@ -41,7 +43,7 @@ def prediction_points(n_parameters: int) -> int:
 
 @dataclass(frozen=True)
 class MeasuredPlate:
-    """A nominal plate and its measured resonance.
+    """A nominal plate and what its logs measured.
 
     Attributes
     ----------
@@ -51,15 +53,39 @@ class MeasuredPlate:
         Nominal plate [m].
     frequency : float
         Measured resonance frequency [Hz].
+    deflection_per_volt : float or None
+        Measured quasi-static antinode deflection per volt (peak over V Q) [m/V]; None: not used.
+    scan : ScanShape or None
+        Measured mode pattern of a deflection scan; None: no scan.
     """
 
     name: str
     plate: Plate
     frequency: float
+    deflection_per_volt: float | None = None
+    scan: ScanShape | None = None
+
+    @property
+    def data_used(self) -> list:
+        """The measured quantities the likelihood uses for this plate."""
+        return (["resonance frequency"] + (["deflection per volt"] if self.deflection_per_volt is not None else [])
+                + (["scan mode shape"] if self.scan is not None else []))
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "plate": plate_record(self.plate), "frequency_hz": self.frequency,
+                "deflection_per_volt_m_v": self.deflection_per_volt,
+                "scan": None if self.scan is None else self.scan.to_dict(), "data_used": self.data_used}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "MeasuredPlate":
+        deflection, scan = data.get("deflection_per_volt_m_v"), data.get("scan")
+        return cls(data["name"], plate_from_record(data["plate"]), float(data["frequency_hz"]),
+                   None if deflection is None else float(deflection), None if scan is None else ScanShape.from_dict(scan))
 
 
-def measured_plate(log: BuiltPlateLog) -> MeasuredPlate:
-    return MeasuredPlate(log.source, log.plate, log.frequency)
+def measured_plate(log: BuiltPlateLog, scan: ScanShape | None = None, use_deflection: bool = True) -> MeasuredPlate:
+    """The measurements of a built-plate log (its deflection per volt when it has one and ``use_deflection``)."""
+    return MeasuredPlate(log.source, log.plate, log.frequency, log.deflection_per_volt if use_deflection else None, scan)
 
 
 @dataclass(frozen=True, eq=False)
@@ -98,6 +124,10 @@ class Calibration:
     def identifiability(self) -> dict:
         return identifiability(self.settings, self.samples)
 
+    def at_prior_bounds(self) -> dict:
+        """Parameters whose posterior sits at a prior bound: name -> "at lower/upper prior bound"."""
+        return prior_bounds(self.settings, self.samples)
+
     def to_dict(self) -> dict:
         return {
             "format": FORMAT,
@@ -105,7 +135,7 @@ class Calibration:
             "settings": {**asdict(self.settings), "parameters": [asdict(p) for p in self.settings.parameters]},
             "names": list(self.settings.names),
             "samples": self.samples.tolist(),
-            "plates": [{"name": p.name, "plate": plate_record(p.plate), "frequency_hz": p.frequency} for p in self.plates],
+            "plates": [p.to_dict() for p in self.plates],
             "surrogates": [s.to_dict() for s in self.surrogates],
             "diagnostics": self.diagnostics.to_dict(),
             "fem": dict(self.fem),
@@ -125,7 +155,7 @@ class Calibration:
             return cls(
                 settings=CalibrationSettings(**settings),
                 samples=samples,
-                plates=tuple(MeasuredPlate(p["name"], plate_from_record(p["plate"]), float(p["frequency_hz"])) for p in data["plates"]),
+                plates=tuple(MeasuredPlate.from_dict(p) for p in data["plates"]),
                 surrogates=tuple(PlateSurrogate.from_dict(s) for s in data["surrogates"]),
                 diagnostics=ChainDiagnostics.from_dict(data["diagnostics"]),
                 fem=dict(data["fem"]),
@@ -159,24 +189,30 @@ def nominal_theta(names: Sequence[str], plate: Plate) -> np.ndarray:
                      for name in names])
 
 
-def prior_surrogates(plates: Sequence[Plate], settings: CalibrationSettings, evaluate: Evaluate) -> tuple:
-    """A surrogate of each plate over the prior's box (the settings' design size, degree and seed)."""
+def prior_surrogates(plates: Sequence[Plate], settings: CalibrationSettings, evaluate: Evaluate,
+                     evaluate_surfaces: EvaluateSurfaces | None = None, scans: Sequence = ()) -> tuple:
+    """A surrogate of each plate over the prior's box (the settings' design size, degree and seed), with the
+    mode pattern at its scan's points where ``scans`` (one ScanShape or None per plate) has one."""
+    scans = tuple(scans) or (None,) * len(plates)
     return tuple(
         build_plate_surrogate(plate, settings.names, settings.bounds, evaluate, settings.surrogate_points,
-                              settings.surrogate_degree, settings.surrogate_seed)
-        for plate in plates
+                              settings.surrogate_degree, settings.surrogate_seed, evaluate_surfaces,
+                              None if scan is None else (np.array(scan.x), np.array(scan.y)))
+        for plate, scan in zip(plates, scans)
     )
 
 
 def posterior_from(plates: Sequence[MeasuredPlate], surrogates: Sequence[PlateSurrogate], settings: CalibrationSettings,
                    fem: dict) -> Calibration:
     """Sample the posterior given measured plates and their surrogates (no FEM evaluation)."""
-    data = calibration_data(settings, surrogates, [p.frequency for p in plates])
+    data = calibration_data(settings, surrogates, [p.frequency for p in plates], [p.deflection_per_volt for p in plates],
+                            [p.scan for p in plates])
     samples, diagnostics = sample_posterior(data)
     return Calibration(settings, samples, tuple(plates), tuple(surrogates), diagnostics, dict(fem))
 
 
-def calibrate(plates: Sequence[MeasuredPlate], settings: CalibrationSettings, evaluate: Evaluate, fem: dict) -> Calibration:
+def calibrate(plates: Sequence[MeasuredPlate], settings: CalibrationSettings, evaluate: Evaluate, fem: dict,
+              evaluate_surfaces: EvaluateSurfaces | None = None) -> Calibration:
     """Surrogates of the measured plates, then the posterior of the parameters.
 
     Parameters
@@ -187,8 +223,10 @@ def calibrate(plates: Sequence[MeasuredPlate], settings: CalibrationSettings, ev
         Plates -> FemResults.
     fem : dict
         The FEM conditions ``evaluate`` binds (recorded with the calibration).
+    evaluate_surfaces : callable, optional
+        Plates and FemResults -> SurfaceModes; needed when a plate has a scan.
     """
-    surrogates = prior_surrogates([p.plate for p in plates], settings, evaluate)
+    surrogates = prior_surrogates([p.plate for p in plates], settings, evaluate, evaluate_surfaces, [p.scan for p in plates])
     return posterior_from(plates, surrogates, settings, fem)
 
 

@@ -4,6 +4,10 @@ Metadata (docs/log-format.md): ``# lambda_mm``, ``# h_i_mm``, ``# h_p_mm``, ``# 
 here), ``# ceramic``, ``# resonator`` (material record names), ``# glue_um`` (optional).  The
 rows are a resonance sweep (or several): the measured f_r is the velocity peak of each sweep,
 refined by a parabola through ln v at the three highest points, and the median over sweeps.
+The deflection per volt comes from the lowest-drive sweep that resolves its resonance
+(:func:`~workflow.calibration.measurements.lorentzian_top`), mapped onto the antinode when the
+log names a measurement point off it; a log whose ``# amplitude: synthesised`` says its velocities
+are not measured amplitudes (the published plates' logs) has none.
 """
 
 from dataclasses import dataclass
@@ -11,11 +15,15 @@ from pathlib import Path
 
 import numpy as np
 
+from workflow.calibration.measurements import ResonanceFit, lorentzian_top
 from workflow.damping.logs import read_log
 from workflow.errors import InputFileError, TactileError
 from workflow.logformat import read_metadata
 from workflow.models.builtplate import BuiltPlate
 from workflow.models.plate import Plate
+
+SYNTHESISED_AMPLITUDE = ("amplitude", "synthesised")
+"""Metadata item of a log whose velocity amplitudes are made up around a published frequency (no deflection per volt)."""
 
 
 @dataclass(frozen=True)
@@ -32,12 +40,22 @@ class BuiltPlateLog:
         Measured resonance frequency: median peak of the finest-spaced sweeps [Hz].
     sweep_frequencies : tuple of float
         Peak frequency of each sweep with a peak inside its range [Hz].
+    deflection_per_volt : float or None
+        Quasi-static antinode deflection per volt from the lowest-drive sweep [m/V] (None: no sweep
+        resolves its resonance's width).
+    resonance_fit : ResonanceFit or None
+        The Lorentzian behind it.
+    drive_voltage : float or None
+        That sweep's drive [V].
     """
 
     source: str
     plate: Plate
     frequency: float
     sweep_frequencies: tuple
+    deflection_per_volt: float | None = None
+    resonance_fit: ResonanceFit | None = None
+    drive_voltage: float | None = None
 
 
 def peak_frequency(frequency: np.ndarray, velocity: np.ndarray) -> float | None:
@@ -70,7 +88,8 @@ def read_built_plate(path) -> BuiltPlateLog:
     """
     path = Path(path)
     try:
-        plate = BuiltPlate.from_metadata(read_metadata(path), str(path)).plate()
+        metadata = read_metadata(path)
+        plate = BuiltPlate.from_metadata(metadata, str(path)).plate()
     except TactileError as error:
         raise InputFileError(str(error) if str(path) in str(error) else f"{path}: {error}") from None
     log = read_log(path)
@@ -81,7 +100,30 @@ def read_built_plate(path) -> BuiltPlateLog:
         raise InputFileError(f"{path}: no sweep has its velocity peak inside the swept range; cannot locate f_r")
     finest = min(step for step, _ in located)
     peaks = [peak for step, peak in located if step <= 1.01 * finest]
-    return BuiltPlateLog(str(path), plate, float(np.median(peaks)), tuple(peak for _, peak in located))
+    key, value = SYNTHESISED_AMPLITUDE
+    synthesised = metadata.get(key, ("",))[0].strip() == value
+    return BuiltPlateLog(str(path), plate, float(np.median(peaks)), tuple(peak for _, peak in located),
+                         *((None, None, None) if synthesised else lowest_drive_deflection(log)))
+
+
+def lowest_drive_deflection(log) -> tuple:
+    """(deflection per volt [m/V], its :class:`ResonanceFit`, drive [V]) of the lowest-drive sweep whose top the
+    Lorentzian resolves (finest spacing first among equal drives), or (None, None, None).
+
+    The velocity is divided by the mode factor |phi| of the log's measurement point (1 without one).
+    """
+    candidates = []
+    for k in range(log.n_sweeps):
+        rows = log.sweep == k
+        factor = 1.0 if log.mode_factor is None else float(np.median(log.mode_factor[rows]))
+        fit = lorentzian_top(log.frequency[rows], log.velocity[rows] / factor)
+        voltage = float(np.median(log.drive_voltage[rows]))
+        if fit is not None and voltage > 0:
+            candidates.append((voltage, frequency_step(log.frequency[rows]), fit))
+    if not candidates:
+        return None, None, None
+    voltage, _, fit = min(candidates, key=lambda c: c[:2])
+    return fit.deflection_per_volt(voltage), fit, voltage
 
 
 def frequency_step(frequency: np.ndarray) -> float:

@@ -98,6 +98,10 @@ class CalibrationSettings:
     parameters : tuple of Parameter
     measurement_sigma : float
         Relative standard deviation of a measured resonance frequency [-].
+    deflection_sigma : float
+        Relative standard deviation of a measured deflection per volt per Q [-].
+    shape_sigma : float
+        Noise floor of a scan's pattern value (patterns have a root mean square of 1) [-].
     surrogate_points, surrogate_degree : int
         FEM evaluations of each surrogate's design and the polynomial degree (1 or 2) [-].
     surrogate_seed, sampler_seed : int
@@ -106,6 +110,8 @@ class CalibrationSettings:
 
     parameters: tuple
     measurement_sigma: float = 0.002
+    deflection_sigma: float = 0.05
+    shape_sigma: float = 0.03
     surrogate_points: int = 24
     surrogate_degree: int = 2
     surrogate_seed: int = 1
@@ -197,6 +203,8 @@ def parse_settings(data: dict, origin: str) -> CalibrationSettings:
         raise InputFileError(f"{origin}: no [parameter.NAME] table: nothing to calibrate")
     numbers = {
         ("likelihood", "measurement_sigma"): (float, 1e-6, 0.5),
+        ("likelihood", "deflection_sigma"): (float, 1e-4, 2.0),
+        ("likelihood", "shape_sigma"): (float, 1e-4, 2.0),
         ("surrogate", "points"): (int, 3, 10_000),
         ("surrogate", "degree"): (int, 1, 2),
         ("surrogate", "seed"): (int, 0, 2**32 - 1),
@@ -220,6 +228,8 @@ def parse_settings(data: dict, origin: str) -> CalibrationSettings:
     settings = CalibrationSettings(
         parameters=parameters,
         measurement_sigma=values[("likelihood", "measurement_sigma")],
+        deflection_sigma=values[("likelihood", "deflection_sigma")],
+        shape_sigma=values[("likelihood", "shape_sigma")],
         surrogate_points=values[("surrogate", "points")],
         surrogate_degree=values[("surrogate", "degree")],
         surrogate_seed=values[("surrogate", "seed")],

@@ -1,9 +1,13 @@
 """The FEM of one plate geometry as a fast function of the calibration parameters.
 
 A design of FEM evaluations (Latin hypercube over the parameters' box) gives a response
-surface of log f_r and of log w (the best mode's frequency and mean probe deflection).  Its
-error, used as an extra variance in the likelihood, combines the leave-one-out residual of
-the fit and the FEM's own discretisation-error estimate.
+surface of log f_r and of log w (the best mode's frequency and mean probe deflection), of
+log g (the quasi-static deflection per volt at the centre, |w(0, 0)| / (V Q) at resonance,
+what a resonance sweep measures) and, when a scan is to be compared, one surface per scan
+point of the FEM's mode pattern there (:func:`~workflow.calibration.measurements.real_pattern`
+of the response at resonance, signs aligned to the design's centre point).  Their errors,
+used as extra variances in the likelihood, are the leave-one-out residuals of the fits (and,
+for f_r, the FEM's own discretisation-error estimate).
 """
 
 from dataclasses import dataclass
@@ -11,12 +15,51 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from workflow.calibration.measurements import real_pattern
 from workflow.calibration.parameters import deviated_plate
 from workflow.calibration.surrogate import ResponseSurface, fit_response_surface, latin_hypercube
 from workflow.models.plate import Plate
 
 Evaluate = Callable[[Sequence[Plate]], list]
 """Plates -> FemResults (the caller binds Q, voltage, accuracy, cache)."""
+EvaluateSurfaces = Callable[[Sequence[Plate], list], list]
+"""Plates and their FemResults -> their :class:`~workflow.models.fem.surface.SurfaceModes` (the caller binds the rest)."""
+CENTRE_PROBE = 0
+"""Index of the probe at the plate's centre (x = 0, y = 0) among the FEM's 44 [-]."""
+
+
+@dataclass(frozen=True)
+class ShapeSurrogate:
+    """The FEM's mode pattern at a scan's points over the calibration parameters.
+
+    Attributes
+    ----------
+    x, y : tuple of float
+        The points [m].
+    surfaces : tuple of ResponseSurface
+        One per point: the pattern value there [-].
+    """
+
+    x: tuple
+    y: tuple
+    surfaces: tuple
+
+    def __call__(self, theta) -> np.ndarray:
+        """Pattern at parameter values ``theta`` (..., n), shape (..., n_points) [-]."""
+        return np.stack([surface(theta) for surface in self.surfaces], axis=-1)
+
+    @property
+    def errors(self) -> np.ndarray:
+        """Leave-one-out error of each point's surface [-]."""
+        return np.array([surface.loo_rms for surface in self.surfaces])
+
+    def to_dict(self) -> dict:
+        return {"x": list(self.x), "y": list(self.y), "surfaces": [s.to_dict() for s in self.surfaces]}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "ShapeSurrogate":
+        return cls(tuple(float(v) for v in data["x"]), tuple(float(v) for v in data["y"]),
+                   tuple(ResponseSurface.from_dict(s) for s in data["surfaces"]))
 
 
 @dataclass(frozen=True)
@@ -34,6 +77,10 @@ class PlateSurrogate:
         (0 when the evaluations carry none).
     evaluations : int
         FEM evaluations of the design [-].
+    log_point_deflection : ResponseSurface or None
+        ln(g / (m/V)), g the centre's quasi-static deflection per volt (None in older files).
+    shape : ShapeSurrogate or None
+        The mode pattern at a scan's points (built only for a plate with a scan).
     """
 
     names: tuple
@@ -41,6 +88,8 @@ class PlateSurrogate:
     log_deflection: ResponseSurface
     fem_error: float
     evaluations: int
+    log_point_deflection: ResponseSurface | None = None
+    shape: ShapeSurrogate | None = None
 
     @property
     def frequency_sigma(self) -> float:
@@ -62,30 +111,56 @@ class PlateSurrogate:
             "log_deflection": self.log_deflection.to_dict(),
             "fem_error": self.fem_error,
             "evaluations": self.evaluations,
+            "log_point_deflection": None if self.log_point_deflection is None else self.log_point_deflection.to_dict(),
+            "shape": None if self.shape is None else self.shape.to_dict(),
         }
 
     @classmethod
     def from_dict(cls, data: dict) -> "PlateSurrogate":
+        point, shape = data.get("log_point_deflection"), data.get("shape")
         return cls(
             names=tuple(data["names"]),
             log_frequency=ResponseSurface.from_dict(data["log_frequency"]),
             log_deflection=ResponseSurface.from_dict(data["log_deflection"]),
             fem_error=float(data["fem_error"]),
             evaluations=int(data["evaluations"]),
+            log_point_deflection=None if point is None else ResponseSurface.from_dict(point),
+            shape=None if shape is None else ShapeSurrogate.from_dict(shape),
         )
 
 
+def point_deflection_per_volt(result) -> float:
+    """g = |w(0, 0)| / (V Q) of a FemResult driven at its best mode's frequency [m/V]."""
+    return float(abs(result.probe_model.response(result.frequency, result.q)[CENTRE_PROBE]) / (result.voltage * result.q))
+
+
+def fem_pattern(result, surface, x, y) -> np.ndarray:
+    """:func:`real_pattern` of the FEM's response at its resonance at points (``x``, ``y``) [m] [-]."""
+    return real_pattern(surface.deflection(np.asarray(x), np.asarray(y), result.frequency, result.q))
+
+
 def design_results(plate: Plate, names: Sequence[str], points: np.ndarray, evaluate: Evaluate) -> tuple:
-    """FEM of the nominal ``plate`` deviated by each row of ``points`` [SI]: (log f, log w, relative f errors)."""
+    """FEM of the nominal ``plate`` deviated by each row of ``points`` [SI]: (log f, log w, log g, relative f errors,
+    the FemResults)."""
     results = evaluate([deviated_plate(plate, names, theta) for theta in points])
     log_f = np.log([r.frequency for r in results])
     log_w = np.log([r.deflection for r in results])
+    log_g = np.log([point_deflection_per_volt(r) for r in results])
     errors = np.array([0.0 if r.error is None else r.error.frequency for r in results])
-    return log_f, log_w, errors
+    return log_f, log_w, log_g, errors, results
+
+
+def design_patterns(plate: Plate, names: Sequence[str], points: np.ndarray, results: list, evaluate_surfaces: EvaluateSurfaces,
+                    scan_points: tuple) -> np.ndarray:
+    """(n_design, n_scan) FEM patterns at ``scan_points`` (x, y) [m], each signed to agree with the first (the box centre)."""
+    plates = [deviated_plate(plate, names, theta) for theta in points]
+    patterns = np.array([fem_pattern(r, s, *scan_points) for r, s in zip(results, evaluate_surfaces(plates, results))])
+    return patterns * np.where(patterns @ patterns[0] < 0, -1.0, 1.0)[:, None]
 
 
 def build_plate_surrogate(
-    plate: Plate, names: Sequence[str], bounds: np.ndarray, evaluate: Evaluate, n_points: int, degree: int, seed: int
+    plate: Plate, names: Sequence[str], bounds: np.ndarray, evaluate: Evaluate, n_points: int, degree: int, seed: int,
+    evaluate_surfaces: EvaluateSurfaces | None = None, scan_points: tuple | None = None,
 ) -> PlateSurrogate:
     """Response surfaces of the nominal ``plate`` over ``bounds`` from ``n_points`` FEM evaluations.
 
@@ -101,13 +176,23 @@ def build_plate_surrogate(
         Plates -> FemResults.
     n_points, degree, seed : int
         Design size, polynomial degree (1 or 2), Latin hypercube seed.
+    evaluate_surfaces : callable, optional
+        Plates and their FemResults -> SurfaceModes; with ``scan_points`` ((x, y) arrays [m]) a
+        :class:`ShapeSurrogate` is built too.
     """
     points = latin_hypercube(n_points, bounds, seed)
-    log_f, log_w, errors = design_results(plate, names, points, evaluate)
+    log_f, log_w, log_g, errors, results = design_results(plate, names, points, evaluate)
+    shape = None
+    if scan_points is not None:
+        patterns = design_patterns(plate, names, points, results, evaluate_surfaces, scan_points)
+        shape = ShapeSurrogate(tuple(float(v) for v in scan_points[0]), tuple(float(v) for v in scan_points[1]),
+                               tuple(fit_response_surface(points, column, bounds, degree) for column in patterns.T))
     return PlateSurrogate(
         names=tuple(names),
         log_frequency=fit_response_surface(points, log_f, bounds, degree),
         log_deflection=fit_response_surface(points, log_w, bounds, degree),
         fem_error=float(np.sqrt(np.mean(errors**2))),
         evaluations=len(points),
+        log_point_deflection=fit_response_surface(points, log_g, bounds, degree),
+        shape=shape,
     )

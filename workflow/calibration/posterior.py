@@ -1,9 +1,15 @@
-"""Posterior of the calibration parameters given measured resonance frequencies (emcee).
+"""Posterior of the calibration parameters given what the built plates' logs measured (emcee).
 
-Likelihood: each plate j contributes ln f_meas,j ~ N(ln S_j(theta), sigma_j^2) with
-sigma_j^2 = measurement^2 + surrogate leave-one-out^2 + FEM discretisation^2 (all relative),
-S_j the plate's surrogate (:mod:`workflow.calibration.plate_surrogate`).  Priors from
-:class:`~workflow.calibration.parameters.CalibrationSettings`.  Samples are SI values.
+Likelihood (docs/calibration.md), each term only for the plates whose logs have it:
+
+* resonance: ln f_meas,j ~ N(ln S_j(theta), sigma_j^2) with sigma_j^2 = measurement^2 +
+  surrogate leave-one-out^2 + FEM discretisation^2 (all relative), S_j the plate's surrogate
+  (:mod:`workflow.calibration.plate_surrogate`);
+* deflection per volt per Q: ln g_meas,j ~ N(ln G_j(theta), deflection^2 + leave-one-out^2);
+* scan pattern: each point p, m_p ~ N(s P_j,p(theta), noise^2 + leave-one-out_p^2), s = +-1 the
+  sign that aligns the patterns (:func:`~workflow.calibration.measurements.aligned_misfit`).
+
+Priors from :class:`~workflow.calibration.parameters.CalibrationSettings`.  Samples are SI values.
 """
 
 import time
@@ -13,6 +19,7 @@ from typing import Sequence
 import emcee
 import numpy as np
 
+from workflow.calibration.measurements import aligned_misfit
 from workflow.calibration.parameters import CalibrationSettings
 from workflow.calibration.plate_surrogate import PlateSurrogate
 
@@ -20,6 +27,12 @@ CHAIN_TAUS = 50
 """A chain counts as converged when it is at least this many autocorrelation times long [-]."""
 CONSTRAINED_RATIO = 0.5
 """A direction is constrained when its posterior standard deviation is below this share of the prior's [-]."""
+BOUND_ZONE = 0.1
+"""Share of a prior's range next to each bound in which :func:`prior_bounds` compares posterior and prior mass [-]."""
+BOUND_EXCESS = 2.0
+"""A posterior sits at a bound when it puts at least this many times the prior's mass in the bound's zone [-]..."""
+BOUND_MIN_SHARE = 0.1
+"""... and at least this share of its samples [-] (a normal prior's thin tail next to its bound is not a pile-up)."""
 
 
 @dataclass(frozen=True)
@@ -34,18 +47,42 @@ class CalibrationData:
         ln of the measured frequencies [-] (Hz inside the log).
     sigma : numpy.ndarray
         Relative standard deviation of each plate's residual [-].
+    deflections : tuple
+        Per plate, None or (ln of the measured deflection per volt [-] (m/V inside the log), its relative sd [-]).
+    patterns : tuple
+        Per plate, None or (measured pattern (n_points,) [-], sd of each point (n_points,) [-]).
     """
 
     settings: CalibrationSettings
     surrogates: tuple
     log_measured: np.ndarray
     sigma: np.ndarray
+    deflections: tuple = ()
+    patterns: tuple = ()
 
 
-def calibration_data(settings: CalibrationSettings, surrogates: Sequence[PlateSurrogate], measured: Sequence[float]) -> CalibrationData:
-    """Bundle the likelihood's inputs; ``measured`` frequencies [Hz], one per surrogate."""
+def calibration_data(settings: CalibrationSettings, surrogates: Sequence[PlateSurrogate], measured: Sequence[float],
+                     deflections: Sequence = (), scans: Sequence = ()) -> CalibrationData:
+    """Bundle the likelihood's inputs, one entry per surrogate.
+
+    Parameters
+    ----------
+    measured : sequence of float
+        Resonance frequencies [Hz].
+    deflections : sequence of float or None
+        Deflection per volt per Q [m/V], None where a plate's logs have none (empty: none at all).
+    scans : sequence of ScanShape or None
+        Scanned patterns, None where a plate has no scan; its surrogate then needs a ``shape``.
+    """
     sigma = np.array([np.hypot(settings.measurement_sigma, s.frequency_sigma) for s in surrogates])
-    return CalibrationData(settings, tuple(surrogates), np.log(np.asarray(measured, dtype=float)), sigma)
+    deflection_terms = tuple(
+        None if g is None else (float(np.log(g)), float(np.hypot(settings.deflection_sigma, s.log_point_deflection.loo_rms)))
+        for g, s in zip(deflections, surrogates)
+    )
+    pattern_terms = tuple(None if scan is None else (np.asarray(scan.pattern), np.hypot(scan.noise, s.shape.errors))
+                          for scan, s in zip(scans, surrogates))
+    return CalibrationData(settings, tuple(surrogates), np.log(np.asarray(measured, dtype=float)), sigma,
+                           deflection_terms, pattern_terms)
 
 
 def log_probability(theta: np.ndarray, data: CalibrationData) -> np.ndarray:
@@ -55,6 +92,13 @@ def log_probability(theta: np.ndarray, data: CalibrationData) -> np.ndarray:
     clipped = np.clip(theta, data.settings.bounds[:, 0], data.settings.bounds[:, 1])
     predicted = np.stack([s.log_frequency(clipped) for s in data.surrogates], axis=-1)
     likelihood = -0.5 * np.sum(((data.log_measured - predicted) / data.sigma) ** 2, axis=-1)
+    for surrogate, term in zip(data.surrogates, data.deflections):
+        if term is not None:
+            likelihood = likelihood - 0.5 * ((term[0] - surrogate.log_point_deflection(clipped)) / term[1]) ** 2
+    for surrogate, term in zip(data.surrogates, data.patterns):
+        if term is not None:
+            misfit = aligned_misfit(term[0], surrogate.shape(clipped)) / term[1]
+            likelihood = likelihood - 0.5 * np.sum(misfit**2, axis=-1)
     return np.where(inside, prior + likelihood, -np.inf)
 
 
@@ -151,6 +195,25 @@ def parameter_summary(settings: CalibrationSettings, samples: np.ndarray) -> dic
         p05, p50, p95 = np.percentile(samples[:, k], [5, 50, 95]) / parameter.display_scale
         summary[parameter.name] = {"median": float(p50), "p05": float(p05), "p95": float(p95), "unit": parameter.unit}
     return summary
+
+
+def prior_bounds(settings: CalibrationSettings, samples: np.ndarray, seed: int = 0) -> dict:
+    """Parameters whose posterior sits at a prior bound: name -> "at lower prior bound" or "at upper prior bound".
+
+    A posterior sits at a bound when its mass in the outer :data:`BOUND_ZONE` of the prior's range next to
+    that bound is at least :data:`BOUND_EXCESS` times the prior's own mass there and at least
+    :data:`BOUND_MIN_SHARE` (the data push the parameter against the bound; the bound, not the data,
+    then limits it).
+    """
+    rng = np.random.default_rng(seed)
+    flagged = {}
+    for k, parameter in enumerate(settings.parameters):
+        prior = parameter.draw(20_000, rng)
+        zone = BOUND_ZONE * (parameter.high - parameter.low)
+        for side, near in (("lower", lambda v: v <= parameter.low + zone), ("upper", lambda v: v >= parameter.high - zone)):
+            if np.mean(near(samples[:, k])) >= max(BOUND_EXCESS * np.mean(near(prior)), BOUND_MIN_SHARE):
+                flagged[parameter.name] = f"at {side} prior bound"
+    return flagged
 
 
 def identifiability(settings: CalibrationSettings, samples: np.ndarray) -> dict:

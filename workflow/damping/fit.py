@@ -296,7 +296,8 @@ def initial_guess(data: FitData, sweeps: SweepEstimates) -> Tuple[np.ndarray, np
     start["alpha"], scale["alpha"] = slope, max(0.1 * slope, 1e-4 * alpha_upper)
     v_max = float(np.max(data.velocity))
     start["v_t"], scale["v_t"] = 0.1 * v_max, 0.05 * v_max
-    knots = np.linspace(0.0, v_max, len(MonotoneSpline.INCREMENTS) + 1)
+    fixed = dict(layout.fixed)
+    knots = MonotoneSpline.knots(fixed.get("v_top", v_max), fixed.get("v_first"))
     for name, rise in zip(MonotoneSpline.INCREMENTS, slope * np.diff(knots**2)):
         start[name], scale[name] = max(rise, 1e-6), max(0.1 * rise, 1e-5)
     peak_q = np.where(np.isfinite(sweeps.quality_factor), sweeps.quality_factor, np.median(q))

@@ -125,25 +125,31 @@ class ThresholdLoss:
 
 @dataclass(frozen=True)
 class MonotoneSpline:
-    """1/Q(v) a monotone non-decreasing linear spline in |v|: the flexible law.
+    """1/Q(v) monotone non-decreasing, piecewise linear in v^2: the flexible law.
 
-    Knots u_j = j v_top / K, j = 0 .. K (K = 6 segments); 1/Q(0) = 1/Q0 and 1/Q rises by
-    d_j >= 0 over segment j, linearly, so
+    Knots u_0 = 0 < u_1 = v_first < u_2 < .. < u_K = v_top, equally spaced from v_first to
+    v_top (K = 8 segments).  1/Q(0) = 1/Q0 and 1/Q rises by d_j >= 0 over segment j,
+    linearly in v^2, so
 
-    1/Q(v) = 1/Q0 + sum_j d_j clip(|v| K / v_top - (j - 1), 0, 1),
+    1/Q(v) = 1/Q0 + sum_j d_j clip((v^2 - u_(j-1)^2) / (u_j^2 - u_(j-1)^2), 0, 1),
 
-    with the last segment's slope continued above v_top.  Any non-increasing Q(v) is
-    followed up to the knot spacing; the fit puts v_top at the largest measured velocity
-    and a random-walk prior on the increments (:mod:`workflow.damping.likelihood`).
+    with the last segment's slope (in v^2) continued above v_top.  Below v_first the law is
+    1/Q0 + d1 (v / v_first)^2, the low-velocity form of every smooth even loss, so the
+    velocities the sweeps hardly probe follow the curvature measured just above them;
+    the quadratic law is followed exactly, any other non-increasing Q(v) up to the knot
+    spacing.  The fit places the knots on the measured velocities and puts a random-walk
+    prior on the increments (:mod:`workflow.damping.likelihood`).
 
     Attributes
     ----------
     q0 : float or array
         Quality factor at v = 0 [-].
-    d1 .. d6 : float or array
+    d1 .. d8 : float or array
         Rise of 1/Q over each segment [-], >= 0.
     v_top : float or array
-        Velocity of the last knot [m/s], > 0 (fixed by the data, not fitted).
+        Velocity of the last knot [m/s], > v_first (fixed by the data, not fitted).
+    v_first : float or array
+        Velocity of the first knot [m/s], > 0 (fixed by the data, not fitted); default v_top / 3.
     """
 
     q0: float
@@ -153,9 +159,20 @@ class MonotoneSpline:
     d4: float
     d5: float
     d6: float
+    d7: float
+    d8: float
     v_top: float
+    v_first: float = None
     name: ClassVar[str] = "flexible"
-    INCREMENTS: ClassVar[tuple] = ("d1", "d2", "d3", "d4", "d5", "d6")
+    INCREMENTS: ClassVar[tuple] = ("d1", "d2", "d3", "d4", "d5", "d6", "d7", "d8")
+
+    @classmethod
+    def knots(cls, v_top, v_first=None) -> np.ndarray:
+        """The knots u_0 = 0, u_1 = ``v_first`` (default ``v_top`` / 3) .. u_K = ``v_top`` [m/s], along the first axis."""
+        v_top = np.asarray(v_top, dtype=float)
+        v_first = v_top / 3 if v_first is None else np.asarray(v_first, dtype=float)
+        step = np.arange(len(cls.INCREMENTS)).reshape((-1,) + (1,) * v_top.ndim) / (len(cls.INCREMENTS) - 1)
+        return np.concatenate([np.zeros((1,) + v_top.shape), v_first + step * (v_top - v_first)])
 
     def quality_factor(self, velocity):
         """Q at the peak velocity amplitude ``velocity`` [m/s] -> [-]."""
@@ -163,11 +180,13 @@ class MonotoneSpline:
 
     def loss(self, velocity):
         """Loss factor 1/Q at ``velocity`` [m/s] -> [-]."""
-        position = np.abs(velocity) * len(self.INCREMENTS) / np.asarray(self.v_top)
-        rises = [np.asarray(getattr(self, name)) for name in self.INCREMENTS]
-        loss = 1.0 / np.asarray(self.q0) + rises[0] * position
-        for j in range(1, len(rises)):  # the slope changes by d_j - d_(j-1) at knot j
-            loss = loss + (rises[j] - rises[j - 1]) * np.maximum(position - j, 0.0)
+        squared = np.square(self.knots(self.v_top, self.v_first))
+        v2 = np.square(velocity)
+        loss = 1.0 / np.asarray(self.q0)
+        for j, name in enumerate(self.INCREMENTS):
+            share = (v2 - squared[j]) / (squared[j + 1] - squared[j])
+            last = j == len(self.INCREMENTS) - 1
+            loss = loss + np.asarray(getattr(self, name)) * np.clip(share, 0.0, np.inf if last else 1.0)
         return loss
 
 

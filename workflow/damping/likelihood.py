@@ -18,8 +18,8 @@ in the antinode's peak velocity.  A ring-down sample at time t after burst j rea
 Parameters, in the order of :attr:`ParameterLayout.names`:
 
 - the law's parameters: ``ln_q0`` = ln Q0, ``alpha`` (>= 0) for the velocity-dependent laws,
-  ``v_t`` [m/s] for the threshold law, ``d1`` .. ``d6`` (>= 0) for the flexible law (whose
-  last knot ``v_top`` is fixed at the largest antinode velocity, :attr:`ParameterLayout.fixed`);
+  ``v_t`` [m/s] for the threshold law, ``d1`` .. ``d8`` (>= 0) for the flexible law (whose
+  knots are fixed by the data, :func:`spline_knots`, :attr:`ParameterLayout.fixed`);
 - with sweeps: ``ln_gain`` (ln g, g the quasi-static deflection per volt [m/V]) and
   ``f_r_<k>``, one resonance frequency per sweep [Hz] (drift between sweeps is free);
 - ``kappa`` (softening [s^2/m^2], >= 0) and ``drift_rate`` (beta [Hz/s]) when fitted;
@@ -29,9 +29,9 @@ Parameters, in the order of :attr:`ParameterLayout.names`:
   (sigma_rel v_model)^2 + sigma_abs^2 (sigma_abs in m/s).
 
 Priors are flat on these coordinates within :attr:`FitData.lower` .. :attr:`FitData.upper`;
-the flexible law's increments have in addition a Gaussian random-walk prior,
-d_{j+1} - d_j ~ N(0, :data:`RANDOM_WALK_SCALE`^2) (:func:`log_prior`), which keeps 1/Q(v)
-smooth where the data do not say otherwise.
+the flexible law's slopes of 1/Q in (v / v_top)^2, b_j = d_j v_top^2 / (u_j^2 - u_(j-1)^2), have
+in addition a Gaussian random-walk prior, b_{j+1} - b_j ~ N(0, :data:`RANDOM_WALK_SCALE`^2)
+(:func:`log_prior`), which keeps 1/Q(v) close to the quadratic law where the data do not say otherwise.
 Every function here is module-level and takes arrays, so emcee can pickle it.
 """
 
@@ -80,10 +80,13 @@ SIGMA_ABS_RANGE = (1e-7, 1.0)
 THRESHOLD_RANGE = (0.02, 0.9)
 """Prior range of the threshold law's v_t, relative to the largest measured velocity [-]."""
 MAX_INCREMENT = 0.2
-"""Prior bound of each increment of the flexible law's 1/Q [-] (six of them: Q down to 1 at the largest velocity)."""
+"""Prior bound of each increment of the flexible law's 1/Q [-]."""
 RANDOM_WALK_SCALE = 0.01
-"""Standard deviation of the step between consecutive increments of the flexible law's 1/Q [-]:
-weak for plates with Q above ~20 (1/Q changing by 0.01 or less between knots)."""
+"""Standard deviation of the step between consecutive slopes of the flexible law's 1/Q in (v / v_top)^2 [-]:
+a change of slope that would move 1/Q(v_top) by 0.01, above the 0.005-0.008 a threshold's onset makes
+between two knots (the simulated threshold campaign: Q0 140, alpha 0.45 s^2/m^2, v_t 0.1 m/s)."""
+FIRST_KNOT_RANGE = (0.1, 0.6)
+"""Bounds of the flexible law's first knot, relative to its last one (the largest antinode velocity) [-]."""
 
 
 SOFTENING_MAX_SHIFT = 0.2
@@ -101,7 +104,7 @@ class ParameterLayout:
     forward: ForwardModel = ForwardModel()
     n_bursts: int = 0
     fixed: Tuple[Tuple[str, float], ...] = ()
-    """Values of the law parameters that are not sampled (name, value): the flexible law's ``v_top`` [m/s]."""
+    """Values of the law parameters that are not sampled (name, value): the flexible law's knots ``v_top``, ``v_first`` [m/s]."""
 
     @property
     def law_parameters(self) -> Tuple[str, ...]:
@@ -246,7 +249,7 @@ def fit_data(log: CampaignLog, law_name: str, forward: ForwardModel = ForwardMod
     factor = log.measurement_factor()
     antinode = np.concatenate([log.velocity / factor] + ([decays.velocity / decays.mode_factor] if decays else []))
     v_max = float(np.max(antinode))
-    layout = replace(layout, fixed=(("v_top", v_max),)) if law_name == MonotoneSpline.name else layout
+    layout = replace(layout, fixed=spline_knots(log, v_max)) if law_name == MonotoneSpline.name else layout
     exponent = {"quadratic": 2, "linear": 1}
     bounds = {
         "ln_q0": np.log(Q0_RANGE),
@@ -293,6 +296,19 @@ def fit_data(log: CampaignLog, law_name: str, forward: ForwardModel = ForwardMod
     velocity = np.concatenate([log.velocity] + ([decays.velocity] if decays else []))
     return FitData(log.frequency, log.drive_voltage, velocity, log.sweep, layout, lower, upper, time_offset,
                    log.mode_factor, decay_data)
+
+
+def spline_knots(log: CampaignLog, v_top: float) -> Tuple[Tuple[str, float], ...]:
+    """The flexible law's fixed knots (("v_top", v_top), ("v_first", u_1)) [m/s] for a campaign.
+
+    u_1 is the smallest sweep peak (antinode velocity): below it no sweep reaches its resonance,
+    so the law there is the parabola the data just above it support; kept within
+    :data:`FIRST_KNOT_RANGE` of ``v_top``; without sweeps, v_top / 3.
+    """
+    antinode = log.velocity / log.measurement_factor()
+    peaks = [np.max(antinode[log.sweep == k]) for k in range(log.n_sweeps)]
+    first = min(peaks) if peaks else v_top / 3
+    return ("v_top", v_top), ("v_first", float(np.clip(first, *(np.asarray(FIRST_KNOT_RANGE) * v_top))))
 
 
 def sweep_order(sweep: np.ndarray) -> np.ndarray:
@@ -443,12 +459,15 @@ def in_prior(theta, data: FitData) -> np.ndarray:
 
 
 def log_prior(theta, layout: ParameterLayout) -> np.ndarray:
-    """ln of the prior's non-flat part, shape (W,): the flexible law's random walk on its increments."""
+    """ln of the prior's non-flat part, shape (W,): the flexible law's random walk on its slopes."""
     theta = np.atleast_2d(theta)
     if layout.law_name != MonotoneSpline.name:
         return np.zeros(len(theta))
     increments = theta[:, [layout.names.index(name) for name in MonotoneSpline.INCREMENTS]]
-    return -0.5 * np.sum(np.square(np.diff(increments, axis=1) / RANDOM_WALK_SCALE), axis=1)
+    fixed = dict(layout.fixed)
+    squared = np.square(MonotoneSpline.knots(fixed["v_top"], fixed["v_first"]))
+    slopes = increments / np.diff(squared) * fixed["v_top"] ** 2  # of 1/Q in (v / v_top)^2
+    return -0.5 * np.sum(np.square(np.diff(slopes, axis=1) / RANDOM_WALK_SCALE), axis=1)
 
 
 def log_probability(theta, data: FitData) -> np.ndarray:

@@ -69,7 +69,7 @@ class DampingPosterior:
         return POSTERIOR_LAWS[self.law_name](**self.parameters)
 
 
-NEUTRAL_PARAMETERS = {"q0": 1e3, "alpha": 0.0, "v_t": 1.0, "v_top": 1.0}
+NEUTRAL_PARAMETERS = {"q0": 1e3, "alpha": 0.0, "v_t": 1.0, "v_top": 1.0, "v_first": 0.5}
 """Placeholder values (a constant Q of 1000; increments 0) for the columns of a law a stacked posterior does not mix."""
 
 

@@ -8,7 +8,8 @@ For each stock resonator thickness h_i (docs/calibration.md, "Robust design"):
    beam model's estimate;
 2. Monte Carlo draws: posterior samples plus manufacturing scatter (normal, standard deviations
    :class:`Tolerances`) plus the surrogate's and the FEM's errors; lambda is solved so that
-   the (1 - reliability) quantile of f_r equals f_min;
+   the quantile of f_r at level (1 - reliability) minus :data:`SOLVE_MARGIN_SE` Monte Carlo
+   standard errors equals f_min (conservative by the solve's own sampling error);
 3. the achieved probability from fresh draws (its Monte Carlo standard error given), and one FEM
    evaluation at the posterior median for the mode separation and the homogeneity of |w|.
 
@@ -33,8 +34,11 @@ OFFSET_NAMES = ("glue_um", "resonator_offset_um")
 """Calibration parameters that manufacturing scatter adds to (always among the robust inputs)."""
 LAMBDA_BOX = (0.93, 1.06)
 """The surrogate's lambda range around the beam model's estimate, as factors [-]."""
-SOLVE_DRAWS = 4000
-"""Monte Carlo draws of the lambda solve [-]."""
+SOLVE_DRAWS = 20000
+"""Monte Carlo draws of the lambda solve (common to every trial lambda) [-]."""
+SOLVE_MARGIN_SE = 2.0
+"""The solve targets the quantile this many binomial standard errors sqrt(a (1 - a) / n) below the requested
+level a = 1 - reliability, so that fresh draws find P >= reliability despite the solve's own sampling error [-]."""
 CHECK_DRAWS = 20000
 """Fresh draws that estimate the achieved probability [-]."""
 
@@ -243,16 +247,24 @@ def robust_surrogate(calibration: Calibration, plate: Plate, settings: RobustSet
     return RobustSurrogate(bounds, log_f, log_w, float(np.hypot(log_f.loo_rms, np.sqrt(np.mean(errors**2)))), len(points))
 
 
+def conservative_level(reliability: float, draws: int) -> float:
+    """Quantile level [-] the lambda solve targets: 1 - reliability less :data:`SOLVE_MARGIN_SE` binomial standard
+    errors of a quantile estimated from ``draws`` samples (never below half the requested level)."""
+    level = 1 - reliability
+    return max(level - SOLVE_MARGIN_SE * np.sqrt(level * (1 - level) / draws), level / 2)
+
+
 def robust_candidate(calibration: Calibration, plate: Plate, settings: RobustSettings, evaluate: Evaluate,
                      q: float) -> RobustCandidate:
     """The robust design of one nominal plate (its h_i and h_p fixed, lambda solved); see the module."""
     surrogate = robust_surrogate(calibration, plate, settings, evaluate)
     solve = scattered_draws(calibration, plate, settings.tolerances, SOLVE_DRAWS, settings.seed)
     target = np.log(settings.min_frequency)
+    level = conservative_level(settings.reliability, SOLVE_DRAWS)
 
     def shortfall(log_lambda):
         log_f, _ = surrogate.sample(log_lambda, solve, settings.seed)
-        return float(np.percentile(log_f, 100 * (1 - settings.reliability))) - target
+        return float(np.percentile(log_f, 100 * level)) - target
 
     low, high = surrogate.bounds[0]
     too_low, too_high = shortfall(low) < 0, shortfall(high) > 0

@@ -31,6 +31,19 @@ from workflow.models.materials import PLATE_Q
 from workflow.models.plate import Plate
 from workflow.units import MM
 
+def is_scan_log(path) -> bool:
+    """Whether the log's column header names the scan's ``x_mm`` and ``y_mm`` columns (docs/log-format.md)."""
+    try:
+        with open(path, encoding="utf-8-sig", newline="") as stream:
+            for line in stream:
+                if line.strip() and not line.lstrip().startswith("#"):
+                    fields = {field.strip() for field in next(csv.reader([line]))}
+                    return {logformat.X_POSITION, logformat.Y_POSITION} <= fields
+    except (OSError, UnicodeDecodeError) as error:
+        raise InputFileError(f"{path}: cannot read ({getattr(error, 'strerror', None) or error})") from None
+    return False
+
+
 def read_built_plate(path) -> BuiltPlate:
     """The nominal geometry a built-plate log names (``# lambda_mm``, ``# h_i_mm``, ``# h_p_mm``, ``# b_mm``, ...)."""
     return BuiltPlate.from_metadata(read_metadata(Path(path)), str(path))

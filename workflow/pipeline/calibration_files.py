@@ -4,16 +4,52 @@ that ``calibrate``, ``evaluate``, ``optimize``, ``maps`` and ``run`` print."""
 import json
 from pathlib import Path
 
-from workflow.calibration.calibration import Calibration, predict
+import numpy as np
+
+from workflow.calibration.calibration import Calibration, MeasuredPlate, measured_plate, predict
+from workflow.calibration.logs import read_built_plate
+from workflow.calibration.measurements import scan_shape
+from workflow.calibration.parameters import CalibrationSettings
 from workflow.errors import InputFileError
+from workflow.pipeline.builtplate import is_scan_log, read_scan
 from workflow.optimise.robust import RobustDesign
 from workflow.pipeline.records import geometry_record
-from workflow.units import KHZ, UM
+from workflow.units import KHZ, NM, UM
 
 CALIBRATION_FILE = "calibration.json"
 PAIRS_FIGURE = "calibration_pairs.png"
 CALIBRATION_OUTPUTS = (CALIBRATION_FILE, PAIRS_FIGURE)
 """Files ``tactile calibrate`` writes into its folder (:mod:`workflow.pipeline.outputs`)."""
+
+
+def measured_plates(paths, settings: CalibrationSettings, use_deflection: bool = True) -> list[MeasuredPlate]:
+    """What the logs measured, one entry per resonance log; a scan log joins the resonance log naming the same plate.
+
+    Raises
+    ------
+    InputFileError
+        A scan log whose plate no resonance log names, or two scans of one plate, naming the file.
+    """
+    scans = [read_scan(path) for path in paths if is_scan_log(path)]
+    logs = [read_built_plate(path) for path in paths if not is_scan_log(path)]
+    if not logs:
+        raise InputFileError(f"{paths[0]}: only scan logs given; the calibration needs a resonance log of each plate")
+    matched = {}
+    for scan in scans:
+        nominal = scan.plate.plate()
+        same = [k for k, log in enumerate(logs) if _same_geometry(log.plate, nominal)]
+        if not same:
+            raise InputFileError(f"{scan.source}: no resonance log given names this scan's plate "
+                                 f"(lambda {nominal.wavelength * 1e3:g} mm, h_i {nominal.resonator_thickness * 1e3:g} mm)")
+        if same[0] in matched:
+            raise InputFileError(f"{scan.source}: a second scan of the plate of {logs[same[0]].source}; give one")
+        matched[same[0]] = scan_shape(scan.x, scan.y, scan.phasors, settings.shape_sigma, scan.source)
+    return [measured_plate(log, matched.get(k), use_deflection) for k, log in enumerate(logs)]
+
+
+def _same_geometry(a, b) -> bool:
+    names = ("wavelength", "resonator_thickness", "ceramic_thickness", "width")
+    return all(abs(float(getattr(a, n)) - float(getattr(b, n))) <= 1e-9 for n in names)
 
 
 def write_calibration(calibration: Calibration, out: Path, figures: bool = True, protect=()) -> dict:
@@ -72,6 +108,8 @@ def calibration_summary(calibration: Calibration, nominal_frequencies, files: di
     for plate, surrogate, nominal in zip(calibration.plates, calibration.surrogates, nominal_frequencies):
         predicted = predict(calibration, plate.plate, None, surrogate)["frequency"]
         plates.append({
+            "data_used": plate.data_used,
+            **measured_terms(calibration, plate, surrogate),
             "log": plate.name,
             **geometry_record(plate.plate),
             "measured_f_khz": plate.frequency / KHZ,
@@ -89,10 +127,31 @@ def calibration_summary(calibration: Calibration, nominal_frequencies, files: di
         "figures": files["figures"],
         "diagnostics": calibration.diagnostics.to_dict(),
         "identifiability": calibration.identifiability(),
+        "at_prior_bound": calibration.at_prior_bounds(),
         "fem_evaluations": calibration.evaluations + len(calibration.plates),
+        "fem_surface_evaluations": sum(s.evaluations for s in calibration.surrogates if s.shape is not None),
         "wall_time_s": seconds,
         "fem": calibration.fem,
     }
+
+
+def measured_terms(calibration: Calibration, plate: MeasuredPlate, surrogate) -> dict:
+    """A plate's deflection per volt (measured, posterior p05/p50/p95 [nm/V], surrogate error) and scan (points, noise,
+    MAC of the measured pattern with the posterior-median prediction) keys, for the terms it has."""
+    record = {}
+    if plate.deflection_per_volt is not None:
+        g = np.exp(np.percentile(surrogate.log_point_deflection(calibration.samples), [5, 50, 95])) / NM
+        record.update({"measured_deflection_nm_v": plate.deflection_per_volt / NM, "predicted_deflection_nm_v": g[1],
+                       "predicted_deflection_nm_v_p05": g[0], "predicted_deflection_nm_v_p95": g[2],
+                       "deflection_surrogate_error": surrogate.log_point_deflection.loo_rms})
+    if plate.scan is not None:
+        measured = np.array(plate.scan.pattern)
+        predicted = surrogate.shape(np.median(calibration.samples, axis=0))
+        record["scan"] = {"log": plate.scan.source, "points": len(measured), "noise": plate.scan.noise,
+                          "mirror_scatter": plate.scan.mirror_scatter,
+                          "mac": float((measured @ predicted) ** 2 / (measured @ measured * (predicted @ predicted))),
+                          "surrogate_error_max": float(np.max(surrogate.shape.errors))}
+    return record
 
 
 def calibrated_record(calibration: Calibration, plate, evaluate, source: str) -> dict:

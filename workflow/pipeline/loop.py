@@ -135,18 +135,21 @@ def first_plate_figures(context: RunContext, measured: BuiltMeasurement | None) 
 
 
 def loop_calibration(context: RunContext):
-    """The calibration on plate #1's resonance log (default priors and sampler), and its prediction of plate #1."""
-    from workflow.calibration.calibration import calibrate, measured_plate, predict
-    from workflow.calibration.logs import read_built_plate
+    """The calibration on plate #1's resonance log and scan (default priors and sampler: resonance, deflection per
+    volt and mode shape), and its prediction of plate #1."""
+    from workflow.calibration.calibration import calibrate, predict
     from workflow.calibration.parameters import load_settings
+    from workflow.pipeline.calibration_files import measured_plates
 
     measured = context.results["loop_first_plate"]
     if measured is None:
         return None
     model, fem = calibration_model(context)
-    log = read_built_plate(measured.resonance_log)
-    calibration = calibrate([measured_plate(log)], load_settings(), model.evaluate_plates, fem)
-    prediction = predict(calibration, log.plate, None, calibration.surrogates[0])
+    settings = load_settings()
+    logs = [path for path in (measured.resonance_log, measured.scan_log) if path is not None]
+    (plate,) = measured_plates(logs, settings)
+    calibration = calibrate([plate], settings, model.evaluate_plates, fem, model.surfaces)
+    prediction = predict(calibration, plate.plate, None, calibration.surrogates[0])
     return calibration, tuple(float(f) for f in prediction["frequency"])
 
 

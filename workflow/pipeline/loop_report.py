@@ -48,10 +48,14 @@ def loop_section(context: RunContext, second) -> str:
         "The bench simulator plays each plate as built with the hidden deviations of the [simulator] section "
         "(`built_*` keys: a demonstration, docs/instruments.md); the resonance search and a coarse deflection scan "
         f"run through the real procedures and write their logs into `{LOOP_FOLDER}/`.  The calibration "
-        f"(`{LOOP_FOLDER}/calibration.json`) reads only plate #1's resonance log; the robust re-design keeps plate #1's "
+        f"(`{LOOP_FOLDER}/calibration.json`) reads only plate #1's logs, never the deviations; it uses its "
+        f"{', '.join(calibration.plates[0].data_used)}; the robust re-design keeps plate #1's "
         "h_p and width and picks h_i from the stock list (docs/calibration.md).\n\n"
         + table(("stage", "geometry", "f_r [kHz]", "verdict"), rows)
-        + f"\n\nPosterior (median [90 %]): {parameters}.  {calibration.identifiability()['statement']}.\n\n"
+        + f"\n\nPosterior (median [90 %]): {parameters}.  {calibration.identifiability()['statement']}."
+        + "".join(f"  {name} is {where}: the prior, not the data, limits it."
+                  for name, where in calibration.at_prior_bounds().items())
+        + "\n\n"
         f"The simulator's truth for plate #1 as built: {first.built_frequency / KHZ:.3f} kHz; for the re-designed "
         f"plate: {second.built_frequency / KHZ:.3f} kHz.\n\n"
         + figure(context, "loop_scan.png", f"Plate #1 as built, scanned on a {' × '.join(map(str, context.config['loop']['scan_grid']))} "

@@ -1,10 +1,14 @@
 """Vectorised assembly of stiffness, mass and piezo load on a :class:`BrickMesh`.
 
 Element matrices depend only on the element's box size and material, so they are computed
-once per distinct (size, material) and scattered with one COO assembly.
+once per distinct (size, material).  The plain path scatters them with one COO assembly
+(:func:`scatter_matrices`); the fast path of an evaluation (:func:`assemble_system`) sums them
+into the reduced matrices through a :class:`ReducedPattern`, which depends only on the mesh's
+topology (element counts and type, not the dimensions) and is cached per topology.
 """
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 import scipy.sparse as sp
@@ -42,10 +46,17 @@ def element_dofs(mesh: BrickMesh) -> np.ndarray:
     return (3 * mesh.connectivity[:, :, None] + np.arange(3)).reshape(len(mesh.cells), -1)
 
 
-def element_matrices(mesh: BrickMesh, plate: Plate):
-    """Stiffness and mass of every element, each of shape (n, 3 n_local, 3 n_local) [N/m], [kg]."""
-    sizes = mesh.sizes
-    keys = np.column_stack([sizes, mesh.material])
+def element_types(mesh: BrickMesh, plate: Plate):
+    """The distinct element matrices of a mesh (one per box size and material) and each element's type.
+
+    Returns
+    -------
+    stiffness, mass : (n_types, 3 n_local, 3 n_local) arrays
+        [N/m], [kg].
+    which : (n,) int array
+        Type of each element.
+    """
+    keys = np.column_stack([mesh.sizes, mesh.material])
     unique_keys, which = np.unique(np.round(keys, 15), axis=0, return_inverse=True)
     n_local = 3 * mesh.brick.n_nodes
     stiffness = np.empty((len(unique_keys), n_local, n_local))
@@ -54,7 +65,13 @@ def element_matrices(mesh: BrickMesh, plate: Plate):
         rows = unique_keys[:, 3] == material_id
         stiffness[rows] = mesh.brick.box_stiffness(unique_keys[rows, :3], material.stiffness_matrix())
         mass[rows] = mesh.brick.box_mass(unique_keys[rows, :3], material.density)
-    return stiffness[which.ravel()], mass[which.ravel()]
+    return stiffness, mass, which.ravel()
+
+
+def element_matrices(mesh: BrickMesh, plate: Plate):
+    """Stiffness and mass of every element, each of shape (n, 3 n_local, 3 n_local) [N/m], [kg]."""
+    stiffness, mass, which = element_types(mesh, plate)
+    return stiffness[which], mass[which]
 
 
 def scatter_matrices(mesh: BrickMesh, *locals_) -> tuple:
@@ -85,9 +102,14 @@ def assemble_piezo_load(mesh: BrickMesh, plate: Plate, voltage: float) -> np.nda
     return np.bincount(element_dofs(mesh)[ceramic].ravel(), weights=local.ravel(), minlength=mesh.n_dofs)
 
 
+def free_dofs(mesh: BrickMesh) -> np.ndarray:
+    """The dofs left free by the symmetry constraints, ascending."""
+    return np.setdiff1d(np.arange(mesh.n_dofs), symmetry_dofs(mesh))
+
+
 def reduce_system(mesh: BrickMesh, stiffness, mass, load) -> PlateSystem:
     """Apply the symmetry constraints by removing the constrained dofs."""
-    free = np.setdiff1d(np.arange(mesh.n_dofs), symmetry_dofs(mesh))
+    free = free_dofs(mesh)
     return PlateSystem(
         stiffness=stiffness[free][:, free].tocsc(),
         mass=mass[free][:, free].tocsc(),
@@ -96,7 +118,131 @@ def reduce_system(mesh: BrickMesh, stiffness, mass, load) -> PlateSystem:
     )
 
 
+PATTERN_CACHE_SIZE = 6
+"""Sparsity patterns kept in memory, one per mesh topology (about 140 MB at 73 000 dofs) [-]."""
+
+
+@dataclass(frozen=True, eq=False)
+class ReducedPattern:
+    """Sparsity of the reduced stiffness and mass of a mesh topology, and where element entries are summed.
+
+    The entries couple nodes in 3 x 3 blocks: element node pair (a, b) of every element adds
+    its block to one *slot* (a pair of global nodes, n_slots in all).  The stiffness is the slots'
+    blocks on the free dofs; the mass, component-diagonal (M_e = kron(m_e, I_3)), their diagonals.
+
+    Attributes
+    ----------
+    n_free : int
+        Free dofs [-].
+    indptr, indices : int arrays
+        CSC structure of the stiffness on the free dofs (with rows sorted; by symmetry also its CSR structure).
+    mass_indptr, mass_indices : int arrays
+        The same for the mass (only equal components couple).
+    element_slots : (n_elements, n_local, n_local) int array
+        Slot of each element node pair.
+    stiffness_entries : (nnz,) int array
+        Index of each stiffness entry in the (n_slots, 3, 3) block sums.
+    mass_entries : (nnz_mass,) int array
+        Slot of each mass entry.
+    """
+
+    n_free: int
+    indptr: np.ndarray
+    indices: np.ndarray
+    mass_indptr: np.ndarray
+    mass_indices: np.ndarray
+    element_slots: np.ndarray
+    stiffness_entries: np.ndarray
+    mass_entries: np.ndarray
+
+    @property
+    def n_slots(self) -> int:
+        return int(self.element_slots.max()) + 1
+
+    def stiffness(self, types, which) -> sp.csc_matrix:
+        """Reduced stiffness [N/m] from the distinct element matrices ``types`` (n_types, 3 n_local, 3 n_local) and each element's type ``which``."""
+        n_local = self.element_slots.shape[1]
+        local = np.reshape(types, (len(types), n_local, 3, n_local, 3))
+        slots, n_slots = self.element_slots.ravel(), self.n_slots
+        blocks = np.empty((n_slots, 3, 3))
+        for i in range(3):
+            for j in range(3):
+                blocks[:, i, j] = np.bincount(slots, weights=local[:, :, i, :, j][which].ravel(), minlength=n_slots)
+        return sp.csc_matrix((blocks.ravel()[self.stiffness_entries], self.indices, self.indptr), shape=(self.n_free,) * 2)
+
+    def mass(self, types, which) -> sp.csc_matrix:
+        """Reduced mass [kg] from the distinct component-diagonal element matrices (as :meth:`stiffness`)."""
+        n_local = self.element_slots.shape[1]
+        local = np.reshape(types, (len(types), n_local, 3, n_local, 3))[:, :, 0, :, 0]
+        blocks = np.bincount(self.element_slots.ravel(), weights=local[which].ravel(), minlength=self.n_slots)
+        return sp.csc_matrix((blocks[self.mass_entries], self.mass_indices, self.mass_indptr), shape=(self.n_free,) * 2)
+
+
+def reduced_pattern(mesh: BrickMesh, free: np.ndarray) -> ReducedPattern:
+    """The :class:`ReducedPattern` of a mesh with free dofs ``free`` (cached per topology)."""
+    connectivity = np.ascontiguousarray(mesh.connectivity, dtype=np.int64)
+    free = np.ascontiguousarray(free, dtype=np.int64)
+    return _cached_pattern(connectivity.tobytes(), connectivity.shape[1], mesh.n_nodes, free.tobytes())
+
+
+@lru_cache(maxsize=PATTERN_CACHE_SIZE)
+def _cached_pattern(connectivity: bytes, n_local: int, n_nodes: int, free: bytes) -> ReducedPattern:
+    connectivity = np.frombuffer(connectivity, dtype=np.int64).reshape(-1, n_local)
+    free = np.frombuffer(free, dtype=np.int64)
+    pairs, slots = np.unique(
+        (connectivity[:, :, None] * n_nodes + connectivity[:, None, :]).ravel(), return_inverse=True
+    )
+    rows, cols = np.divmod(pairs, n_nodes)
+    transposed = np.searchsorted(pairs, cols * n_nodes + rows)  # slot (A, B) of slot (B, A)
+    is_free = np.zeros(3 * n_nodes, dtype=bool)
+    is_free[free] = True
+    is_free = is_free.reshape(n_nodes, 3)
+    number = np.full(3 * n_nodes, -1)
+    number[free] = np.arange(len(free))
+    # items: the free dofs of each slot's column node A, slot by slot; the column (B, j) lists the items of row B
+    item_slot, item_component = np.nonzero(is_free[cols])
+    item_row = number.reshape(n_nodes, 3)[cols[item_slot], item_component].astype(np.int32)
+    item_block = (9 * transposed[item_slot] + 3 * item_component).astype(np.int32)
+    item_node = rows[item_slot]
+    row_width = np.bincount(item_node, minlength=n_nodes)
+    item_start = np.concatenate([[0], np.cumsum(row_width)[:-1]])
+    column_node, column_component = np.divmod(free, 3)
+    lengths = row_width[column_node]
+    indptr = np.concatenate([[0], np.cumsum(lengths)])
+    item = np.repeat((item_start[column_node] - indptr[:-1]).astype(np.int32), lengths)
+    item += np.arange(indptr[-1], dtype=np.int32)
+    stiffness_entries = item_block[item] + np.repeat(column_component.astype(np.int32), lengths)
+    diagonal = np.flatnonzero(stiffness_entries % 9 % 4 == 0)  # i == j: 3 i + j in (0, 4, 8)
+    mass_lengths = np.bincount(3 * item_node + item_component, minlength=3 * n_nodes)[free]
+    indices = item_row[item]
+    pattern = ReducedPattern(
+        n_free=len(free),
+        indptr=indptr.astype(np.int32),
+        indices=indices,
+        mass_indptr=np.concatenate([[0], np.cumsum(mass_lengths)]).astype(np.int32),
+        mass_indices=indices[diagonal],
+        element_slots=slots.reshape(connectivity.shape + (n_local,)).astype(np.int32),
+        stiffness_entries=stiffness_entries,
+        mass_entries=stiffness_entries[diagonal] // 9,
+    )
+    for array in vars(pattern).values():  # shared by the matrices it assembles: never to be changed in place
+        if isinstance(array, np.ndarray):
+            array.flags.writeable = False
+    return pattern
+
+
 def assemble_system(mesh: BrickMesh, plate: Plate, voltage: float) -> PlateSystem:
-    """K, M and F of the quarter plate with its symmetry constraints."""
-    stiffness, mass = assemble_matrices(mesh, plate)
-    return reduce_system(mesh, stiffness, mass, assemble_piezo_load(mesh, plate, voltage))
+    """K, M and F of the quarter plate with its symmetry constraints (the fast, pattern-cached path).
+
+    Equal to :func:`reduce_system` of :func:`assemble_matrices` (to rounding; the mass without the
+    explicit zeros between different components).
+    """
+    free = free_dofs(mesh)
+    pattern = reduced_pattern(mesh, free)
+    stiffness, mass, which = element_types(mesh, plate)
+    return PlateSystem(
+        stiffness=pattern.stiffness(stiffness, which),
+        mass=pattern.mass(mass, which),
+        load=assemble_piezo_load(mesh, plate, voltage)[free],
+        free_dofs=free,
+    )

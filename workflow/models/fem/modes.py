@@ -4,6 +4,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 from threadpoolctl import threadpool_limits
 
@@ -82,10 +83,14 @@ def shift_invert_modes(system: PlateSystem, shift: float, solve_shifted: Callabl
 
     operator = sla.LinearOperator(system.mass.shape, matvec=solve_elastic, dtype=float)
     start = np.ones(system.mass.shape[0])
-    with threadpool_limits(limits=1, user_api="blas"):  # ARPACK's small dense steps only lose from threads
+    mass = system.mass.tocsc()
+    mass_rows = sp.csr_matrix((mass.data, mass.indices, mass.indptr), shape=mass.shape)  # M = M^T: row-wise products are faster
+    with threadpool_limits(limits=1, user_api="blas"):
+        # ARPACK's small dense steps only lose from threads; PARDISO's solves (MKL) with two threads are
+        # not bitwise reproducible, and repeated evaluations of one plate must be equal
         # in shift-invert mode ARPACK uses only OPinv and M; the first argument gives shape and type
         eigenvalues, vectors = sla.eigsh(
-            system.stiffness, k=n_modes, M=system.mass, sigma=shift, which="LM", OPinv=operator, v0=start, tol=EIGEN_TOLERANCE
+            system.stiffness, k=n_modes, M=mass_rows, sigma=shift, which="LM", OPinv=operator, v0=start, tol=EIGEN_TOLERANCE
         )
     order = np.argsort(eigenvalues)
     vectors = vectors[:, order]

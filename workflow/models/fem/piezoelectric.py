@@ -29,10 +29,10 @@ import scipy.sparse as sp
 from scipy.optimize import brentq
 
 from workflow.models import analytical
-from workflow.models.fem.assembly import PlateSystem, assemble_matrices, element_dofs
+from workflow.models.fem.assembly import PlateSystem, assemble_system, element_dofs, free_dofs
 from workflow.models.fem.evaluate import QUARTERS, FemResult, fem_result
 from workflow.models.fem.harmonic import probe_modal_model
-from workflow.models.fem.mesh import CERAMIC, BrickMesh, quarter_plate_mesh, symmetry_dofs
+from workflow.models.fem.mesh import CERAMIC, BrickMesh, quarter_plate_mesh
 from workflow.models.fem.modes import ShiftedModes, shift_invert_modes
 from workflow.models.fem.probes import antinode_probe_points, probe_matrix
 from workflow.models.fem.solvers import factorise
@@ -174,10 +174,26 @@ def assemble_piezo_system(mesh: BrickMesh, stiffness, mass, ceramic: PiezoMateri
     voltage : float
         Drive amplitude across each ceramic [V].
     """
+    free = free_dofs(mesh)
+    mechanical = PlateSystem(stiffness[free][:, free].tocsc(), mass[free][:, free].tocsc(), np.zeros(len(free)), free)
+    return electromechanical_system(mesh, mechanical, ceramic, voltage)
+
+
+def electromechanical_system(mesh: BrickMesh, mechanical: PlateSystem, ceramic: PiezoMaterial, voltage: float) -> PiezoSystem:
+    """The electromechanical system on a reduced mechanical one (its load is replaced by the voltage drive).
+
+    Parameters
+    ----------
+    mesh : BrickMesh
+    mechanical : PlateSystem
+        K_uu (c^E for the ceramics) and M on the free dofs.
+    ceramic : PiezoMaterial
+    voltage : float
+        Drive amplitude across each ceramic [V].
+    """
     coupling, permittivity = assemble_piezo_matrices(mesh, ceramic)
-    free = np.setdiff1d(np.arange(mesh.n_dofs), symmetry_dofs(mesh))
     driven, _, inner = electrode_nodes(mesh)
-    coupling = coupling[free]
+    coupling = coupling[mechanical.free_dofs]
     coupling_inner = coupling[:, inner].tocsc()
     permittivity_inner = permittivity[inner][:, inner].tocsc()
     coupling_driven = np.asarray(coupling[:, driven].sum(axis=1)).ravel()
@@ -185,13 +201,7 @@ def assemble_piezo_system(mesh: BrickMesh, stiffness, mass, ceramic: PiezoMateri
     inner_potential = factorise(permittivity_inner).solve(permittivity_inner_driven)  # K_II^-1 k_IH
     drive = coupling_inner @ inner_potential - coupling_driven
     capacitance = float(permittivity[driven][:, driven].sum() - permittivity_inner_driven @ inner_potential)
-    mechanical = PlateSystem(
-        stiffness=stiffness[free][:, free].tocsc(),
-        mass=mass[free][:, free].tocsc(),
-        load=drive * voltage,
-        free_dofs=free,
-    )
-    return PiezoSystem(mechanical, coupling_inner, permittivity_inner, drive, capacitance)
+    return PiezoSystem(replace(mechanical, load=drive * voltage), coupling_inner, permittivity_inner, drive, capacitance)
 
 
 def coupled_modes(system: PiezoSystem, frequency: float, n_modes: int) -> CoupledModes:
@@ -260,8 +270,7 @@ def evaluate_fem_coupled(
         the clamped capacitance and the charge residual of the whole plate (for the admittance).
     """
     mesh = quarter_plate_mesh(plate, settings)
-    stiffness, mass = assemble_matrices(mesh, plate)
-    system = assemble_piezo_system(mesh, stiffness, mass, plate.ceramic, voltage)
+    system = electromechanical_system(mesh, assemble_system(mesh, plate, voltage), plate.ceramic, voltage)
     modes = coupled_modes(system, float(analytical.resonance_frequency(plate)), settings.n_modes)
     probes = probe_matrix(mesh, antinode_probe_points(plate))[:, system.mechanical.free_dofs]
     result = fem_result(probe_modal_model(system.mechanical, modes.short_circuit, probes), q, voltage, system.mechanical)

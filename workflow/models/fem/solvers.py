@@ -10,6 +10,7 @@ SuperLU is the fallback wherever pypardiso does not install.  ``$TACTILE_SPARSE_
 import ctypes
 import os
 import weakref
+from functools import lru_cache
 
 import numpy as np
 import scipy.sparse as sp
@@ -44,50 +45,88 @@ def solver_name() -> str:
     return name
 
 
-class _Pardiso:
-    """A PARDISO factorisation of a symmetric matrix kept for repeated solves.
+@lru_cache(maxsize=1)
+def _mkl_pardiso():
+    """MKL's ``pardiso`` with its argument types, found once (pypardiso searches the file system, ~0.1 s)."""
+    return PyPardisoSolver()._mkl_pardiso
 
-    pypardiso factorises; the solves call MKL directly with the 1-based index arrays converted
-    once (pypardiso's own ``solve`` converts them and compares the matrix on every call).
+
+def upper_triangle(matrix) -> sp.csr_matrix:
+    """Upper triangle of a symmetric sparse matrix as CSR with sorted indices (its CSC structure read as CSR)."""
+    matrix = sp.csc_matrix(matrix)
+    matrix.sum_duplicates()
+    rows = np.repeat(np.arange(matrix.shape[0], dtype=matrix.indices.dtype), np.diff(matrix.indptr))
+    keep = matrix.indices >= rows
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[keep], minlength=matrix.shape[0]))])
+    return sp.csr_matrix((matrix.data[keep], matrix.indices[keep], indptr), shape=matrix.shape)
+
+
+def _pardiso(handle, phase: int, matrix: tuple, iparm, rhs, solution) -> None:
+    """One call of MKL's ``pardiso`` on a real symmetric indefinite matrix (1-based CSR upper triangle).
+
+    Parameters
+    ----------
+    handle : (64,) int64 array
+        PARDISO's internal pointer array of this factorisation.
+    phase : int
+        12 analysis and factorisation, 33 solve, -1 release.
+    matrix : tuple
+        (size, data, ia, ja) of the upper triangle.
+    iparm : (64,) int32 array
+    rhs, solution : float arrays
+        Fortran-ordered, shape (size,) or (size, k).
+    """
+    size, data, ia, ja = matrix
+    error = ctypes.c_int32(0)
+    int_pointer, float_pointer = ctypes.POINTER(ctypes.c_int32), ctypes.POINTER(ctypes.c_double)
+    _mkl_pardiso()(
+        handle.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)),
+        ctypes.byref(ctypes.c_int32(1)),  # maxfct
+        ctypes.byref(ctypes.c_int32(1)),  # mnum
+        ctypes.byref(ctypes.c_int32(SYMMETRIC_INDEFINITE)),
+        ctypes.byref(ctypes.c_int32(phase)),
+        ctypes.byref(ctypes.c_int32(size)),
+        data.ctypes.data_as(float_pointer),
+        ia.ctypes.data_as(int_pointer),
+        ja.ctypes.data_as(int_pointer),
+        np.zeros(0, dtype=np.int32).ctypes.data_as(int_pointer),  # perm: PARDISO's own ordering
+        ctypes.byref(ctypes.c_int32(1 if rhs.ndim == 1 else rhs.shape[1])),
+        iparm.ctypes.data_as(int_pointer),
+        ctypes.byref(ctypes.c_int32(0)),  # no messages
+        rhs.ctypes.data_as(float_pointer),
+        solution.ctypes.data_as(float_pointer),
+        ctypes.byref(error),
+    )
+    if error.value != 0:
+        raise TactileError(f"PARDISO phase {phase} failed with error {error.value}; set {SOLVER_VARIABLE}=superlu")
+
+
+class _Pardiso:
+    """A PARDISO factorisation of a symmetric matrix kept for repeated solves (MKL called directly).
+
+    PARDISO's defaults, but without iterative refinement in the solves: residuals stay ~1e-12 and a
+    solve costs a third.
     """
 
     def __init__(self, matrix):
-        upper = sp.triu(matrix, format="csr")
-        upper.sort_indices()
-        self._solver = PyPardisoSolver(mtype=SYMMETRIC_INDEFINITE)
-        self._solver.set_iparm(8, 0)  # no iterative refinement: residuals ~1e-12 without it, solves 2x faster
-        self._solver.factorize(upper)
-        self._size = upper.shape[0]
-        self._data = upper.data
-        self._ia = upper.indptr.astype(np.int32) + 1
-        self._ja = upper.indices.astype(np.int32) + 1
-        weakref.finalize(self, self._solver.free_memory, True)
+        upper = upper_triangle(matrix)
+        self._matrix = (
+            upper.shape[0],
+            np.ascontiguousarray(upper.data, dtype=float),
+            upper.indptr.astype(np.int32) + 1,
+            upper.indices.astype(np.int32) + 1,
+        )
+        self._handle = np.zeros(64, dtype=np.int64)
+        self._iparm = np.zeros(64, dtype=np.int32)  # iparm(1) = 0: PARDISO fills in its defaults
+        empty = np.zeros(upper.shape[0])
+        _pardiso(self._handle, 12, self._matrix, self._iparm, empty, empty.copy())
+        self._iparm[7] = 0  # iparm(8): no iterative refinement in the solves (the default does 2 steps)
+        weakref.finalize(self, _pardiso, self._handle, -1, self._matrix, self._iparm, empty, empty)
 
     def solve(self, rhs):
         rhs = np.asfortranarray(rhs, dtype=float)
         solution = np.zeros_like(rhs)
-        solver, error = self._solver, ctypes.c_int32(0)
-        int_pointer, float_pointer = ctypes.POINTER(ctypes.c_int32), ctypes.POINTER(ctypes.c_double)
-        solver._mkl_pardiso(
-            solver.pt.ctypes.data_as(ctypes.POINTER(solver._pt_type[0])),
-            ctypes.byref(ctypes.c_int32(1)),  # maxfct
-            ctypes.byref(ctypes.c_int32(1)),  # mnum
-            ctypes.byref(ctypes.c_int32(SYMMETRIC_INDEFINITE)),
-            ctypes.byref(ctypes.c_int32(33)),  # phase: solve and iterative refinement
-            ctypes.byref(ctypes.c_int32(self._size)),
-            self._data.ctypes.data_as(float_pointer),
-            self._ia.ctypes.data_as(int_pointer),
-            self._ja.ctypes.data_as(int_pointer),
-            solver.perm.ctypes.data_as(int_pointer),
-            ctypes.byref(ctypes.c_int32(1 if rhs.ndim == 1 else rhs.shape[1])),
-            solver.iparm.ctypes.data_as(int_pointer),
-            ctypes.byref(ctypes.c_int32(0)),  # no messages
-            rhs.ctypes.data_as(float_pointer),
-            solution.ctypes.data_as(float_pointer),
-            ctypes.byref(error),
-        )
-        if error.value != 0:
-            raise TactileError(f"PARDISO solve failed with error {error.value}; set {SOLVER_VARIABLE}=superlu")
+        _pardiso(self._handle, 33, self._matrix, self._iparm, rhs, solution)
         return np.ascontiguousarray(solution)
 
 
