@@ -72,9 +72,8 @@ def test_configuration_errors_name_the_key(tmp_path, text, words):
 
 
 def test_too_few_walkers_for_the_logs_is_a_configuration_error_before_the_chain(tmp_path):
-    """emcee needs twice the sampled parameters (the flexible law with softening and drift: 14 + one resonance per sweep): the
-    step says so, naming
-    the key and the range, before any sampling."""
+    """emcee needs twice the sampled parameters (the flexible law with softening and drift: 14 + one resonance per
+    sweep): the step says so, naming the key and the range, before any sampling."""
     from workflow.damping.synthetic import campaign_csv, simulate_campaign
     from workflow.pipeline.runner import RunContext
     from workflow.pipeline.steps import damping_fit
