@@ -7,7 +7,6 @@ resonance log and a scan log.
 """
 
 import json
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -17,42 +16,25 @@ from instruments.simulator.physics import plate_response
 from workflow import logformat
 from workflow.calibration.calibration import Calibration, MeasuredPlate, calibrate
 from workflow.calibration.measurements import aligned_misfit, lorentzian_top, mirror_scatter, real_pattern, scan_shape
-from workflow.calibration.parameters import default_settings, deviated_plate
+from workflow.calibration.parameters import deviated_plate
 from workflow.calibration.plate_surrogate import build_plate_surrogate, fem_pattern, point_deflection_per_volt
 from workflow.calibration.posterior import prior_bounds
 from workflow.calibration.surrogate import latin_hypercube
 from workflow.cli import main
-from workflow.execution.cache import EvaluationCache
-from workflow.models.fem import FemSettings
-from workflow.models.plate import Plate
-from workflow.optimise.fem_model import FemModel
 from workflow.units import MM
 
-COARSE = FemSettings(elements_per_ceramic=2, elements_per_layer=1, elements_across_half_width=2, n_modes=3)
-P1 = Plate(20.56e-3, 0.75e-3, 1.0e-3, 49e-3)
-TRUTH = np.array([0.93, 1.04, 30e-6, -15e-6])
-"""Hidden deviations: ceramic and resonator factors, glue [m], h_i offset [m]."""
-FAST = replace(default_settings(), steps=2000, surrogate_points=18)
+from tests.test_calibration import COARSE, FAST, P1, TRUTH, cache_dir, coarse_model  # noqa: F401 (fixtures)
+
 GRID = np.array(grid_points(float(P1.length) / 2, float(P1.width) / 2, 7, 3))
 """The loop's 7 x 3 scan grid on P1 [m]."""
 
 
 @pytest.fixture(scope="module")
-def cache_dir(tmp_path_factory):
-    return tmp_path_factory.mktemp("likelihood-cache")
-
-
-@pytest.fixture(scope="module")
-def model(cache_dir):
-    return FemModel(settings=COARSE, cache=EvaluationCache(cache_dir), scheduler="synchronous")
-
-
-@pytest.fixture(scope="module")
-def built(model):
+def built(coarse_model):
     """The simulated built plate: its FEM result and surface, and what its logs would measure."""
     plate = deviated_plate(P1, FAST.names, TRUTH)
-    (result,) = model.evaluate_plates([plate])
-    (surface,) = model.surfaces([plate], [result])
+    (result,) = coarse_model.evaluate_plates([plate])
+    (surface,) = coarse_model.surfaces([plate], [result])
     rng = np.random.default_rng(1)
     velocity = 2j * np.pi * result.frequency * surface.deflection(GRID[:, 0], GRID[:, 1], result.frequency, result.q)
     velocity *= 1 + 0.01 * rng.normal(size=len(GRID))
@@ -91,25 +73,25 @@ def test_scan_pattern_noise_from_mirror_images_and_sign_free_misfit():
     assert np.allclose(aligned_misfit(pattern, -pattern), 0.0)
 
 
-def test_new_surrogates_against_fresh_fem_evaluations(model):
+def test_new_surrogates_against_fresh_fem_evaluations(coarse_model):
     """ln g at the centre and the pattern at the scan points, fitted on the 18-point design, against 5 fresh points."""
     scan_points = (GRID[:, 0], GRID[:, 1])
-    surrogate = build_plate_surrogate(P1, FAST.names, FAST.bounds, model.evaluate_plates, FAST.surrogate_points, 2,
-                                      FAST.surrogate_seed, model.surfaces, scan_points)
+    surrogate = build_plate_surrogate(P1, FAST.names, FAST.bounds, coarse_model.evaluate_plates, FAST.surrogate_points, 2,
+                                      FAST.surrogate_seed, coarse_model.surfaces, scan_points)
     fresh = latin_hypercube(6, FAST.bounds, seed=11)[1:]
     plates = [deviated_plate(P1, FAST.names, theta) for theta in fresh]
-    results = model.evaluate_plates(plates)
+    results = coarse_model.evaluate_plates(plates)
     g = np.array([point_deflection_per_volt(r) for r in results])
     g_errors = np.exp(surrogate.log_point_deflection(fresh)) / g - 1
     assert np.max(np.abs(g_errors)) < 0.02
     assert np.sqrt(np.mean(g_errors**2)) < 4 * surrogate.log_point_deflection.loo_rms + 1e-3
-    patterns = np.array([fem_pattern(r, s, *scan_points) for r, s in zip(results, model.surfaces(plates, results))])
+    patterns = np.array([fem_pattern(r, s, *scan_points) for r, s in zip(results, coarse_model.surfaces(plates, results))])
     misfit = aligned_misfit(patterns, surrogate.shape(fresh))
     assert np.max(np.abs(misfit)) < 0.05
     assert np.sqrt(np.mean(misfit**2)) < 4 * np.max(surrogate.shape.errors) + 1e-3
 
 
-def test_known_deviations_recovered_with_and_without_the_extra_terms(model, built):
+def test_known_deviations_recovered_with_and_without_the_extra_terms(coarse_model, built):
     """One simulated built plate: every parameter's truth within its 2-98 % posterior interval with the frequency alone
     and with deflection and scan added; the extra terms narrow the posterior (prior-standardised generalised
     variance, and the glue) without moving it away from the truth."""
@@ -118,7 +100,7 @@ def test_known_deviations_recovered_with_and_without_the_extra_terms(model, buil
         "frequency": MeasuredPlate("P1", P1, built["frequency"]),
         "all": MeasuredPlate("P1", P1, built["frequency"], built["g"], scan),
     }
-    calibrations = {label: calibrate([plate], FAST, model.evaluate_plates, {}, model.surfaces) for label, plate in runs.items()}
+    calibrations = {label: calibrate([plate], FAST, coarse_model.evaluate_plates, {}, coarse_model.surfaces) for label, plate in runs.items()}
     mean, sd = FAST.prior_scale()
     for calibration in calibrations.values():
         assert calibration.diagnostics.converged
