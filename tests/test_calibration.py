@@ -10,7 +10,8 @@ import pytest
 
 from workflow.calibration.calibration import Calibration, MeasuredPlate, calibrate, nominal_theta, predict
 from workflow.calibration.case_study import cross_predictions
-from workflow.calibration.logs import peak_frequency, read_built_plate
+from workflow.calibration.logs import read_built_plate
+from workflow.calibration.measurements import peak_frequency
 from workflow.calibration.parameters import default_settings, deviated_plate, load_settings
 from workflow.calibration.plate_surrogate import build_plate_surrogate
 from workflow.calibration.surrogate import fit_response_surface, latin_hypercube

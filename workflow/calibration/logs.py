@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from workflow.calibration.measurements import ResonanceFit, lorentzian_top
+from workflow.calibration.measurements import ResonanceFit, lorentzian_top, peak_frequency
 from workflow.damping.logs import read_log
 from workflow.errors import InputFileError, TactileError
 from workflow.logformat import read_metadata
@@ -56,22 +56,6 @@ class BuiltPlateLog:
     deflection_per_volt: float | None = None
     resonance_fit: ResonanceFit | None = None
     drive_voltage: float | None = None
-
-
-def peak_frequency(frequency: np.ndarray, velocity: np.ndarray) -> float | None:
-    """Frequency of the velocity maximum, refined by a parabola through ln v at it and its neighbours [Hz].
-
-    None when the maximum lies at either end of the swept range (the peak was not bracketed).
-    """
-    order = np.argsort(frequency)
-    f, v = frequency[order], velocity[order]
-    k = int(np.argmax(v))
-    if k == 0 or k == len(f) - 1:
-        return None
-    if np.any(v[k - 1:k + 2] <= 0):
-        return float(f[k])
-    a, b, _ = np.polyfit(f[k - 1:k + 2] - f[k], np.log(v[k - 1:k + 2]), 2)
-    return float(f[k] - b / (2 * a)) if a < 0 else float(f[k])
 
 
 def read_built_plate(path) -> BuiltPlateLog:

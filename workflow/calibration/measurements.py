@@ -63,6 +63,22 @@ class ResonanceFit:
         return self.peak_velocity / (2 * np.pi * self.frequency * self.quality_factor * voltage)
 
 
+def peak_frequency(frequency: np.ndarray, velocity: np.ndarray) -> float | None:
+    """Frequency of the velocity maximum, refined by a parabola through ln v at it and its neighbours [Hz].
+
+    None when the maximum lies at either end of the swept range (the peak was not bracketed).
+    """
+    order = np.argsort(frequency)
+    f, v = frequency[order], velocity[order]
+    k = int(np.argmax(v))
+    if k == 0 or k == len(f) - 1:
+        return None
+    if np.any(v[k - 1:k + 2] <= 0):
+        return float(f[k])
+    a, b, _ = np.polyfit(f[k - 1:k + 2] - f[k], np.log(v[k - 1:k + 2]), 2)
+    return float(f[k] - b / (2 * a)) if a < 0 else float(f[k])
+
+
 def lorentzian_top(frequency: np.ndarray, velocity: np.ndarray) -> ResonanceFit | None:
     """Fit :class:`ResonanceFit` to a sweep's top (the module's equation).
 
@@ -81,10 +97,9 @@ def lorentzian_top(frequency: np.ndarray, velocity: np.ndarray) -> ResonanceFit 
     order = np.argsort(frequency)
     f, v = np.asarray(frequency, float)[order], np.asarray(velocity, float)[order]
     k = int(np.argmax(v))
-    if k == 0 or k == len(f) - 1 or np.any(v[k - 1:k + 2] <= 0):
+    f0 = peak_frequency(f, v)
+    if f0 is None or np.any(v[k - 1:k + 2] <= 0):
         return None
-    curvature, slope_f, _ = np.polyfit(f[k - 1:k + 2] - f[k], np.log(v[k - 1:k + 2]), 2)
-    f0 = float(f[k] - slope_f / (2 * curvature)) if curvature < 0 else float(f[k])
     top = v >= TOP_LEVEL * v[k]
     top[k - 1:k + 2] = True
     u2, vt = (f[top] / f0 - f0 / f[top]) ** 2, v[top]
