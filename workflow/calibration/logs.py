@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from workflow.calibration.measurements import ResonanceFit, lorentzian_top, peak_frequency
+from workflow.calibration.measurements import lorentzian_top, peak_frequency
 from workflow.damping.logs import read_log
 from workflow.errors import InputFileError, TactileError
 from workflow.logformat import read_metadata
@@ -43,10 +43,6 @@ class BuiltPlateLog:
     deflection_per_volt : float or None
         Quasi-static antinode deflection per volt from the lowest-drive sweep [m/V] (None: no sweep
         resolves its resonance's width).
-    resonance_fit : ResonanceFit or None
-        The Lorentzian behind it.
-    drive_voltage : float or None
-        That sweep's drive [V].
     """
 
     source: str
@@ -54,8 +50,6 @@ class BuiltPlateLog:
     frequency: float
     sweep_frequencies: tuple
     deflection_per_volt: float | None = None
-    resonance_fit: ResonanceFit | None = None
-    drive_voltage: float | None = None
 
 
 def read_built_plate(path) -> BuiltPlateLog:
@@ -87,12 +81,12 @@ def read_built_plate(path) -> BuiltPlateLog:
     key, value = SYNTHESISED_AMPLITUDE
     synthesised = metadata.get(key, ("",))[0].strip() == value
     return BuiltPlateLog(str(path), plate, float(np.median(peaks)), tuple(peak for _, peak in located),
-                         *((None, None, None) if synthesised else lowest_drive_deflection(log)))
+                         None if synthesised else lowest_drive_deflection(log))
 
 
-def lowest_drive_deflection(log) -> tuple:
-    """(deflection per volt [m/V], its :class:`ResonanceFit`, drive [V]) of the lowest-drive sweep whose top the
-    Lorentzian resolves (finest spacing first among equal drives), or (None, None, None).
+def lowest_drive_deflection(log) -> float | None:
+    """Deflection per volt [m/V] of the lowest-drive sweep whose top the Lorentzian (:func:`lorentzian_top`) resolves
+    (finest spacing first among equal drives), or None.
 
     The velocity is divided by the mode factor |phi| of the log's measurement point (1 without one).
     """
@@ -105,9 +99,9 @@ def lowest_drive_deflection(log) -> tuple:
         if fit is not None and voltage > 0:
             candidates.append((voltage, frequency_step(log.frequency[rows]), fit))
     if not candidates:
-        return None, None, None
+        return None
     voltage, _, fit = min(candidates, key=lambda c: c[:2])
-    return fit.deflection_per_volt(voltage), fit, voltage
+    return fit.deflection_per_volt(voltage)
 
 
 def frequency_step(frequency: np.ndarray) -> float:

@@ -11,6 +11,7 @@ for f_r, the FEM's own discretisation-error estimate).
 """
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Callable, Sequence
 
 import numpy as np
@@ -37,16 +38,21 @@ class ShapeSurrogate:
     x, y : tuple of float
         The points [m].
     surfaces : tuple of ResponseSurface
-        One per point: the pattern value there [-].
+        One per point: the pattern value there [-]; all on the same box and degree (one design).
     """
 
     x: tuple
     y: tuple
     surfaces: tuple
 
+    @cached_property
+    def _coefficients(self) -> np.ndarray:
+        """The points' coefficients side by side, shape (n_coefficients, n_points)."""
+        return np.column_stack([surface.coefficients for surface in self.surfaces])
+
     def __call__(self, theta) -> np.ndarray:
-        """Pattern at parameter values ``theta`` (..., n), shape (..., n_points) [-]."""
-        return np.stack([surface(theta) for surface in self.surfaces], axis=-1)
+        """Pattern at parameter values ``theta`` (..., n), shape (..., n_points) [-] (one basis for every point)."""
+        return self.surfaces[0].basis(theta) @ self._coefficients
 
     @property
     def errors(self) -> np.ndarray:
@@ -139,10 +145,9 @@ def fem_pattern(result, surface, x, y) -> np.ndarray:
     return real_pattern(surface.deflection(np.asarray(x), np.asarray(y), result.frequency, result.q))
 
 
-def design_results(plate: Plate, names: Sequence[str], points: np.ndarray, evaluate: Evaluate) -> tuple:
-    """FEM of the nominal ``plate`` deviated by each row of ``points`` [SI]: (log f, log w, log g, relative f errors,
-    the FemResults)."""
-    results = evaluate([deviated_plate(plate, names, theta) for theta in points])
+def design_results(plates: Sequence[Plate], evaluate: Evaluate) -> tuple:
+    """FEM of the design's ``plates``: (log f, log w, log g, relative f errors, the FemResults)."""
+    results = evaluate(plates)
     log_f = np.log([r.frequency for r in results])
     log_w = np.log([r.deflection for r in results])
     log_g = np.log([point_deflection_per_volt(r) for r in results])
@@ -150,10 +155,10 @@ def design_results(plate: Plate, names: Sequence[str], points: np.ndarray, evalu
     return log_f, log_w, log_g, errors, results
 
 
-def design_patterns(plate: Plate, names: Sequence[str], points: np.ndarray, results: list, evaluate_surfaces: EvaluateSurfaces,
+def design_patterns(plates: Sequence[Plate], results: list, evaluate_surfaces: EvaluateSurfaces,
                     scan_points: tuple) -> np.ndarray:
-    """(n_design, n_scan) FEM patterns at ``scan_points`` (x, y) [m], each signed to agree with the first (the box centre)."""
-    plates = [deviated_plate(plate, names, theta) for theta in points]
+    """(n_design, n_scan) FEM patterns at ``scan_points`` (x, y) [m] of ``plates`` and their FemResults, each signed to
+    agree with the first (the box centre)."""
     patterns = np.array([fem_pattern(r, s, *scan_points) for r, s in zip(results, evaluate_surfaces(plates, results))])
     return patterns * np.where(patterns @ patterns[0] < 0, -1.0, 1.0)[:, None]
 
@@ -181,10 +186,11 @@ def build_plate_surrogate(
         :class:`ShapeSurrogate` is built too.
     """
     points = latin_hypercube(n_points, bounds, seed)
-    log_f, log_w, log_g, errors, results = design_results(plate, names, points, evaluate)
+    plates = [deviated_plate(plate, names, theta) for theta in points]
+    log_f, log_w, log_g, errors, results = design_results(plates, evaluate)
     shape = None
     if scan_points is not None:
-        patterns = design_patterns(plate, names, points, results, evaluate_surfaces, scan_points)
+        patterns = design_patterns(plates, results, evaluate_surfaces, scan_points)
         shape = ShapeSurrogate(tuple(float(v) for v in scan_points[0]), tuple(float(v) for v in scan_points[1]),
                                tuple(fit_response_surface(points, column, bounds, degree) for column in patterns.T))
     return PlateSurrogate(

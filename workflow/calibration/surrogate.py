@@ -67,9 +67,13 @@ class ResponseSurface:
 
     def __call__(self, points) -> np.ndarray:
         """Values at ``points`` (..., n_dim) [input units]."""
+        return self.basis(points) @ np.asarray(self.coefficients)
+
+    def basis(self, points) -> np.ndarray:
+        """The polynomial's basis columns at ``points`` (..., n_dim), shape (..., n_coefficients) [-]."""
         bounds = np.asarray(self.bounds)
         unit = 2 * (np.asarray(points, dtype=float) - bounds[:, 0]) / (bounds[:, 1] - bounds[:, 0]) - 1
-        return _basis(unit, self.degree) @ np.asarray(self.coefficients)
+        return _basis(unit, self.degree)
 
     def to_dict(self) -> dict:
         return {

@@ -458,7 +458,7 @@ def sample_posterior(
     sampler = emcee.EnsembleSampler(n_walkers, n_dim, log_probability, args=(data,), vectorize=True, moves=moves)
     sampler.random_state = np.random.RandomState(seed).get_state()
     state = walkers
-    previous = np.full(n_dim, np.inf)
+    previous = tau = np.full(n_dim, np.inf)  # tau: of the final chain, computed in the loop's last pass
     converged = False
     start = time.perf_counter()
     with Progress(None, description, unit="steps", enabled=progress) as shown:
@@ -481,7 +481,6 @@ def sample_posterior(
             if max_seconds is not None and time.perf_counter() - start > max_seconds:
                 break
     seconds = time.perf_counter() - start
-    tau = autocorrelation_times(sampler.get_chain())
     finite_tau = np.where(np.isfinite(tau), tau, sampler.iteration)
     burn_in = int(min(2 * np.max(finite_tau), sampler.iteration // 2))
     thin = max(1, int(0.5 * np.min(finite_tau)))
@@ -810,13 +809,13 @@ def velocity_grid(log: CampaignLog, n: int = 50) -> np.ndarray:
     return np.linspace(float(np.min(velocity)), float(np.max(velocity)), n)
 
 
-def ringdown_summary(fit: DampingFit) -> Optional[dict]:
+def ringdown_summary(fit: DampingFit, parameters: dict) -> Optional[dict]:
     """The ring-downs in ``fit.json``: per burst its level, fitted initial velocity and temperature; the decay
-    noise fitted; the agreement of sweeps and ring-downs (None without ring-downs)."""
+    noise fitted; the agreement of sweeps and ring-downs (None without ring-downs).  ``parameters``: the
+    preferred law's :func:`parameter_summary`."""
     decays = fit.log.ringdown
     if decays is None:
         return None
-    parameters = parameter_summary(fit.best)
     bursts = []
     for j in range(decays.n_bursts):
         mine = decays.burst == j
@@ -835,6 +834,7 @@ def ringdown_summary(fit: DampingFit) -> Optional[dict]:
 def fit_summary(fit: DampingFit) -> dict:
     """The JSON of ``tactile fit-damping`` (docs/cli.md): the answer, the preferred law, the comparison and the checks."""
     best = fit.best
+    parameters = parameter_summary(best)
     velocity = velocity_grid(fit.log)
     q05, q50, q95 = np.quantile(fit.answer.law_from_samples().quality_factor(velocity[:, None]), (0.05, 0.5, 0.95), axis=1)
     comparison = {
@@ -854,7 +854,7 @@ def fit_summary(fit: DampingFit) -> dict:
         "weights": fit.comparison.weights,
         "warning": fit.warning,
         "checks": {name: check.summary() for name, check in fit.checks.items()},
-        "parameters": parameter_summary(best),
+        "parameters": parameters,
         "q_of_v": {"v_m_s": velocity, "q_p05": q05, "q_p50": q50, "q_p95": q95, "law": fit.answer.law_name},
         "diagnostics": diagnostics_summary(best),
         "comparison": comparison,
@@ -869,7 +869,7 @@ def fit_summary(fit: DampingFit) -> dict:
             "half_power_q": [None if not np.isfinite(q) else float(q) for q in fit.sweeps.quality_factor],
         },
         "forward_model": {"softening": best.data.layout.forward.softening, "drift": best.data.layout.forward.drift},
-        "ringdown": ringdown_summary(fit),
+        "ringdown": ringdown_summary(fit, parameters),
         "velocity_convention": VELOCITY_CONVENTION,
         "n_points": int(len(fit.log.velocity)),
         "n_ringdown_samples": 0 if fit.log.ringdown is None else int(len(fit.log.ringdown.velocity)),

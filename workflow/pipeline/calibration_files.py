@@ -11,6 +11,7 @@ from workflow.calibration.logs import read_built_plate
 from workflow.calibration.measurements import scan_shape
 from workflow.calibration.parameters import CalibrationSettings
 from workflow.errors import InputFileError
+from workflow.models.fem.surface import modal_assurance_criterion
 from workflow.pipeline.builtplate import is_scan_log, read_scan
 from workflow.optimise.robust import RobustDesign
 from workflow.pipeline.records import geometry_record
@@ -30,8 +31,9 @@ def measured_plates(paths, settings: CalibrationSettings, use_deflection: bool =
     InputFileError
         A scan log whose plate no resonance log names, or two scans of one plate, naming the file.
     """
-    scans = [read_scan(path) for path in paths if is_scan_log(path)]
-    logs = [read_built_plate(path) for path in paths if not is_scan_log(path)]
+    is_scan = [is_scan_log(path) for path in paths]
+    scans = [read_scan(path) for path, scan in zip(paths, is_scan) if scan]
+    logs = [read_built_plate(path) for path, scan in zip(paths, is_scan) if not scan]
     if not logs:
         raise InputFileError(f"{paths[0]}: only scan logs given; the calibration needs a resonance log of each plate")
     matched = {}
@@ -149,7 +151,7 @@ def measured_terms(calibration: Calibration, plate: MeasuredPlate, surrogate) ->
         predicted = surrogate.shape(np.median(calibration.samples, axis=0))
         record["scan"] = {"log": plate.scan.source, "points": len(measured), "noise": plate.scan.noise,
                           "mirror_scatter": plate.scan.mirror_scatter,
-                          "mac": float((measured @ predicted) ** 2 / (measured @ measured * (predicted @ predicted))),
+                          "mac": modal_assurance_criterion(measured, predicted),
                           "surrogate_error_max": float(np.max(surrogate.shape.errors))}
     return record
 

@@ -11,6 +11,7 @@ from dataclasses import MISSING, fields
 from importlib import resources
 from pathlib import Path
 
+from instruments.simulator.vibrometer import RECORD_INTERVAL_US_RANGE, RECORD_SAMPLES_RANGE
 from workflow.damping.laws import SAMPLED_LAWS
 from workflow.errors import InputFileError
 from workflow.models import materials
@@ -28,6 +29,8 @@ def _mm(bounds) -> tuple:
 
 
 LIMITS = {
+    "campaign.ringdown_samples": RECORD_SAMPLES_RANGE,  # the vibrometer's envelope record
+    "campaign.ringdown_interval_us": RECORD_INTERVAL_US_RANGE,
     "design.voltage_v": (1e-3, 1000.0),
     "design.q": (1.0, 1e5),
     "design.wavelength_min_mm": _mm(materials.WAVELENGTH_RANGE),
@@ -252,7 +255,6 @@ def merge(defaults: dict, user: dict, source: str = "configuration") -> dict:
             _check_range(merged[section][key], f"{section}.{key}", source)
     _check_consistency(merged, source)
     _check_campaign_size(merged["campaign"], source)
-    _check_ringdown_record(merged["campaign"], source)
     return merged
 
 
@@ -268,17 +270,9 @@ def _check_campaign_size(campaign: dict, source: str) -> None:
         raise InputFileError(f"{source}: {error}") from None
 
 
-def _check_ringdown_record(campaign: dict, source: str) -> None:
-    """Refuse ring-down record sizes the vibrometer's envelope record cannot take (its limits), naming the key."""
-    from instruments.simulator.vibrometer import RECORD_INTERVAL_US_RANGE, RECORD_SAMPLES_RANGE
-
-    _check_range(campaign["ringdown_samples"], "campaign.ringdown_samples", source, RECORD_SAMPLES_RANGE)
-    _check_range(campaign["ringdown_interval_us"], "campaign.ringdown_interval_us", source, RECORD_INTERVAL_US_RANGE)
-
-
-def _check_range(value, name: str, source: str, bounds=None) -> None:
-    """Refuse a non-finite number, or one outside ``bounds`` (default: :data:`LIMITS`), naming the key and the range."""
-    bounds = LIMITS.get(name) if bounds is None else bounds
+def _check_range(value, name: str, source: str) -> None:
+    """Refuse a non-finite number, or one outside its :data:`LIMITS`, naming the key and the range."""
+    bounds = LIMITS.get(name)
     for item in value if isinstance(value, list) else [value]:
         if isinstance(item, float) and not math.isfinite(item):
             raise InputFileError(f"{source}: '{name}' must be a finite number, got {item!r}")

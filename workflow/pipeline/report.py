@@ -462,10 +462,11 @@ def _ringdowns(summary: dict) -> str:
         return text
     if not len(agreement["v_m_s"]):
         return text + "The sweeps and the ring-downs cover no common velocity range: their Q(v) are not compared.\n\n"
-    compared = [(f"{v:.3f}", f"{agreement['sweeps']['q_p50'][i]:.1f} [{agreement['sweeps']['q_p05'][i]:.1f}, "
-                 f"{agreement['sweeps']['q_p95'][i]:.1f}]", f"{agreement['ringdowns']['q_p50'][i]:.2f} "
-                 f"[{agreement['ringdowns']['q_p05'][i]:.2f}, {agreement['ringdowns']['q_p95'][i]:.2f}]",
-                 f"{agreement['z'][i]:+.2f}") for i, v in enumerate(agreement["v_m_s"])]
+    def band(side, i, digits):
+        return _interval([agreement[side][key][i] for key in ("q_p05", "q_p50", "q_p95")], 1, digits)
+
+    compared = [(f"{v:.3f}", band("sweeps", i, 1), band("ringdowns", i, 2), f"{agreement['z'][i]:+.2f}")
+                for i, v in enumerate(agreement["v_m_s"])]
     verdict = "agree" if agreement["agree"] else "**DISAGREE**"
     return (text + f"Agreement of the two measurements of Q ({agreement['law']} law fitted to each alone): they {verdict} "
             f"(largest |z| {agreement['max_abs_z']:.2f}; {agreement['rule']}).\n\n"

@@ -29,7 +29,7 @@ import scipy.sparse as sp
 from scipy.optimize import brentq
 
 from workflow.models import analytical
-from workflow.models.fem.assembly import PlateSystem, assemble_system, element_dofs, free_dofs
+from workflow.models.fem.assembly import PlateSystem, assemble_system, element_dofs, reduce_system
 from workflow.models.fem.evaluate import QUARTERS, FemResult, fem_result
 from workflow.models.fem.harmonic import probe_modal_model
 from workflow.models.fem.mesh import CERAMIC, BrickMesh, quarter_plate_mesh
@@ -174,8 +174,7 @@ def assemble_piezo_system(mesh: BrickMesh, stiffness, mass, ceramic: PiezoMateri
     voltage : float
         Drive amplitude across each ceramic [V].
     """
-    free = free_dofs(mesh)
-    mechanical = PlateSystem(stiffness[free][:, free].tocsc(), mass[free][:, free].tocsc(), np.zeros(len(free)), free)
+    mechanical = reduce_system(mesh, stiffness, mass, np.zeros(stiffness.shape[0]))
     return electromechanical_system(mesh, mechanical, ceramic, voltage)
 
 
