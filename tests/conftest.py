@@ -1,4 +1,8 @@
-"""Shared pytest configuration: figures render off-screen; Hypothesis profiles.
+"""Shared pytest configuration: figures render off-screen; Hypothesis profiles; which package is under test.
+
+The header names the folder ``workflow`` was imported from. With ``TACTILE_REQUIRE_INSTALLED=1`` (set by
+``.ci/run``) the session stops at once when that folder is the checkout rather than an installed package,
+so CI always tests what a user installs.
 
 Hypothesis profiles (tests/test_fuzz.py): ``default`` runs a few dozen examples per property
 (a few seconds in all); ``long`` runs thousands, for the tests marked ``slow`` or for every
@@ -6,8 +10,10 @@ property with ``HYPOTHESIS_PROFILE=long``.
 """
 
 import os
+from pathlib import Path
 
 import matplotlib
+import pytest
 from hypothesis import HealthCheck, settings
 
 matplotlib.use("Agg")
@@ -15,3 +21,55 @@ matplotlib.use("Agg")
 settings.register_profile("default", max_examples=40, deadline=2000, suppress_health_check=[HealthCheck.too_slow])
 settings.register_profile("long", max_examples=3000, deadline=2000, suppress_health_check=[HealthCheck.too_slow])
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
+
+CHECKOUT = Path(__file__).resolve().parents[1]
+"""The source tree the tests belong to."""
+
+
+def _package_folder() -> Path:
+    import workflow
+
+    return Path(workflow.__path__[0]).resolve()
+
+
+def pytest_report_header(config):
+    return f"tactile under test: {_package_folder()}"
+
+
+def pytest_sessionstart(session):
+    if os.environ.get("TACTILE_REQUIRE_INSTALLED") == "1" and _package_folder().is_relative_to(CHECKOUT):
+        raise pytest.UsageError(f"workflow was imported from the checkout ({_package_folder()}), not from an "
+                                "installed package: run the installed environment's pytest, not python -m pytest")
+
+
+@pytest.fixture(scope="session")
+def calibration_cache_dir(tmp_path_factory):
+    """One FEM cache for every calibration test (the coarse evaluations are shared between modules)."""
+    return tmp_path_factory.mktemp("calibration-cache")
+
+
+@pytest.fixture(scope="session")
+def coarse_model(calibration_cache_dir):
+    """The FEM on the coarse mesh of calibration_setup.COARSE, cached, in process."""
+    from calibration_setup import COARSE
+
+    from workflow.execution.cache import EvaluationCache
+    from workflow.optimise.fem_model import FemModel
+
+    return FemModel(settings=COARSE, cache=EvaluationCache(calibration_cache_dir), scheduler="synchronous")
+
+
+@pytest.fixture
+def coarse_cli(monkeypatch, calibration_cache_dir):
+    """The commands' FEM on the coarse mesh, in process, sharing the calibration tests' cache."""
+    from calibration_setup import COARSE
+
+    import workflow.optimise.fem_model as fem_evaluations
+
+    monkeypatch.setenv("TACTILE_CACHE", str(calibration_cache_dir))
+    model = fem_evaluations.FemModel
+
+    def coarse(**options):
+        return model(**{**options, "settings": COARSE, "scheduler": "synchronous"})
+
+    monkeypatch.setattr(fem_evaluations, "FemModel", coarse)

@@ -6,12 +6,13 @@ import math
 import random
 import signal
 import subprocess
-import sys
 import time
 from dataclasses import replace
 
 import pytest
 import serial
+from ports import DevicePort
+from user_facing import TACTILE
 
 from instruments.drivers.errors import SafetyLimitError
 from instruments.drivers.generator import LOWEST_AMPLITUDE_VPP, FunctionGenerator
@@ -19,7 +20,6 @@ from instruments.procedures.sweeps import Station
 from instruments.simulator.generator import FUNCTIONS, GeneratorDevice, GeneratorState
 from workflow.cli import main
 
-TACTILE = [sys.executable, "-c", "import sys; from workflow.cli import main; sys.exit(main())"]
 DRIVER_LIMIT = 3.0
 """The driver's limit in these tests [V peak at the generator output]."""
 DEVICE_LIMIT = 9.0
@@ -125,30 +125,6 @@ def test_a_refused_voltage_leaves_an_instrument_left_on_switched_off(pty_bench, 
 
 
 # --- item 2: the driver's limit from the instrument's real state ----------------------------------
-
-class DevicePort:
-    """A serial port onto a simulated generator in this process (its state can be changed behind the driver)."""
-
-    port = "device"
-
-    def __init__(self, device: GeneratorDevice):
-        self.device = device
-        self.pending = b""
-
-    def write(self, data: bytes) -> int:
-        for line in data.decode().split("\n")[:-1]:
-            reply = self.device.handle_line(line)
-            if reply is not None:
-                self.pending += reply.encode() + b"\n"
-        return len(data)
-
-    def read_until(self, terminator=b"\n"):
-        line, found, self.pending = self.pending.partition(terminator)
-        return line + found
-
-    def reset_input_buffer(self):
-        self.pending = b""
-
 
 def generator_left_in(**state) -> tuple[FunctionGenerator, GeneratorDevice]:
     """A driver on a simulated generator left in ``state`` (High Z load unless given)."""

@@ -8,14 +8,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_fit_damping import run_cli
+from user_facing import SAMPLE_CAMPAIGN, run_cli
 
 from workflow.damping.posterior import DampingPosterior, load_posterior, save_posterior
 from workflow.models import materials
 from workflow.models.plate import ORIGINAL_PLATE
 from workflow.optimise.problem import DesignProblem, optimise_analytical
-
-SAMPLE = Path(__file__).resolve().parents[1] / "data" / "sample_campaign.csv"
 
 
 def _with_velocity(text: str, value: str, rows=None) -> str:
@@ -35,7 +33,7 @@ def _with_velocity(text: str, value: str, rows=None) -> str:
 def inputs(tmp_path, monkeypatch):
     """A working folder with good and damaged input files; the test runs in it."""
     monkeypatch.chdir(tmp_path)
-    text = SAMPLE.read_text(encoding="utf-8")
+    text = SAMPLE_CAMPAIGN.read_text(encoding="utf-8")
     (tmp_path / "log.csv").write_text(text, encoding="utf-8")
     (tmp_path / "fast.csv").write_text(_with_velocity(text, "1e6", rows={5}), encoding="utf-8")
     (tmp_path / "zero.csv").write_text(_with_velocity(text, "0"), encoding="utf-8")

@@ -3,6 +3,7 @@
 import dataclasses
 import io
 import pickle
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -143,7 +144,11 @@ def test_default_directory_follows_the_environment(monkeypatch, tmp_path):
     monkeypatch.setenv(CACHE_VARIABLE, str(tmp_path))
     assert default_directory() == tmp_path
     monkeypatch.delenv(CACHE_VARIABLE)
-    assert default_directory() == Path(".cache") / "tactile"
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "user-cache"))  # platformdirs' Linux rule
+    monkeypatch.chdir(tmp_path / "..")
+    expected = tmp_path / "user-cache" / "tactile" if sys.platform.startswith("linux") else None
+    assert default_directory().is_absolute(), "not relative to whatever folder the user is in"
+    assert expected is None or default_directory() == expected
 
 
 def test_fem_model_rerun_is_faster_and_identical(tmp_path):

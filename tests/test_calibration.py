@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from calibration_setup import FAST, P1, P2, TRUTH
 
 from workflow.calibration.calibration import Calibration, MeasuredPlate, calibrate, nominal_theta, predict
 from workflow.calibration.case_study import cross_predictions
@@ -17,43 +18,8 @@ from workflow.calibration.plate_surrogate import build_plate_surrogate
 from workflow.calibration.surrogate import fit_response_surface, latin_hypercube
 from workflow.cli import main
 from workflow.errors import InputFileError
-from workflow.execution.cache import EvaluationCache
-from workflow.models.fem import FemSettings
 from workflow.models.plate import Plate
-from workflow.optimise.fem_model import FemModel
 from workflow.units import KHZ, MM, UM
-
-COARSE = FemSettings(elements_per_ceramic=2, elements_per_layer=1, elements_across_half_width=2, n_modes=3)
-"""A coarse mesh (0.4 s an evaluation): the tests check the machinery, not the physics' last per cent."""
-P1 = Plate(20.56e-3, 0.75e-3, 1.0e-3, 49e-3)
-P2 = Plate(15.66e-3, 0.5e-3, 0.5e-3, 49e-3)
-TRUTH = np.array([0.93, 1.04, 30e-6, -15e-6])
-"""Hidden deviations of the simulated built plates: ceramic and resonator factors, glue [m], h_i offset [m]."""
-FAST = replace(default_settings(), steps=2000, surrogate_points=18)
-
-
-@pytest.fixture(scope="module")
-def cache_dir(tmp_path_factory):
-    return tmp_path_factory.mktemp("calibration-cache")
-
-
-@pytest.fixture(scope="module")
-def coarse_model(cache_dir):
-    return FemModel(settings=COARSE, cache=EvaluationCache(cache_dir), scheduler="synchronous")
-
-
-@pytest.fixture
-def coarse_cli(monkeypatch, cache_dir):
-    """The commands' FEM on the coarse mesh, in process, sharing the module's cache."""
-    import workflow.optimise.fem_model as fem_evaluations
-
-    monkeypatch.setenv("TACTILE_CACHE", str(cache_dir))
-    model = fem_evaluations.FemModel
-
-    def coarse(**options):
-        return model(**{**options, "settings": COARSE, "scheduler": "synchronous"})
-
-    monkeypatch.setattr(fem_evaluations, "FemModel", coarse)
 
 
 def built_plate_frequency(model, plate, theta=TRUTH) -> float:

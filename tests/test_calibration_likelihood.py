@@ -10,6 +10,7 @@ import json
 
 import numpy as np
 import pytest
+from calibration_setup import FAST, P1, TRUTH
 
 from instruments.procedures.scan import grid_points
 from instruments.simulator.physics import plate_response
@@ -22,8 +23,6 @@ from workflow.calibration.posterior import prior_bounds
 from workflow.calibration.surrogate import latin_hypercube
 from workflow.cli import main
 from workflow.units import MM
-
-from tests.test_calibration import COARSE, FAST, P1, TRUTH, cache_dir, coarse_model  # noqa: F401 (fixtures)
 
 GRID = np.array(grid_points(float(P1.length) / 2, float(P1.width) / 2, 7, 3))
 """The loop's 7 x 3 scan grid on P1 [m]."""
@@ -155,13 +154,7 @@ def _write_logs(folder, built) -> tuple:
     return resonance, scan
 
 
-def test_calibrate_cli_uses_deflection_and_scan_and_says_so(tmp_path, capsys, monkeypatch, cache_dir, built):
-    import workflow.optimise.fem_model as fem_evaluations
-
-    monkeypatch.setenv("TACTILE_CACHE", str(cache_dir))
-    original = fem_evaluations.FemModel
-    monkeypatch.setattr(fem_evaluations, "FemModel",
-                        lambda **options: original(**{**options, "settings": COARSE, "scheduler": "synchronous"}))
+def test_calibrate_cli_uses_deflection_and_scan_and_says_so(tmp_path, capsys, coarse_cli, built):
     resonance, scan = _write_logs(tmp_path, built)
     config = tmp_path / "fast.toml"
     config.write_text("[sampler]\nsteps = 2000\n[surrogate]\npoints = 18\n", encoding="utf-8")

@@ -4,35 +4,12 @@ import argparse
 import json
 import re
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+from user_facing import TACTILE, assert_readable, run_cli
 
 from workflow.cli import build_parser, main
-
-REPR = re.compile(r"\w+\(\w+=|[\[\]{}]")
-"""Python reprs in human output: ``Law(q0=...)``, lists, dicts."""
-NUMBER = re.compile(r"\d+(?:\.\d+)?")
-MAX_DIGITS = 8
-"""Most significant digits a number in human output may show."""
-
-
-def assert_readable(text: str) -> None:
-    """No Python repr, no long float, micrometres as µm (file paths, which may hold anything, are skipped)."""
-    words = " ".join(word for word in text.split() if "/" not in word or word in ("m/s", "pm/V", "s^2/m^2", "s/m"))
-    assert not REPR.search(words), text
-    assert all(len(n.replace(".", "").lstrip("0")) <= MAX_DIGITS for n in NUMBER.findall(words)), text
-    assert not re.search(r"\bum\b", words), text
-
-
-def run_cli(capsys, *argv):
-    try:
-        status = main(list(argv))
-    except SystemExit as exit_:
-        status = exit_.code
-    out, err = capsys.readouterr()
-    return status, out, err
 
 
 def test_evaluate_json_has_the_contract_keys(capsys):
@@ -86,7 +63,7 @@ def test_bad_input_gives_one_error_line_and_a_non_zero_exit(capsys, argv, words)
 
 def test_console_script_error_has_no_traceback():
     result = subprocess.run(
-        [sys.executable, "-m", "workflow", "evaluate", "--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "0.7"],
+        [*TACTILE, "evaluate", "--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "0.7"],
         capture_output=True,
         text=True,
     )

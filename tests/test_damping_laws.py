@@ -151,6 +151,7 @@ def test_a_wrong_only_law_is_flagged_and_the_answer_falls_back_to_the_flexible_l
     assert coverage(fit.answer, THRESHOLD_TRUTH, velocity) >= 0.6 > 0.3 >= coverage(fit.best.posterior(), THRESHOLD_TRUTH, velocity)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("truth", [THRESHOLD_TRUTH, TRUE_LAW], ids=["threshold", "quadratic"])
 def test_flexible_law_covers_a_threshold_and_a_quadratic_truth_over_the_measured_range(truth):
     """A short chain (2000 steps) on seed 1; the converged chains on more seeds are the slow test below."""

@@ -12,6 +12,7 @@ import unicodedata
 from pathlib import Path
 
 import pytest
+from user_facing import HIDDEN_REFERENCE
 
 from workflow import logformat
 from workflow.cli import build_parser
@@ -27,8 +28,6 @@ SOURCES = sorted(
     for path in (ROOT / folder).rglob("*")
     if path.suffix in {".py", ".toml", ".md"}
 )
-HIDDEN_REFERENCE = re.compile(r"\b" + "spec".upper() + r"\b")
-"""The name of the specification file users never see, as a whole word in capitals."""
 LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)(?:\s+\"[^\"]*\")?\)")
 FENCE = re.compile(r"^```.*?^```", re.MULTILINE | re.DOTALL)
 INLINE_CODE = re.compile(r"`[^`\n]*`")

@@ -4,7 +4,7 @@ import json
 import re
 
 import pytest
-from test_cli import assert_readable, run_cli
+from user_facing import assert_readable, run_cli
 
 
 def test_fem_evaluate_json_lists_the_modes(capsys):

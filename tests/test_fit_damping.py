@@ -7,7 +7,7 @@ import re
 
 import numpy as np
 import pytest
-from test_cli import assert_readable
+from user_facing import assert_readable, run_cli
 
 from workflow import progress
 from workflow.cli import main
@@ -88,15 +88,6 @@ def test_half_power_estimates_fall_with_voltage(campaign):
     estimates = sweep_estimates(campaign)
     assert np.all(np.diff(estimates.quality_factor) < 0)
     assert np.all(np.diff(estimates.peak_velocity) > 0)
-
-
-def run_cli(capsys, *argv):
-    try:
-        status = main([str(a) for a in argv])
-    except SystemExit as exit_:
-        status = exit_.code
-    out, err = capsys.readouterr()
-    return status, out, err
 
 
 def test_cli_writes_posterior_figures_and_leaves_the_log_alone(tmp_path, capsys):

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
-from test_bench_safety import DevicePort
+from ports import DevicePort
 
 from instruments.drivers.errors import InstrumentError
 from instruments.drivers.generator import FunctionGenerator

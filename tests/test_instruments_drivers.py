@@ -1,6 +1,7 @@
 """Drivers against recorded exchanges: a replay port checks every line sent and plays the replies."""
 
 import pytest
+from ports import ReplayPort
 
 from instruments.drivers.errors import (
     ConnectionLost,
@@ -11,34 +12,6 @@ from instruments.drivers.errors import (
 )
 from instruments.drivers.generator import FunctionGenerator
 from instruments.drivers.vibrometer import VelocityReading, Vibrometer, format_range, parse_range
-
-
-class ReplayPort:
-    """A serial port that expects ``exchanges`` in order: (line sent, reply bytes or None)."""
-
-    port = "replay"
-
-    def __init__(self, exchanges):
-        self.exchanges = list(exchanges)
-        self.pending = b""
-
-    def write(self, data: bytes) -> int:
-        assert self.exchanges, f"unexpected write {data!r}"
-        sent, reply = self.exchanges.pop(0)
-        assert data == sent.encode() + b"\n"
-        self.pending += reply or b""
-        return len(data)
-
-    def read_until(self, terminator=b"\n"):
-        line, found, rest = self.pending.partition(terminator)
-        self.pending = rest
-        return line + found
-
-    def reset_input_buffer(self):
-        self.pending = b""
-
-    def done(self) -> bool:
-        return not self.exchanges
 
 
 def test_constructors_do_no_io():

@@ -3,10 +3,10 @@ refused settings never logged, bounded plan sizes."""
 
 import os
 import subprocess
-import sys
 import threading
 
 import pytest
+from user_facing import TACTILE
 
 from instruments.drivers.errors import InstrumentError
 from instruments.procedures.logwriter import LogWriter, read_log
@@ -63,7 +63,7 @@ def test_a_second_procedure_on_a_log_in_use_fails_at_once_and_the_first_complete
 def test_cli_refuses_a_log_held_by_another_process_naming_it(tmp_path):
     path = tmp_path / "c.csv"
     with LogWriter(path, {"procedure": "campaign"}):
-        result = subprocess.run([sys.executable, "-m", "workflow", "measure", "campaign", "--simulate",
+        result = subprocess.run([*TACTILE, "measure", "campaign", "--simulate",
                                  "--points", "5", "--voltages", "5", "--out", str(path)],
                                 capture_output=True, text=True, timeout=120)
         assert (tmp_path / "c.csv.lock").read_text().strip() == str(os.getpid())

@@ -106,9 +106,9 @@ def test_the_report_tables_each_stage_and_the_case_study(tmp_path):
     assert "it uses its resonance frequency, deflection per volt, scan mode shape;" in text
     assert "glue_um is at upper prior bound: the prior, not the data, limits it." in text
     directions = [
-        {"calibrated_on": "data/built_plates/paper_P1.csv", "predicted": "data/built_plates/paper_P2.csv",
+        {"calibrated_on": "paper_P1.csv", "predicted": "paper_P2.csv",
          "measured_hz": 23.95e3, "predicted_hz": (23.37e3, 23.90e3, 24.41e3), "error": -0.002, "inside": True},
-        {"calibrated_on": "data/built_plates/paper_P2.csv", "predicted": "data/built_plates/paper_P1.csv",
+        {"calibrated_on": "paper_P2.csv", "predicted": "paper_P1.csv",
          "measured_hz": 23.16e3, "predicted_hz": (22.92e3, 23.40e3, 23.93e3), "error": 0.010, "inside": True},
     ]
     text = writers["case_study"](run, directions)

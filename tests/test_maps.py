@@ -4,7 +4,7 @@ import json
 
 import numpy as np
 import pytest
-from test_cli import run_cli
+from user_facing import run_cli
 
 from workflow.execution.cache import EvaluationCache
 from workflow.models.fem import FemSettings

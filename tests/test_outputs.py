@@ -4,7 +4,7 @@ a rerun into the same folder works, and ``--force`` overwrites the others."""
 import json
 
 import pytest
-from test_fit_damping import run_cli
+from user_facing import SAMPLE_CAMPAIGN, run_cli
 
 from workflow.errors import InputFileError
 from workflow.pipeline.outputs import RECORD, output_folder
@@ -114,11 +114,10 @@ def test_maps_refuses_a_foreign_figure_reruns_and_overwrites_with_force(maps_fol
     (("run", "--out"), "damping/q_of_v.png"),
 ])
 def test_fit_damping_and_run_refuse_a_foreign_output_before_any_work(tmp_path, capsys, command, name):
-    from test_boundaries import SAMPLE
 
     out = tmp_path / "out"
     _write(out, name, FOREIGN)
-    argv = [str(SAMPLE) if part == "LOG" else part for part in command]
+    argv = [str(SAMPLE_CAMPAIGN) if part == "LOG" else part for part in command]
     status, _, err = run_cli(capsys, *argv, out)
     assert status == 2 and len(err.strip().splitlines()) == 1, err
     assert name in err and "--force" in err

@@ -2,12 +2,12 @@
 
 import csv
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 import serial
+from user_facing import TACTILE
 
 from instruments.drivers.errors import ConnectionLost, InstrumentError, SafetyLimitError
 from instruments.procedures.logwriter import LogWriter, read_log
@@ -199,7 +199,7 @@ def test_cli_bad_port_and_garbled_replies_are_one_line_errors(tmp_path, capsys):
 def test_shipped_sample_campaign_regenerates_identically(tmp_path):
     shipped = ROOT / "data" / "sample_campaign.csv"
     out = tmp_path / "sample_campaign.csv"
-    subprocess.run([sys.executable, "-c", "import sys; from workflow.cli import main; sys.exit(main())", "measure",
+    subprocess.run([*TACTILE, "measure",
                     "campaign", "--simulate", "--seed", "0", "--restart", "--out", str(out)],
                    check=True, capture_output=True, cwd=tmp_path)
     assert out.read_text() == shipped.read_text()

@@ -4,6 +4,7 @@ procedure and its CLI, the closed-form decays, and Q(v) recovered from ring-down
 import numpy as np
 import pytest
 import serial
+from ports import ReplayPort
 
 from instruments.drivers.errors import ConnectionLost, SafetyLimitError
 from instruments.drivers.generator import FunctionGenerator
@@ -12,7 +13,6 @@ from instruments.procedures.simulated import simulate_campaign, simulate_ringdow
 from instruments.procedures.sweeps import open_station
 from instruments.simulator import FaultSettings, default_bench_settings
 from instruments.simulator.generator import GeneratorDevice
-from tests.test_instruments_drivers import ReplayPort
 from workflow.cli import main
 from workflow.damping.fit import fit_law, parameter_summary, velocity_grid
 from workflow.damping.laws import ConstantQ, LinearLoss, QuadraticLoss

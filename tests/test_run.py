@@ -6,7 +6,8 @@ import json
 import re
 
 import pytest
-from test_docs import HIDDEN_REFERENCE
+from tiny_config import TINY
+from user_facing import HIDDEN_REFERENCE
 
 from workflow import progress
 from workflow.cli import main
@@ -15,36 +16,6 @@ from workflow.pipeline.config import default_config, tomllib
 from workflow.pipeline.outputs import RECORD
 from workflow.pipeline.steps import STEPS, sweep_widths
 from workflow.units import MM
-
-TINY = """
-[design]
-ceramic_thicknesses_mm = [1.0]
-[maps]
-grid = 9
-fem_grid = 2
-fem_ceramic_thicknesses_mm = [1.0]
-[fem]
-accuracy = 0.05
-survey_accuracy = 0.0
-elements_per_ceramic = 2
-elements_per_layer = 1
-elements_across_half_width = 3
-width_points = 3
-fine_width_min_mm = 48.0
-fine_width_max_mm = 50.0
-[campaign]
-voltages_v = [5.0, 15.0]
-points_per_sweep = 21
-ringdown_voltages_v = [5.0, 15.0]
-ringdown_samples = 40
-[damping]
-laws = ["quadratic"]
-walkers = 32
-max_steps = 3000
-posterior_draws = 8
-[loop]
-enabled = false
-"""
 
 
 @pytest.fixture(scope="module")

@@ -4,7 +4,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_run import TINY as SMALL
+from tiny_config import TINY as SMALL
 
 from workflow.pipeline.config import load_config
 from workflow.pipeline.runner import RunContext, run_steps
@@ -18,22 +18,25 @@ TINY = (SMALL.replace("accuracy = 0.05", "accuracy = 0.0").replace("ringdown_vol
 DISTRIBUTED_STEPS = ("damped_design", "fem_optima", "fem_maps", "width_sweep")
 
 
-def _run(config, out: Path, scheduler):
-    steps = [step for step in STEPS if step.key in ("logs", "analytical_optima", "damping_fit") + DISTRIBUTED_STEPS]
-    context = RunContext(config=config, out=out, scheduler=scheduler)
-    return run_steps(context, steps).results
+def _run(context: RunContext, keys) -> dict:
+    return run_steps(context, [step for step in STEPS if step.key in keys]).results
 
 
 def test_local_and_dask_runs_give_identical_numbers(tmp_path, monkeypatch):
-    """Bit-identical with SuperLU (PARDISO's threaded factorisation differs in the last bits between process layouts)."""
+    """Bit-identical with SuperLU (PARDISO's threaded factorisation differs in the last bits between process layouts).
+
+    The damping fit runs once (its laws are not distributed with one law); the steps that distribute their
+    evaluations run locally and on the cluster from its results."""
     distributed = pytest.importorskip("distributed")
     monkeypatch.setenv("TACTILE_SPARSE_SOLVER", "superlu")
     path = tmp_path / "tiny.toml"
     path.write_text(TINY)
     config = load_config(path)
-    local = _run(config, tmp_path / "local", None)
+    fitted = _run(RunContext(config=config, out=tmp_path / "fit"), ("logs", "analytical_optima", "damping_fit"))
+    local = _run(RunContext(config=config, out=tmp_path / "local", results=dict(fitted)), DISTRIBUTED_STEPS)
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
-        remote = _run(config, tmp_path / "dask", cluster.scheduler_address)
+        remote = _run(RunContext(config=config, out=tmp_path / "dask", scheduler=cluster.scheduler_address,
+                                 results=dict(fitted)), DISTRIBUTED_STEPS)
     hp = 1e-3
     design_local, design_remote = local["damped_design"][0].optima[hp], remote["damped_design"][0].optima[hp]
     for name in design_local.draws:

@@ -2,11 +2,11 @@
 
 import json
 import subprocess
-import sys
 
 import numpy as np
 import pytest
 import serial
+from user_facing import TACTILE
 
 from instruments.simulator import (
     Bench,
@@ -203,7 +203,7 @@ def test_pymeasure_agilent33500_client_drives_the_simulator_unchanged():
 
 def test_pty_server_end_to_end():
     process = subprocess.Popen(
-        [sys.executable, "-c", "import sys; from workflow.cli import main; sys.exit(main())", "simulate", "--pty"],
+        [*TACTILE, "simulate", "--pty"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
     try:

@@ -53,7 +53,7 @@ def register(subparsers) -> None:
         description="Evaluate the deflection and the resonance frequency on a grid over the whole "
         "Table 1 box of wavelength and resonator thickness for one ceramic thickness, mark the 25 kHz "
         "line, the h_i limit and the optimum, and write the maps as PNG. With --model fem the "
-        "evaluations are cached on disk ($TACTILE_CACHE or .cache/tactile) and run on the local "
+        "evaluations are cached on disk ($TACTILE_CACHE, else the user cache folder, ~/.cache/tactile on Linux) and run on the local "
         "cores, or on a Dask cluster with --scheduler.",
     )
     add_model_option(parser)

@@ -9,8 +9,9 @@ warning and recomputed).  Writes go to a temporary file in the cache directory a
 renamed into place, so a reader never sees a half-written entry and concurrent writers
 cannot corrupt one.
 
-The directory is ``$TACTILE_CACHE`` if set, else ``.cache/tactile`` under the working
-directory.
+The directory is ``$TACTILE_CACHE`` if set, else the platform's user cache folder
+(``platformdirs.user_cache_dir("tactile")``: ``~/.cache/tactile`` on Linux, ``~/Library/Caches/tactile``
+on macOS, ``%LOCALAPPDATA%\\tactile\\Cache`` on Windows), whatever the working directory.
 """
 
 import dataclasses
@@ -24,19 +25,23 @@ from pathlib import Path
 from typing import Callable, Iterable, List, Optional
 
 import numpy as np
+import platformdirs
 
 from workflow.execution import datafile
 from workflow.execution.parallel import map_evaluations
 
 CACHE_VARIABLE = "TACTILE_CACHE"
 """Environment variable naming the cache directory."""
-DEFAULT_DIRECTORY = Path(".cache") / "tactile"
-"""Cache directory relative to the working directory when the variable is unset."""
 
 
 def default_directory() -> Path:
-    """``$TACTILE_CACHE`` or ``./.cache/tactile``."""
-    return Path(os.environ.get(CACHE_VARIABLE) or DEFAULT_DIRECTORY)
+    """``$TACTILE_CACHE``, else the user cache folder of the platform (``~/.cache/tactile`` on Linux)."""
+    return Path(os.environ.get(CACHE_VARIABLE) or platformdirs.user_cache_dir("tactile", appauthor=False))
+
+
+def package_directory(package) -> str:
+    """The folder of an imported package (``package.__path__``), for :func:`source_version`."""
+    return str(Path(package.__path__[0]))
 
 
 @lru_cache(maxsize=None)

@@ -13,11 +13,10 @@ evaluation ended on, cached as "fem-surface".
 """
 
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 
 import numpy as np
 
-from workflow.execution.cache import EvaluationCache, cached_map, source_version
+from workflow.execution.cache import EvaluationCache, cached_map, package_directory, source_version
 from workflow.models import fem, materials
 from workflow.models.fem import FemResult, FemSettings, evaluate_fem
 from workflow.models.fem.accuracy import FemAccuracy, mesh_for_level
@@ -25,7 +24,7 @@ from workflow.models.fem.sensitivity import DESIGN_PARAMETERS, best_mode_gradien
 from workflow.models.fem.surface import SurfaceModes, evaluate_surface
 from workflow.models.plate import Plate
 
-FEM_SOURCE = str(Path(fem.__file__).parent)
+FEM_SOURCE = package_directory(fem)
 """Directory whose sources version the cached FEM results."""
 
 

@@ -17,10 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
+from instruments import simulator
 from instruments.simulator import builtplate as simulated
 from workflow import logformat
 from workflow.errors import InputFileError
-from workflow.execution.cache import EvaluationCache, content_key, source_version
+from workflow.execution.cache import EvaluationCache, content_key, package_directory, source_version
 from workflow.logformat import read_metadata
 from workflow.models import fem
 from workflow.models.builtplate import BuiltPlate, PlateDeviations
@@ -149,7 +150,7 @@ def built_plate_model(nominal: Plate, deviations: PlateDeviations = PlateDeviati
         "plate": nominal,
         "deviations": deviations,
         "settings": settings.as_dict(),
-        "code": [source_version(str(Path(module.__file__).parent)) for module in (simulated, fem)],
+        "code": [source_version(package_directory(package)) for package in (simulator, fem)],
     })
     found, value = cache.load(key)
     if not found:

@@ -7,7 +7,9 @@ run through the real procedures and write built-plate logs into ``loop/`` of the
 calibration reads only those logs, never the deviations.
 """
 
+from contextlib import ExitStack
 from dataclasses import dataclass
+from importlib import resources
 from pathlib import Path
 
 from workflow.errors import TactileError
@@ -19,9 +21,8 @@ LOOP_FOLDER = "loop"
 """Sub-folder of the run's output with the loop's logs and calibration."""
 LOOP_OUTPUTS = ("*.csv", "calibration.json", "*.png")
 """Glob patterns of the files the loop writes into its sub-folder."""
-PAPER_LOGS = tuple(Path(__file__).resolve().parents[2] / "data" / "built_plates" / name
-                   for name in ("paper_P1.csv", "paper_P2.csv"))
-"""The published plates' logs (the case study)."""
+PAPER_LOGS = ("paper_P1.csv", "paper_P2.csv")
+"""The published plates' logs (the case study), shipped in :mod:`workflow.calibration.published`."""
 SCAN_VOLTAGE = 5.0
 """Drive of the deflection scan [V peak across the ceramics]."""
 
@@ -196,6 +197,9 @@ def case_study(context: RunContext):
 
     if not (context.config["loop"]["enabled"] and context.config["loop"]["case_study"]):
         return None
-    first, second = (measured_plate(read_built_plate(path)) for path in PAPER_LOGS)
+    with ExitStack() as stack:
+        published = resources.files("workflow.calibration.published")
+        paths = [stack.enter_context(resources.as_file(published / name)) for name in PAPER_LOGS]
+        first, second = (measured_plate(read_built_plate(path)) for path in paths)
     model, fem = calibration_model(context)
     return cross_predictions(first, second, load_settings(), model.evaluate_plates, fem)

@@ -80,7 +80,7 @@ def case_study_section(context: RunContext, directions) -> str:
     worst = max(abs(d["error"]) for d in directions)
     return (
         "## Case study: the published plates\n\n"
-        "Each published plate's measured resonance (data/built_plates, docs/calibration.md) calibrates the model "
+        "Each published plate's measured resonance (shipped with tactile, docs/calibration.md) calibrates the model "
         "alone; the calibration then predicts the other plate.\n\n"
         + table(("calibrated on", "predicts", "measured [kHz]", "predicted [kHz] (90 %)", "error", "inside 90 %"), rows)
         + f"\n\nIn plain words: one plate predicts the other within {worst * 100:.1f} % of its measured frequency "

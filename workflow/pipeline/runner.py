@@ -13,8 +13,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional
 
+import instruments
+import workflow
 from workflow.errors import TactileError
-from workflow.execution.cache import EvaluationCache, content_key, source_version
+from workflow.execution.cache import EvaluationCache, content_key, package_directory, source_version
 from workflow.progress import format_duration
 
 
@@ -79,14 +81,13 @@ class Step:
 
 def _step_key(context: RunContext, step: Step) -> str:
     """Content key of a step's result: step, configuration, logs' bytes, code."""
-    package = Path(__file__).resolve().parents[1]
     logs = [hashlib.sha256(Path(path).read_bytes()).hexdigest() for path in context.results.get("logs", [])]
     return content_key(
         {
             "step": step.key,
             "config": context.config,
             "logs": logs,
-            "code": [source_version(str(package)), source_version(str(package.parent / "instruments"))],
+            "code": [source_version(package_directory(workflow)), source_version(package_directory(instruments))],
         }
     )
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from workflow.models.fem.elements import BRICKS, ReferenceBrick
+from workflow.models.fem.elements import ReferenceBrick, brick
 from workflow.models.fem.settings import FemSettings
 from workflow.models.plate import Plate
 
@@ -23,7 +23,7 @@ GLUE_ELEMENTS = 1
 
 @dataclass(frozen=True, eq=False)
 class BrickMesh:
-    """Quadratic bricks on a tensor-product grid, some grid cells removed.
+    """Bricks on a tensor-product grid, some grid cells removed.
 
     Attributes
     ----------
@@ -38,7 +38,7 @@ class BrickMesh:
     polarity : (n,) float array
         +1/-1 poling sign of ceramic elements, 0 for the resonator [-].
     node_number : 3D int array
-        Node number on the (2 n_x + 1, 2 n_y + 1, 2 n_z + 1) grid of quadratic nodes, -1 if unused.
+        Node number on the (p_x n_x + 1, p_y n_y + 1, p_z n_z + 1) grid of nodes (p: the brick's degrees), -1 if unused.
     connectivity : (n, n_local) int array
         Node numbers of each element in the order of ``brick.local_nodes``.
     """
@@ -65,12 +65,11 @@ class BrickMesh:
         return np.stack([np.diff(self.edges[axis])[self.cells[:, axis]] for axis in range(3)], axis=1)
 
     def node_grid_coordinates(self, axis: int) -> np.ndarray:
-        """Coordinates of the quadratic nodes along one axis (corners and midpoints) [m]."""
+        """Coordinates of the node grid along one axis (element edges and the nodes between) [m]."""
         edges = self.edges[axis]
-        grid = np.empty(2 * len(edges) - 1)
-        grid[0::2] = edges
-        grid[1::2] = (edges[:-1] + edges[1:]) / 2
-        return grid
+        inner = self.brick.node_coordinates(axis)[:-1]
+        grid = edges[:-1, None] + np.diff(edges)[:, None] * inner[None, :]
+        return np.concatenate([grid.ravel(), edges[-1:]])
 
     @property
     def coordinates(self) -> np.ndarray:
@@ -167,15 +166,15 @@ def quarter_plate_mesh(plate: Plate, settings: FemSettings) -> BrickMesh:
     cells, cell_ceramic, material = cells[keep], cell_ceramic[keep], layer[keep]
     polarity = np.where(material == CERAMIC, np.asarray(plate.polarities)[cell_ceramic], 0).astype(float)
 
-    return brick_mesh(BRICKS[settings.element], (x_edges, y_edges, z_edges), cells, material, polarity)
+    return brick_mesh(brick(settings.element), (x_edges, y_edges, z_edges), cells, material, polarity)
 
 
-def brick_mesh(brick: ReferenceBrick, edges: tuple, cells, material, polarity) -> BrickMesh:
+def brick_mesh(element: ReferenceBrick, edges: tuple, cells, material, polarity) -> BrickMesh:
     """A :class:`BrickMesh` of the kept ``cells`` of a tensor grid, its nodes numbered.
 
     Parameters
     ----------
-    brick : ReferenceBrick
+    element : ReferenceBrick
     edges : tuple of 3 arrays
         Element boundaries along x, y, z [m].
     cells : (n, 3) int array
@@ -184,20 +183,21 @@ def brick_mesh(brick: ReferenceBrick, edges: tuple, cells, material, polarity) -
         Material id and poling sign per element.
     """
     grid_shape = tuple(len(axis_edges) - 1 for axis_edges in edges)
-    grid_nodes = 2 * cells[:, None, :] + brick.local_nodes[None]  # (n, n_local, 3)
-    node_shape = tuple(2 * n + 1 for n in grid_shape)
+    degrees = np.asarray(element.degrees)
+    grid_nodes = degrees * cells[:, None, :] + element.local_nodes[None]  # (n, n_local, 3)
+    node_shape = tuple(p * n + 1 for p, n in zip(element.degrees, grid_shape))
     flat = np.ravel_multi_index(tuple(grid_nodes.reshape(-1, 3).T), node_shape)
     used, inverse = np.unique(flat, return_inverse=True)
     node_number = np.full(int(np.prod(node_shape)), -1)
     node_number[used] = np.arange(len(used))
     return BrickMesh(
-        brick=brick,
+        brick=element,
         edges=tuple(edges),
         cells=cells,
         material=material,
         polarity=polarity,
         node_number=node_number.reshape(node_shape),
-        connectivity=inverse.reshape(len(cells), brick.n_nodes),
+        connectivity=inverse.reshape(len(cells), element.n_nodes),
     )
 
 

@@ -35,7 +35,7 @@ def probe_matrix(mesh: BrickMesh, points: np.ndarray, component: int = 2) -> sp.
     located = [_locate(mesh.edges[axis], points[:, axis]) for axis in range(3)]
     cells = np.column_stack([index for index, _ in located])
     reference = np.column_stack([xi for _, xi in located])
-    grid_nodes = 2 * cells[:, None, :] + mesh.brick.local_nodes[None]
+    grid_nodes = np.asarray(mesh.brick.degrees) * cells[:, None, :] + mesh.brick.local_nodes[None]
     nodes = mesh.node_number[tuple(np.moveaxis(grid_nodes, -1, 0))]
     rows = np.repeat(np.arange(len(points)), mesh.brick.n_nodes)
     return sp.csr_matrix(

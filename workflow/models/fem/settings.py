@@ -3,7 +3,7 @@
 from dataclasses import asdict, dataclass
 
 from workflow.errors import TactileError
-from workflow.models.fem.elements import BRICKS
+from workflow.models.fem.elements import BRICKS, brick
 
 
 PIEZO_MODELS = ("eigenstrain", "coupled")
@@ -28,7 +28,8 @@ class FemSettings:
     n_modes : int
         Eigenmodes computed nearest the analytical resonance [-].
     element : str
-        Element type: "serendipity20" or "lagrange27" (see :data:`elements.BRICKS`).
+        Element type: "lagrange27", "serendipity20" or "lagrange-PX-PY-PZ", tensor-product Lagrange of
+        degrees PX, PY, PZ along x, y, z (:func:`elements.brick`).
     piezo : str
         Piezo model: "eigenstrain" (the converse effect as an eigenstress of a uniform field, fast,
         the paper's model) or "coupled" (the electric potential as an unknown; resonance,
@@ -48,8 +49,11 @@ class FemSettings:
     piezo: str = "eigenstrain"
 
     def __post_init__(self):
-        if self.element not in BRICKS:
-            raise TactileError(f"unknown FEM element {self.element!r}; choose one of {', '.join(BRICKS)}")
+        try:
+            brick(self.element)
+        except KeyError:
+            raise TactileError(f"unknown FEM element {self.element!r}; choose one of {', '.join(BRICKS)} or "
+                               "lagrange-PX-PY-PZ (degrees 1 to 6 along x, y, z)") from None
         if self.piezo not in PIEZO_MODELS:
             raise TactileError(f"unknown piezo model {self.piezo!r}; choose one of {', '.join(PIEZO_MODELS)}")
         counts = {name: value for name, value in asdict(self).items() if name not in ("element", "grading", "piezo")}

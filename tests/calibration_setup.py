@@ -1,0 +1,19 @@
+"""What the calibration tests share: a coarse mesh, the published plates' geometry, the hidden deviations of the
+simulated built plates and fast sampler settings (the fixtures built on them are in conftest.py)."""
+
+from dataclasses import replace
+
+import numpy as np
+
+from workflow.calibration.parameters import default_settings
+from workflow.models.fem import FemSettings
+from workflow.models.plate import Plate
+
+COARSE = FemSettings(elements_per_ceramic=2, elements_per_layer=1, elements_across_half_width=2, n_modes=3)
+"""A coarse mesh (0.4 s an evaluation): the tests check the machinery, not the physics' last per cent."""
+P1 = Plate(20.56e-3, 0.75e-3, 1.0e-3, 49e-3)
+P2 = Plate(15.66e-3, 0.5e-3, 0.5e-3, 49e-3)
+TRUTH = np.array([0.93, 1.04, 30e-6, -15e-6])
+"""Hidden deviations of the simulated built plates: ceramic and resonator factors, glue [m], h_i offset [m]."""
+FAST = replace(default_settings(), steps=2000, surrogate_points=18)
+"""Calibration settings with a short chain and a small surrogate design."""
