@@ -1,78 +1,98 @@
-"""FEM accuracy on the thin designs: the mesh levels of accuracy control against their converged limit.
+"""FEM accuracy: the levels of accuracy control against their converged limit, plate by plate.
 
-For each plate, the eigenstrain FEM on the levels 6, 8, 10, 12, 16 (elements per ceramic, the mesh
-following the geometry), the converged frequency and deflection by Richardson extrapolation of the
-two finest levels at the estimator's rate, and for each level its true relative error against that
-limit beside the estimate accuracy control gives it (from the level before), and the old fixed default
-mesh for reference.  Prints one JSON object.  Slow (minutes): run it on purpose.
+For each plate, the FEM (eigenstrain, or ``--piezo coupled``) on the levels 2 to 6 (the polynomial degree
+of the spectral elements on the mesh that follows the geometry), the converged frequency and deflection
+extrapolated from the three highest levels with the rate fitted to them
+(:func:`~workflow.models.fem.accuracy.extrapolated_limit`: independent of the estimator's assumed rate),
+and for each level its true relative error against that limit beside the estimate accuracy control gives
+it (from the level below).  Prints one JSON object; ``--write-references FILE`` also stores the limits,
+the converged values bench/bench_fem.py measures both discretisations against.  Slow (the level-6
+meshes have 10^5 unknowns and more): run it on purpose.
 
-    python bench/bench_accuracy.py [--levels 6 8 10 12 16]
+    python bench/bench_accuracy.py [--levels 2 3 4 5 6] [--piezo eigenstrain|coupled] [--plates NAME ...]
+                                   [--write-references bench/fem_references.json]
 """
 
 import argparse
 import json
+import os
 import time
+from pathlib import Path
 
-from workflow.models.fem import FemSettings, evaluate_fem
-from workflow.models.fem.accuracy import estimate_error, mesh_for_level
+from workflow.errors import TactileError
+from workflow.models.fem import evaluate_fem
+from workflow.models.fem.accuracy import estimate_error, extrapolated_limit, mesh_for_level
 from workflow.models.plate import ORIGINAL_PLATE, Plate
 
 PLATES = {
-    "original plate (lambda 24, h_i 2, h_p 1, b 49 mm)": ORIGINAL_PLATE,
-    "original plate at b 55 mm (clean mode)": ORIGINAL_PLATE.with_(width=55e-3),
-    "h_p 1 mm FEM optimum of the fixed mesh (lambda 21.52, h_i 0.897)": Plate(21.52e-3, 0.897e-3, 1e-3, 49e-3),
-    "P2 / h_p 0.5 mm design (lambda 15.66, h_i 0.5)": Plate(15.66e-3, 0.5e-3, 0.5e-3, 49e-3),
+    "original": ORIGINAL_PLATE,
+    "original_b55": ORIGINAL_PLATE.with_(width=55e-3),
+    "hp1_optimum": Plate(21.515e-3, 0.916e-3, 1e-3, 49e-3),
+    "P2": Plate(15.66e-3, 0.5e-3, 0.5e-3, 49e-3),
 }
+"""The plates of the study: the original plate (mixed working mode at b = 49 mm), the same plate at
+b = 55 mm (a clean mode), the h_p = 1 mm FEM optimum of the former quadratic meshes, and the published P2
+(a transverse mode mixes in)."""
 
 
-def study(plate: Plate, levels) -> dict:
+def limit(results: dict, levels, name: str) -> float | None:
+    """The extrapolated limit of a result attribute over the three highest ``levels`` (None if not monotone)."""
+    top = levels[-3:]
+    try:
+        return extrapolated_limit([getattr(results[k], name) for k in top], top)[0]
+    except TactileError:
+        return None
+
+
+def study(plate: Plate, levels, piezo: str) -> dict:
     results, seconds = {}, {}
     for level in levels:
         start = time.perf_counter()
-        results[level] = evaluate_fem(plate, 54.0, 15.0, mesh_for_level(plate, level))
+        results[level] = evaluate_fem(plate, 54.0, 15.0, mesh_for_level(plate, level, piezo=piezo))
         seconds[level] = time.perf_counter() - start
-    fine, coarse = levels[-1], levels[-2]
-    limit = estimate_error(results[fine], results[coarse], fine, coarse)
-    f_converged = results[fine].frequency / (1 + limit.frequency)
-    w_converged = results[fine].deflection / (1 + limit.deflection)
-    default = evaluate_fem(plate, 54.0, 15.0, FemSettings())
+    f_converged, w_converged = limit(results, levels, "frequency"), limit(results, levels, "deflection")
     rows = []
     for previous, level in zip(levels[:-1], levels[1:]):
         estimate = estimate_error(results[level], results[previous], level, previous)
-        rows.append(
-            {
-                "level": level,
-                "dofs": results[level].n_dofs,
-                "seconds": round(seconds[level], 2),
-                "f_hz": round(results[level].frequency, 2),
-                "w_um": round(results[level].deflection * 1e6, 5),
-                "indicator": round(results[level].best.transverse_indicator, 3),
-                "f_error_true": results[level].frequency / f_converged - 1,
-                "f_error_estimate": estimate.frequency,
-                "w_error_true": results[level].deflection / w_converged - 1,
-                "w_error_estimate": estimate.deflection,
-            }
-        )
+        result = results[level]
+        rows.append({
+            "level": level,
+            "dofs": result.n_dofs,
+            "seconds": round(seconds[level], 2),
+            "f_hz": round(result.frequency, 3),
+            "w_um": round(result.deflection * 1e6, 5),
+            "indicator": round(result.best.transverse_indicator, 3),
+            "f_error_true": None if f_converged is None else result.frequency / f_converged - 1,
+            "f_error_estimate": estimate.frequency,
+            "w_error_true": None if w_converged is None else result.deflection / w_converged - 1,
+            "w_error_estimate": estimate.deflection,
+            "mode_match": round(estimate.mode_match, 4),
+        })
     return {
+        "plate_mm": {"lambda": plate.wavelength * 1e3, "h_i": plate.resonator_thickness * 1e3,
+                     "h_p": plate.ceramic_thickness * 1e3, "b": plate.width * 1e3},
         "f_converged_hz": f_converged,
-        "w_converged_um": w_converged * 1e6,
+        "w_converged_um": None if w_converged is None else w_converged * 1e6,
         "levels": rows,
-        "old_default_mesh": {
-            "dofs": default.n_dofs,
-            "f_hz": default.frequency,
-            "w_um": default.deflection * 1e6,
-            "indicator": default.best.transverse_indicator,
-            "f_error": default.frequency / f_converged - 1,
-            "w_error": default.deflection / w_converged - 1,
-        },
     }
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--levels", type=int, nargs="+", default=[6, 8, 10, 12, 16])
+    parser.add_argument("--levels", type=int, nargs="+", default=[2, 3, 4, 5, 6])
+    parser.add_argument("--piezo", choices=("eigenstrain", "coupled"), default="eigenstrain")
+    parser.add_argument("--plates", nargs="+", choices=sorted(PLATES), default=sorted(PLATES))
+    parser.add_argument("--write-references", type=Path, help="store the converged values in this JSON file")
     args = parser.parse_args()
-    print(json.dumps({name: study(plate, args.levels) for name, plate in PLATES.items()}, indent=1))
+    figures = {"piezo": args.piezo, "cpu_load_1min": os.getloadavg()[0]}
+    figures.update({name: study(PLATES[name], sorted(args.levels), args.piezo) for name in args.plates})
+    if args.write_references:
+        stored = json.loads(args.write_references.read_text()) if args.write_references.is_file() else {}
+        for name in args.plates:
+            stored.setdefault(name, {})[args.piezo] = {key: figures[name][key] for key in ("f_converged_hz", "w_converged_um")}
+            stored[name][args.piezo]["levels"] = sorted(args.levels)[-3:]
+        args.write_references.write_text(json.dumps(stored, indent=1) + "\n")
+    print(json.dumps(figures, indent=1))
 
 
 if __name__ == "__main__":

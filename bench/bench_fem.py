@@ -13,11 +13,13 @@ model, all in the same run: ratios of times, and the results' agreement.
 ``--stages`` times the converged (0.2 %) evaluation stage by stage (mesh, assembly with its
 sparsity-pattern build, factorisation, eigen solve and its number of solves, responses; levels used;
 wall and CPU time), cold (first in the process) and warm (again: sparsity patterns cached), on
-the original plate and a thin design, for both piezo models; with ``--against TREE`` one evaluation
-runs in a fresh process with this code and one with another checkout (e.g. ``main``), giving the
-ratio of times (wall and CPU: on a loaded machine the CPU time is the steadier) and the results'
-agreement.  ``floor`` is the cost of the final level alone (one assembly, one factorisation and the
-solves ARPACK needs there): what an evaluation that guessed its level would still pay.
+the original plate, the h_p = 1 mm optimum and P2, for both piezo models, with each result's error
+against the converged values of ``bench/fem_references.json`` (bench/bench_accuracy.py); with
+``--against TREE`` one evaluation runs in a fresh process with this code and one with another checkout
+(e.g. the previous discretisation), giving the ratio of times (wall and CPU: on a loaded machine the CPU
+time is the steadier) and both results' errors.  ``floor`` is the cost of the final level alone (one
+assembly, one factorisation and the solves ARPACK needs there): what an evaluation that guessed its
+level would still pay.
 
     python bench/bench_fem.py [--repeat N] [--width-mm B] [--no-accurate] [--stages [--against TREE]]
 """
@@ -133,8 +135,16 @@ def accurate_paths(plate) -> dict:
     return paths
 
 
-THIN_DESIGN = {"wavelength": 21.515 * MM, "resonator_thickness": 0.916 * MM, "ceramic_thickness": 1.0 * MM, "width": 49 * MM}
-"""The h_p = 1 mm FEM optimum (docs/fem.md) [m]."""
+PLATES = {
+    "original": {},
+    "hp1_optimum": {"wavelength": 21.515 * MM, "resonator_thickness": 0.916 * MM, "ceramic_thickness": 1.0 * MM,
+                    "width": 49 * MM},
+    "P2": {"wavelength": 15.66 * MM, "resonator_thickness": 0.5 * MM, "ceramic_thickness": 0.5 * MM, "width": 49 * MM},
+}
+"""The plates of the stage timing, as changes of the original plate [m]: the h_p = 1 mm FEM optimum (docs/fem.md)
+and the published P2 (a transverse mode mixes in), both thin."""
+REFERENCES = Path(__file__).resolve().parent / "fem_references.json"
+"""Converged frequency and deflection of each plate and piezo model (bench/bench_accuracy.py --write-references)."""
 STAGES = {
     "mesh": ("mesh.py", "quarter_plate_mesh"),
     "assembly": ("assembly.py", "assemble_system"),
@@ -177,10 +187,10 @@ def profiled_evaluation(plate, piezo: str) -> dict:
     """Stage times and levels of one converged evaluation in this process."""
     levels = []
 
-    def evaluate_mesh(settings):
+    def evaluate_mesh(settings, trial):
         start = time.perf_counter()
-        result = evaluate_fem(plate, 54.0, 15.0, settings)
-        levels.append({"level": settings.elements_per_ceramic, "n_dofs": result.n_dofs, "s": time.perf_counter() - start})
+        result = evaluate_fem(plate, 54.0, 15.0, settings, trial)
+        levels.append({"element": settings.element, "n_dofs": result.n_dofs, "s": time.perf_counter() - start})
         return result
 
     profile = cProfile.Profile()
@@ -196,6 +206,7 @@ def profiled_evaluation(plate, piezo: str) -> dict:
         "f_khz": result.frequency / KHZ,
         "w_um": result.deflection / UM,
         "f_error_estimate": result.error.frequency,
+        "level": result.error.level,
     }
 
 
@@ -223,28 +234,40 @@ def cold_evaluation(tree: Path, plate_changes: dict, piezo: str) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+def true_errors(result: dict, reference: dict | None) -> dict:
+    """Relative errors of a result's f and w against the converged values (empty without references)."""
+    if not reference or reference.get("f_converged_hz") is None:
+        return {}
+    errors = {"f_error_true": result["f"] / reference["f_converged_hz"] - 1}
+    if reference.get("w_converged_um") is not None:
+        errors["w_error_true"] = result["w"] / (reference["w_converged_um"] * UM) - 1
+    return errors
+
+
 def stage_figures(against: Path | None) -> dict:
-    """Stage timing (cold and warm) of both piezo models on the original plate and the thin design."""
+    """Stage timing (cold and warm) of both piezo models on the plates of :data:`PLATES`."""
     here = Path(__file__).resolve().parent.parent
+    references = json.loads(REFERENCES.read_text()) if REFERENCES.is_file() else {}
     figures = {"cpu_load_1min": os.getloadavg()[0]}
-    for name, changes in (("original", {}), ("thin", THIN_DESIGN)):
+    for name, changes in PLATES.items():
         plate = ORIGINAL_PLATE.with_(**changes)
         for piezo in ("eigenstrain", "coupled"):
-            key = f"{name}_{piezo}"
+            reference = references.get(name, {}).get(piezo)
             entry = {"cold": profiled_evaluation(plate, piezo), "warm": profiled_evaluation(plate, piezo)}
+            warm = entry["warm"]
+            entry["warm"].update(true_errors({"f": warm["f_khz"] * KHZ, "w": warm["w_um"] * UM}, reference))
             if against is not None:  # both in fresh processes, one after the other
                 cold = cold_evaluation(here, changes, piezo)
                 previous = cold_evaluation(against, changes, piezo)
-                entry["fresh_process"] = {"s": cold["s"], "cpu_s": cold["cpu_s"]}
-                entry["previous_fresh_process"] = {"s": previous["s"], "cpu_s": previous["cpu_s"]}
+                entry["fresh_process"] = {"s": cold["s"], "cpu_s": cold["cpu_s"], **true_errors(cold, reference)}
+                entry["previous_fresh_process"] = {"s": previous["s"], "cpu_s": previous["cpu_s"],
+                                                   "f_error_estimate": previous["f_error"],
+                                                   **true_errors(previous, reference)}
                 entry["previous_over_this"] = previous["s"] / cold["s"]
                 entry["previous_over_this_cpu"] = previous["cpu_s"] / cold["cpu_s"]
-                entry["f_rel_diff_to_previous"] = abs(cold["f"] / previous["f"] - 1)
-                entry["w_rel_diff_to_previous"] = abs(cold["w"] / previous["w"] - 1)
-                entry["f_error_diff_to_previous"] = abs(cold["f_error"] - previous["f_error"])
             if piezo == "eigenstrain":
-                entry["floor"] = final_level_floor(plate, entry["warm"]["levels"][-1]["level"])
-            figures[key] = entry
+                entry["floor"] = final_level_floor(plate, warm["level"])
+            figures[f"{name}_{piezo}"] = entry
     figures["cpu_load_1min_after"] = os.getloadavg()[0]
     return figures
 

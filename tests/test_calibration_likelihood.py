@@ -32,8 +32,7 @@ GRID = np.array(grid_points(float(P1.length) / 2, float(P1.width) / 2, 7, 3))
 def built(coarse_model):
     """The simulated built plate: its FEM result and surface, and what its logs would measure."""
     plate = deviated_plate(P1, FAST.names, TRUTH)
-    (result,) = coarse_model.evaluate_plates([plate])
-    (surface,) = coarse_model.surfaces([plate], [result])
+    (result,), (surface,) = coarse_model.results_with_surfaces([plate])
     rng = np.random.default_rng(1)
     velocity = 2j * np.pi * result.frequency * surface.deflection(GRID[:, 0], GRID[:, 1], result.frequency, result.q)
     velocity *= 1 + 0.01 * rng.normal(size=len(GRID))
@@ -76,15 +75,15 @@ def test_new_surrogates_against_fresh_fem_evaluations(coarse_model):
     """ln g at the centre and the pattern at the scan points, fitted on the 18-point design, against 5 fresh points."""
     scan_points = (GRID[:, 0], GRID[:, 1])
     surrogate = build_plate_surrogate(P1, FAST.names, FAST.bounds, coarse_model.evaluate_plates, FAST.surrogate_points, 2,
-                                      FAST.surrogate_seed, coarse_model.surfaces, scan_points)
+                                      FAST.surrogate_seed, coarse_model.results_with_surfaces, scan_points)
     fresh = latin_hypercube(6, FAST.bounds, seed=11)[1:]
     plates = [deviated_plate(P1, FAST.names, theta) for theta in fresh]
-    results = coarse_model.evaluate_plates(plates)
+    results, surfaces = coarse_model.results_with_surfaces(plates)
     g = np.array([point_deflection_per_volt(r) for r in results])
     g_errors = np.exp(surrogate.log_point_deflection(fresh)) / g - 1
     assert np.max(np.abs(g_errors)) < 0.02
     assert np.sqrt(np.mean(g_errors**2)) < 4 * surrogate.log_point_deflection.loo_rms + 1e-3
-    patterns = np.array([fem_pattern(r, s, *scan_points) for r, s in zip(results, coarse_model.surfaces(plates, results))])
+    patterns = np.array([fem_pattern(r, s, *scan_points) for r, s in zip(results, surfaces)])
     misfit = aligned_misfit(patterns, surrogate.shape(fresh))
     assert np.max(np.abs(misfit)) < 0.05
     assert np.sqrt(np.mean(misfit**2)) < 4 * np.max(surrogate.shape.errors) + 1e-3
@@ -99,7 +98,7 @@ def test_known_deviations_recovered_with_and_without_the_extra_terms(coarse_mode
         "frequency": MeasuredPlate("P1", P1, built["frequency"]),
         "all": MeasuredPlate("P1", P1, built["frequency"], built["g"], scan),
     }
-    calibrations = {label: calibrate([plate], FAST, coarse_model.evaluate_plates, {}, coarse_model.surfaces) for label, plate in runs.items()}
+    calibrations = {label: calibrate([plate], FAST, coarse_model.evaluate_plates, {}, coarse_model.results_with_surfaces) for label, plate in runs.items()}
     mean, sd = FAST.prior_scale()
     for calibration in calibrations.values():
         assert calibration.diagnostics.converged

@@ -26,8 +26,8 @@ from workflow.models.fem.surface import SurfaceModes, evaluate_surface
 from workflow.models.materials import DESIGN_VOLTAGE, PLATE_Q
 from workflow.models.plate import Plate
 
-SIMULATION_ACCURACY = FemAccuracy(target=0.01)
-"""FEM accuracy of a simulated built plate (1 % in frequency; a few seconds, once per plate) [-]."""
+SIMULATION_ACCURACY = FemAccuracy(target=0.002)
+"""FEM accuracy of a simulated built plate (0.2 % in frequency, as the designs: a few seconds, once per plate) [-]."""
 
 
 @dataclass(frozen=True, eq=False)

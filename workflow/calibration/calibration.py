@@ -224,7 +224,7 @@ def calibrate(plates: Sequence[MeasuredPlate], settings: CalibrationSettings, ev
     fem : dict
         The FEM conditions ``evaluate`` binds (recorded with the calibration).
     evaluate_surfaces : callable, optional
-        Plates and FemResults -> SurfaceModes; needed when a plate has a scan.
+        Plates -> (FemResults, SurfaceModes); needed when a plate has a scan.
     """
     surrogates = prior_surrogates([p.plate for p in plates], settings, evaluate, evaluate_surfaces, [p.scan for p in plates])
     return posterior_from(plates, surrogates, settings, fem)

@@ -23,8 +23,9 @@ from workflow.models.plate import Plate
 
 Evaluate = Callable[[Sequence[Plate]], list]
 """Plates -> FemResults (the caller binds Q, voltage, accuracy, cache)."""
-EvaluateSurfaces = Callable[[Sequence[Plate], list], list]
-"""Plates and their FemResults -> their :class:`~workflow.models.fem.surface.SurfaceModes` (the caller binds the rest)."""
+EvaluateSurfaces = Callable[[Sequence[Plate]], tuple]
+"""Plates -> (their FemResults, their :class:`~workflow.models.fem.surface.SurfaceModes`), from one evaluation each
+(the caller binds the rest)."""
 CENTRE_PROBE = 0
 """Index of the probe at the plate's centre (x = 0, y = 0) among the FEM's 44 [-]."""
 
@@ -145,21 +146,19 @@ def fem_pattern(result, surface, x, y) -> np.ndarray:
     return real_pattern(surface.deflection(np.asarray(x), np.asarray(y), result.frequency, result.q))
 
 
-def design_results(plates: Sequence[Plate], evaluate: Evaluate) -> tuple:
-    """FEM of the design's ``plates``: (log f, log w, log g, relative f errors, the FemResults)."""
-    results = evaluate(plates)
+def design_results(results: list) -> tuple:
+    """What the design's FemResults give: (log f, log w, log g, relative f errors)."""
     log_f = np.log([r.frequency for r in results])
     log_w = np.log([r.deflection for r in results])
     log_g = np.log([point_deflection_per_volt(r) for r in results])
     errors = np.array([0.0 if r.error is None else r.error.frequency for r in results])
-    return log_f, log_w, log_g, errors, results
+    return log_f, log_w, log_g, errors
 
 
-def design_patterns(plates: Sequence[Plate], results: list, evaluate_surfaces: EvaluateSurfaces,
-                    scan_points: tuple) -> np.ndarray:
-    """(n_design, n_scan) FEM patterns at ``scan_points`` (x, y) [m] of ``plates`` and their FemResults, each signed to
-    agree with the first (the box centre)."""
-    patterns = np.array([fem_pattern(r, s, *scan_points) for r, s in zip(results, evaluate_surfaces(plates, results))])
+def design_patterns(results: list, surfaces: list, scan_points: tuple) -> np.ndarray:
+    """(n_design, n_scan) FEM patterns at ``scan_points`` (x, y) [m] of the design's FemResults and SurfaceModes, each
+    signed to agree with the first (the box centre)."""
+    patterns = np.array([fem_pattern(r, s, *scan_points) for r, s in zip(results, surfaces)])
     return patterns * np.where(patterns @ patterns[0] < 0, -1.0, 1.0)[:, None]
 
 
@@ -182,15 +181,19 @@ def build_plate_surrogate(
     n_points, degree, seed : int
         Design size, polynomial degree (1 or 2), Latin hypercube seed.
     evaluate_surfaces : callable, optional
-        Plates and their FemResults -> SurfaceModes; with ``scan_points`` ((x, y) arrays [m]) a
-        :class:`ShapeSurrogate` is built too.
+        Plates -> (FemResults, SurfaceModes); with ``scan_points`` ((x, y) arrays [m]) the design is evaluated with
+        it instead of ``evaluate`` and a :class:`ShapeSurrogate` is built too.
     """
     points = latin_hypercube(n_points, bounds, seed)
     plates = [deviated_plate(plate, names, theta) for theta in points]
-    log_f, log_w, log_g, errors, results = design_results(plates, evaluate)
+    if scan_points is None:
+        results, surfaces = evaluate(plates), None
+    else:
+        results, surfaces = evaluate_surfaces(plates)
+    log_f, log_w, log_g, errors = design_results(results)
     shape = None
     if scan_points is not None:
-        patterns = design_patterns(plates, results, evaluate_surfaces, scan_points)
+        patterns = design_patterns(results, surfaces, scan_points)
         shape = ShapeSurrogate(tuple(float(v) for v in scan_points[0]), tuple(float(v) for v in scan_points[1]),
                                tuple(fit_response_surface(points, column, bounds, degree) for column in patterns.T))
     return PlateSurrogate(

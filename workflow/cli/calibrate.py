@@ -8,7 +8,6 @@ from workflow.calibration.calibration import calibrate
 from workflow.calibration.parameters import load_settings
 from workflow.cli.options import add_fem_options, add_force_option, add_json_flag, fem_accuracy
 from workflow.models import materials
-from workflow.models.fem.accuracy import SURVEY_ACCURACY
 from workflow.pipeline.calibration_files import CALIBRATION_OUTPUTS, calibration_summary, measured_plates, write_calibration
 from workflow.pipeline.outputs import output_folder
 
@@ -32,7 +31,7 @@ def register(subparsers) -> None:
     add_force_option(parser)
     parser.add_argument("--config", metavar="FILE",
                         help="TOML overriding the priors, likelihood, surrogate and sampler settings (docs/calibration.md)")
-    add_fem_options(parser, accuracy=SURVEY_ACCURACY, build=False)
+    add_fem_options(parser, build=False)
     parser.add_argument("--no-figures", action="store_true", help="skip the pairs figure")
     add_json_flag(parser)
     parser.set_defaults(handler=run)
@@ -51,7 +50,7 @@ def run(args) -> dict:
     input_paths = {Path(p).resolve() for p in args.logs}
     with output_folder(args.out, CALIBRATION_OUTPUTS, force=args.force) as out:
         nominal = [r.frequency for r in model.evaluate_plates([plate.plate for plate in plates])]
-        calibration = calibrate(plates, settings, model.evaluate_plates, fem, model.surfaces)
+        calibration = calibrate(plates, settings, model.evaluate_plates, fem, model.results_with_surfaces)
         files = write_calibration(calibration, out, figures=not args.no_figures, protect=input_paths)
         summary = calibration_summary(calibration, nominal, files, time.perf_counter() - started)
     if not summary["diagnostics"]["converged"]:

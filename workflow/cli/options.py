@@ -9,6 +9,7 @@ import signal
 from contextlib import contextmanager
 from pathlib import Path
 
+from instruments.simulator.builtplate import SIMULATION_ACCURACY
 from workflow.damping.posterior import load_posterior
 from workflow.errors import GeometryError, TactileError
 from workflow.models import materials
@@ -371,9 +372,10 @@ def add_built_plate_arguments(parser) -> None:
         ("--dev-ceramic-offset-mm", demo.ceramic_offset / MM, "offset of the ceramics along x [mm]"),
     ):
         group.add_argument(flag, type=finite_float, help=f"simulator: {text} (demo {value:g})")
-    group.add_argument("--sim-accuracy", type=bounded(float, *ACCURACY_RANGE), default=0.01, metavar="REL",
+    default = SIMULATION_ACCURACY.target
+    group.add_argument("--sim-accuracy", type=bounded(float, *ACCURACY_RANGE), default=default, metavar="REL",
                        help="FEM accuracy of the simulated built plate and of the nominal map a scan is compared "
-                       "with (default 0.01)")
+                       f"with (default {default:g})")
 
 
 def built_plate_from_args(args):

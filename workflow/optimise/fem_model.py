@@ -7,9 +7,9 @@ FEM the same way.  Every geometry is one :class:`FemTask`; tasks run through
 :func:`~workflow.execution.cache.cached_map`, whose key holds the model name, the plate's
 fields, Q, the voltage, the FEM settings and a hash of the FEM's source code.
 :meth:`FemModel.gradients` adds the design sensitivities of :mod:`workflow.models.fem.sensitivity`
-(results with tangents are cached under their own model name).  :meth:`FemModel.surfaces` samples
-the modes over the top face (:func:`workflow.models.fem.surface.evaluate_surface`) on the mesh an
-evaluation ended on, cached as "fem-surface".
+(results with tangents are cached under their own model name).  :meth:`FemModel.results_with_surfaces`
+adds the modes over the top face (:func:`workflow.models.fem.surface.evaluate_surface`), sampled from the
+same evaluation, cached as "fem+surface".
 """
 
 from dataclasses import dataclass, field, replace
@@ -19,7 +19,7 @@ import numpy as np
 from workflow.execution.cache import EvaluationCache, cached_map, package_directory, source_version
 from workflow.models import fem, materials
 from workflow.models.fem import FemResult, FemSettings, evaluate_fem
-from workflow.models.fem.accuracy import FemAccuracy, mesh_for_level
+from workflow.models.fem.accuracy import FemAccuracy
 from workflow.models.fem.sensitivity import DESIGN_PARAMETERS, best_mode_gradients, evaluate_fem_with_tangents
 from workflow.models.fem.surface import SurfaceModes, evaluate_surface
 from workflow.models.plate import Plate
@@ -46,17 +46,17 @@ class FemTask:
 def run_fem_task(task: FemTask) -> FemResult:
     """Evaluate one task (module level, so that process pools and Dask can pickle it)."""
     evaluate = evaluate_fem_with_tangents if task.tangents else evaluate_fem
-    return evaluate(task.plate, task.q, task.voltage, task.settings)
+    return evaluate(task.plate, task.q, task.voltage, task.settings).stripped()
 
 
-def run_surface_task(task: FemTask) -> SurfaceModes:
-    """The modes over the top face of one task on its fixed mesh (module level, picklable)."""
-    return evaluate_surface(task.plate, task.q, task.voltage, task.settings)[1]
+def run_surface_task(task: FemTask) -> tuple[FemResult, SurfaceModes]:
+    """The result of one task and its modes over the top face, from one evaluation (module level, picklable)."""
+    return evaluate_surface(task.plate, task.q, task.voltage, task.settings)
 
 
 def describe_surface_task(task: FemTask) -> dict:
-    """The cache-key content of a surface task."""
-    return {**describe_fem_task(task), "model": "fem-surface"}
+    """The cache-key content of a task with its surface."""
+    return {**describe_fem_task(task), "model": "fem+surface"}
 
 
 def describe_fem_task(task: FemTask) -> dict:
@@ -141,15 +141,14 @@ class FemModel:
             run_fem_task, tasks, describe_fem_task, self.cache, self.scheduler, self.progress, description="FEM evaluations"
         )
 
-    def surfaces(self, plates: list[Plate], results: list[FemResult]) -> list[SurfaceModes]:
-        """The modes of each scalar plate over its top face (eigenstrain drive), on the mesh its ``results`` entry
-        ended on (the accuracy evaluation's final level, or the fixed mesh); one more solve each, cached."""
-        settings = self.settings
-        meshes = [settings if isinstance(settings, FemSettings) else mesh_for_level(p, r.error.level, settings.n_modes)
-                  for p, r in zip(plates, results)]
-        tasks = [FemTask(p, self.q, self.voltage, mesh) for p, mesh in zip(plates, meshes)]
-        return cached_map(run_surface_task, tasks, describe_surface_task, self.cache, self.scheduler, self.progress,
-                          description="FEM surfaces")
+    def results_with_surfaces(self, plates: list[Plate]) -> tuple[list[FemResult], list[SurfaceModes]]:
+        """The result of each scalar plate and its modes over the top face (eigenstrain drive), both from one
+        evaluation (the surface sampled from the final level's own modes), cached together."""
+        tasks = [FemTask(p, self.q, self.voltage, self.settings) for p in plates]
+        self.evaluations += len(tasks)
+        pairs = cached_map(run_surface_task, tasks, describe_surface_task, self.cache, self.scheduler, self.progress,
+                           description="FEM evaluations with surfaces")
+        return [result for result, _ in pairs], [surface for _, surface in pairs]
 
     def gradients(self, plate: Plate) -> tuple[np.ndarray, np.ndarray]:
         """Gradients over (lambda, h_i) of the best mode's deflection and frequency of each plate.

@@ -44,9 +44,9 @@ the search is repeated with the offset measured there (within :data:`VERIFICATIO
 
 
 def search_level(accuracy: FemAccuracy) -> int:
-    """Mesh level (elements per ceramic) of the search: the one below the accuracy's first level [-].
+    """Mesh level (polynomial degree) of the search: the one below the accuracy's first level [-].
 
-    6 for targets under 0.5 %, 4 for coarser ones; the search only needs to be smooth in the geometry,
+    3 for targets under 0.5 %, 2 for coarser ones; the search only needs to be smooth in the geometry,
     its offset from the accurate model is measured and corrected.
     """
     return LEVELS[LEVELS.index(accuracy.start_level) - 1]

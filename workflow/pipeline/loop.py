@@ -149,7 +149,7 @@ def loop_calibration(context: RunContext):
     settings = load_settings()
     logs = [path for path in (measured.resonance_log, measured.scan_log) if path is not None]
     (plate,) = measured_plates(logs, settings)
-    calibration = calibrate([plate], settings, model.evaluate_plates, fem, model.surfaces)
+    calibration = calibrate([plate], settings, model.evaluate_plates, fem, model.results_with_surfaces)
     prediction = predict(calibration, plate.plate, None, calibration.surrogates[0])
     return calibration, tuple(float(f) for f in prediction["frequency"])
 

@@ -29,12 +29,24 @@ class PlateSystem:
         Piezo load F for the drive voltage [N].
     free_dofs : int array
         Global dof number of each free dof.
+    diagonal_entries : int array or None
+        Where the stiffness's diagonal lies in its ``data``, when the mass is diagonal (spectral elements):
+        :meth:`shifted` then keeps the stiffness's structure.
     """
 
     stiffness: sp.csc_matrix
     mass: sp.csc_matrix
     load: np.ndarray
     free_dofs: np.ndarray
+    diagonal_entries: np.ndarray | None = None
+
+    def shifted(self, shift: float) -> sp.csc_matrix:
+        """K - shift M [N/m]; on the stiffness's own (shared, read-only) structure when the mass is diagonal."""
+        if self.diagonal_entries is None:
+            return (self.stiffness - shift * self.mass).tocsc()
+        data = self.stiffness.data.copy()
+        data[self.diagonal_entries] -= shift * self.mass.diagonal()
+        return sp.csc_matrix((data, self.stiffness.indices, self.stiffness.indptr), shape=self.stiffness.shape)
 
 
 def _materials(plate: Plate):
@@ -138,6 +150,8 @@ class ReducedPattern:
         CSC structure of the stiffness on the free dofs (with rows sorted; by symmetry also its CSR structure).
     mass_indptr, mass_indices : int arrays
         The same for the mass (only equal components couple).
+    diagonal_entries : (n_free,) int array
+        Position of each diagonal entry in the stiffness's data.
     element_slots : (n_elements, n_local, n_local) int array
         Slot of each element node pair.
     stiffness_entries : (nnz,) int array
@@ -151,6 +165,7 @@ class ReducedPattern:
     indices: np.ndarray
     mass_indptr: np.ndarray
     mass_indices: np.ndarray
+    diagonal_entries: np.ndarray
     element_slots: np.ndarray
     stiffness_entries: np.ndarray
     mass_entries: np.ndarray
@@ -215,12 +230,14 @@ def _cached_pattern(connectivity: bytes, n_local: int, n_nodes: int, free: bytes
     diagonal = np.flatnonzero(stiffness_entries % 9 % 4 == 0)  # i == j: 3 i + j in (0, 4, 8)
     mass_lengths = np.bincount(3 * item_node + item_component, minlength=3 * n_nodes)[free]
     indices = item_row[item]
+    columns = np.repeat(np.arange(len(free), dtype=np.int32), lengths)
     pattern = ReducedPattern(
         n_free=len(free),
         indptr=indptr.astype(np.int32),
         indices=indices,
         mass_indptr=np.concatenate([[0], np.cumsum(mass_lengths)]).astype(np.int32),
         mass_indices=indices[diagonal],
+        diagonal_entries=np.flatnonzero(indices == columns),
         element_slots=slots.reshape(connectivity.shape + (n_local,)).astype(np.int32),
         stiffness_entries=stiffness_entries,
         mass_entries=stiffness_entries[diagonal] // 9,
@@ -229,6 +246,13 @@ def _cached_pattern(connectivity: bytes, n_local: int, n_nodes: int, free: bytes
         if isinstance(array, np.ndarray):
             array.flags.writeable = False
     return pattern
+
+
+def lumped_mass(mesh: BrickMesh, types, which, free) -> sp.csc_matrix:
+    """The diagonal reduced mass [kg] of elements whose mass matrices ``types`` are diagonal (spectral bricks)."""
+    diagonals = np.diagonal(types, axis1=1, axis2=2)[which]  # (n_elements, 3 n_local)
+    nodal = np.bincount(element_dofs(mesh).ravel(), weights=diagonals.ravel(), minlength=mesh.n_dofs)
+    return sp.diags(nodal[free], format="csc")
 
 
 def assemble_system(mesh: BrickMesh, plate: Plate, voltage: float) -> PlateSystem:
@@ -240,9 +264,11 @@ def assemble_system(mesh: BrickMesh, plate: Plate, voltage: float) -> PlateSyste
     free = free_dofs(mesh)
     pattern = reduced_pattern(mesh, free)
     stiffness, mass, which = element_types(mesh, plate)
+    lumped = mesh.brick.lumped
     return PlateSystem(
         stiffness=pattern.stiffness(stiffness, which),
-        mass=pattern.mass(mass, which),
+        mass=lumped_mass(mesh, mass, which, free) if lumped else pattern.mass(mass, which),
         load=assemble_piezo_load(mesh, plate, voltage)[free],
         free_dofs=free,
+        diagonal_entries=pattern.diagonal_entries if lumped else None,
     )

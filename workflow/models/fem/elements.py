@@ -30,8 +30,10 @@ class ReferenceBrick:
     ``local_nodes`` ((n, 3) int array: each node's position on that grid), ``node_coordinates(axis)``
     (the grid's reference coordinates in [0, 1]) and the unit-cube integrals ``gradient_products``
     R_kl = int d_k phi_a d_l phi_b (3, 3, n, n), ``mass`` int phi_a phi_b (n, n), ``gradient_means``
-    int d_k phi_a (3, n) and ``shape(points)`` (m, n).
+    int d_k phi_a (3, n) and ``shape(points)`` (m, n).  ``lumped``: whether ``mass`` is diagonal.
     """
+
+    lumped = False
 
     @property
     def n_nodes(self) -> int:
@@ -234,6 +236,14 @@ class Lagrange1D:
         return (points + 1) / 2, weights / 2
 
     @cached_property
+    def lobatto_weights(self) -> np.ndarray:
+        """Weights of the Gauss-Lobatto rule on the nodes (exact to degree 2p - 1) [-]."""
+        if self.degree == 1:
+            return np.array([0.5, 0.5])
+        legendre = np.polynomial.legendre.Legendre.basis(self.degree)(2 * self.nodes - 1)
+        return 1.0 / (self.degree * (self.degree + 1) * legendre**2)
+
+    @cached_property
     def integrals(self) -> dict:
         """``mass`` int l_a l_b, ``stiffness`` int l_a' l_b', ``mixed`` int l_a' l_b, ``mean`` int l_a' [-]."""
         t, w = self._quadrature
@@ -251,19 +261,27 @@ class TensorBrick(ReferenceBrick):
     """Tensor-product Lagrange brick of degrees (p_x, p_y, p_z) on Gauss-Lobatto nodes.
 
     Local node a = (i, j, k) in C order (k fastest); its shape function is l_i(x) l_j(y) l_k(z), and
-    every unit-cube integral is a Kronecker product of 1D integrals, exact to rounding.
+    every unit-cube integral is a Kronecker product of 1D integrals, exact to rounding.  A *spectral*
+    brick integrates its mass with the nodes' own Gauss-Lobatto rule, so the mass is diagonal (the
+    spectral-element method; its frequencies differ from the consistent mass's by far less than the
+    discretisation error at p >= 3, docs/fem.md).
 
     Attributes
     ----------
     degrees : tuple of 3 int
         Polynomial degree along x, y, z [-].
+    lumped : bool
+        Diagonal Gauss-Lobatto mass (spectral) instead of the exact (consistent) one.
     """
 
     degrees: tuple
+    lumped: bool = False
 
     @property
     def name(self) -> str:
-        return "lagrange27" if self.degrees == (2, 2, 2) else "lagrange-" + "-".join(map(str, self.degrees))
+        if self.degrees == (2, 2, 2) and not self.lumped:
+            return "lagrange27"
+        return ("spectral-" if self.lumped else "lagrange-") + "-".join(map(str, self.degrees))
 
     @cached_property
     def axes(self) -> tuple:
@@ -307,7 +325,9 @@ class TensorBrick(ReferenceBrick):
 
     @cached_property
     def mass(self) -> np.ndarray:
-        """int_cube phi_a phi_b, shape (n, n) [-]."""
+        """int_cube phi_a phi_b, shape (n, n) [-] (diagonal by the nodes' Gauss-Lobatto rule when ``lumped``)."""
+        if self.lumped:
+            return self._kron(lambda axis: np.diag(self.axes[axis].lobatto_weights))
         return self._kron(lambda axis: self.axes[axis].integrals["mass"])
 
     @cached_property
@@ -345,16 +365,18 @@ MAX_DEGREE = 6
 
 
 @lru_cache(maxsize=None)
-def tensor_brick(degrees: tuple) -> TensorBrick:
+def tensor_brick(degrees: tuple, lumped: bool = False) -> TensorBrick:
     """The (cached) tensor-product Lagrange brick of ``degrees`` (p_x, p_y, p_z), each from 1 to :data:`MAX_DEGREE`."""
-    return TensorBrick(tuple(int(p) for p in degrees))
+    return TensorBrick(tuple(int(p) for p in degrees), lumped)
 
 
 def brick(name: str) -> ReferenceBrick:
-    """The element type ``name``: "lagrange27", "serendipity20" or "lagrange-PX-PY-PZ" (tensor-product degrees)."""
+    """The element type ``name``: "lagrange27", "serendipity20", or "lagrange-PX-PY-PZ" / "spectral-PX-PY-PZ"
+    (tensor-product degrees along x, y, z; spectral: Gauss-Lobatto-lumped mass)."""
     if name in BRICKS:
         return BRICKS[name]
     parts = name.split("-")
-    if len(parts) == 4 and parts[0] == "lagrange" and all(p.isdigit() and 1 <= int(p) <= MAX_DEGREE for p in parts[1:]):
-        return tensor_brick(tuple(int(p) for p in parts[1:]))
+    if (len(parts) == 4 and parts[0] in ("lagrange", "spectral")
+            and all(p.isdigit() and 1 <= int(p) <= MAX_DEGREE for p in parts[1:])):
+        return tensor_brick(tuple(int(p) for p in parts[1:]), parts[0] == "spectral")
     raise KeyError(name)

@@ -1,6 +1,6 @@
 """The FEM cost function: modes near the beam resonance and their driven deflection (docs/fem.md)."""
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -8,9 +8,10 @@ from workflow.errors import TactileError
 from workflow.models import analytical
 from workflow.models.fem.accuracy import ErrorEstimate, FemAccuracy, evaluate_to_accuracy
 from workflow.models.fem.assembly import PlateSystem, assemble_system
-from workflow.models.fem.harmonic import ProbeModalModel, probe_modal_model
+from workflow.models.fem.harmonic import ModalSolution, ProbeModalModel, modal_solution
 from workflow.models.fem.mesh import quarter_plate_mesh
 from workflow.models.fem.modes import ShiftedModes, nearest_modes
+from workflow.models.fem.prolongation import start_vector
 from workflow.models.fem.probes import (
     antinode_probe_points,
     mean_deflection,
@@ -75,6 +76,9 @@ class FemResult:
         Coupled model: capacitance of the driven electrodes of the whole plate with u = 0, C_S [F].
     charge_residual : float or None
         Coupled model: charge per volt of the whole plate from the modes not computed [F].
+    solution : ModalSolution or None
+        The modes on every dof of their mesh, kept in memory only (never saved or sent: :meth:`stripped`), to
+        start the next level's eigen solve and to sample the top face; None otherwise.
     """
 
     modes: tuple
@@ -88,6 +92,7 @@ class FemResult:
     antiresonances: tuple | None = None
     clamped_capacitance: float | None = None
     charge_residual: float | None = None
+    solution: ModalSolution | None = field(default=None, repr=False)
 
     @property
     def best(self) -> ModeResult:
@@ -134,6 +139,10 @@ class FemResult:
         per_volt = QUARTERS * (model.modal_forces / self.voltage) ** 2  # modal charges per volt, whole plate
         dynamic = per_volt / (model.eigenvalues * (1 + 1j / q) - omega[..., None] ** 2)
         return 1j * omega * (self.clamped_capacitance + self.charge_residual + dynamic.sum(axis=-1))
+
+    def stripped(self) -> "FemResult":
+        """The result without its in-memory :attr:`solution` (what is cached and sent between processes)."""
+        return replace(self, solution=None) if self.solution is not None else self
 
     def deflection_at_q(self, q):
         """Best mode's mean probe deflection at its frequency for other quality factors [m] (vectorised)."""
@@ -206,7 +215,8 @@ def mode_results(probe_model: ProbeModalModel, q: float) -> tuple:
     return tuple(ModeResult(float(f), float(w), float(t)) for f, w, t in zip(frequencies, deflections, indicators))
 
 
-def evaluate_fem(plate: Plate, q: float, voltage: float, settings: FemSettings | FemAccuracy = FemAccuracy()) -> FemResult:
+def evaluate_fem(plate: Plate, q: float, voltage: float, settings: FemSettings | FemAccuracy = FemAccuracy(),
+                 start: ModalSolution | None = None) -> FemResult:
     """Evaluate the quarter-plate FEM: modes nearest the beam resonance and their deflections.
 
     Parameters
@@ -221,21 +231,30 @@ def evaluate_fem(plate: Plate, q: float, voltage: float, settings: FemSettings |
         A target accuracy (the mesh follows the geometry and is refined until the estimated
         frequency error meets it; the result carries its ``error``), or a fixed mesh; either
         names the piezo model (the coupled one adds antiresonances and the admittance).
+    start : ModalSolution, optional
+        Modes of the same cells at a lower degree, to start the eigen solve (fixed meshes only).
+
+    Returns
+    -------
+    FemResult
+        On a fixed mesh with its :attr:`~FemResult.solution`; to an accuracy without it.
     """
     if isinstance(settings, FemAccuracy):
-        return evaluate_to_accuracy(plate, settings, lambda mesh: evaluate_fem(plate, q, voltage, mesh))
+        return evaluate_to_accuracy(plate, settings, lambda mesh, lower: evaluate_fem(plate, q, voltage, mesh, lower))
     if settings.piezo == "coupled":
         from workflow.models.fem.piezoelectric import evaluate_fem_coupled  # it builds on this module
 
-        return evaluate_fem_coupled(plate, q, voltage, settings)
-    _, system, probes = discretise(plate, voltage, settings)
-    modes = working_modes(plate, system, settings)
-    return fem_result(probe_modal_model(system, modes, probes), q, voltage, system)
+        return evaluate_fem_coupled(plate, q, voltage, settings, start)
+    mesh, system, probes = discretise(plate, voltage, settings)
+    modes = working_modes(plate, system, settings, start_vector(start, mesh, system.free_dofs))
+    solution = modal_solution(mesh, system, modes)
+    return replace(fem_result(solution.probe_model(probes), q, voltage, system), solution=solution)
 
 
-def working_modes(plate: Plate, system: PlateSystem, settings: FemSettings) -> ShiftedModes:
-    """The ``settings.n_modes`` modes nearest the analytical beam resonance of the plate."""
-    return nearest_modes(system, float(analytical.resonance_frequency(plate)), settings.n_modes)
+def working_modes(plate: Plate, system: PlateSystem, settings: FemSettings, start=None) -> ShiftedModes:
+    """The ``settings.n_modes`` modes nearest the analytical beam resonance of the plate (``start``: ARPACK's first
+    vector, default all ones)."""
+    return nearest_modes(system, float(analytical.resonance_frequency(plate)), settings.n_modes, start)
 
 
 def discretise(plate: Plate, voltage: float, settings: FemSettings):

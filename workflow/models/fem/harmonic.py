@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from workflow.models.fem.assembly import PlateSystem
+from workflow.models.fem.mesh import BrickMesh
 from workflow.models.fem.modes import ShiftedModes
 
 
@@ -81,6 +82,53 @@ class ProbeModalModel:
         return cls(**{name: np.asarray(data[name], dtype=float) for name in cls.__dataclass_fields__})
 
 
+@dataclass(frozen=True, eq=False)
+class ModalSolution:
+    """What the responses need, on every free dof of a mesh: sampled at any points without a new solve.
+
+    Kept in memory only (:attr:`~workflow.models.fem.evaluate.FemResult.solution`), to sample the top face
+    (:mod:`workflow.models.fem.surface`) and to start the eigen solve of the next level
+    (:mod:`workflow.models.fem.prolongation`).
+
+    Attributes
+    ----------
+    mesh : BrickMesh or None
+        The mesh (None where only the projections are wanted).
+    free_dofs : int array
+        Global dof of each row of ``vectors`` and ``residual``.
+    eigenvalues : (n_modes,) array
+        omega_m^2 [rad^2/s^2].
+    vectors : (n_free, n_modes) array
+        Mass-normalised mode shapes [kg^-1/2].
+    modal_forces : (n_modes,) array
+        phi_m . F [N kg^-1/2].
+    residual : (n_free,) array
+        Displacement from all other modes [m] (:func:`shifted_residual`).
+    """
+
+    mesh: BrickMesh | None
+    free_dofs: np.ndarray
+    eigenvalues: np.ndarray
+    vectors: np.ndarray
+    modal_forces: np.ndarray
+    residual: np.ndarray
+
+    def probe_model(self, probes) -> "ProbeModalModel":
+        """The modal data seen by ``probes``, a sparse interpolation on the free dofs (n_probes, n_free)."""
+        return ProbeModalModel(
+            eigenvalues=self.eigenvalues,
+            modal_forces=self.modal_forces,
+            probe_shapes=np.asarray(probes @ self.vectors),
+            residual=np.asarray(probes @ self.residual),
+        )
+
+
+def modal_solution(mesh: BrickMesh | None, system: PlateSystem, modes: ShiftedModes) -> ModalSolution:
+    """The modes of ``system`` on ``mesh`` with their forces and the residual of the others (one more solve)."""
+    return ModalSolution(mesh, system.free_dofs, modes.eigenvalues, modes.vectors, modes.vectors.T @ system.load,
+                         shifted_residual(system, modes))
+
+
 def shifted_residual(system: PlateSystem, modes: ShiftedModes) -> np.ndarray:
     """(K - sigma M)^-1 F without the computed modes' part, on all free dofs [m]."""
     modal_forces = modes.vectors.T @ system.load
@@ -95,11 +143,4 @@ def probe_modal_model(system: PlateSystem, modes: ShiftedModes, probes) -> Probe
     probes : sparse matrix
         Interpolation matrix on the free dofs, shape (n_probes, n_free).
     """
-    modal_forces = modes.vectors.T @ system.load
-    residual = shifted_residual(system, modes)
-    return ProbeModalModel(
-        eigenvalues=modes.eigenvalues,
-        modal_forces=modal_forces,
-        probe_shapes=np.asarray(probes @ modes.vectors),
-        residual=np.asarray(probes @ residual),
-    )
+    return modal_solution(None, system, modes).probe_model(probes)

@@ -50,18 +50,20 @@ def rigid_translation(system: PlateSystem) -> np.ndarray:
     return translation / np.sqrt(translation @ (system.mass @ translation))
 
 
-def nearest_modes(system: PlateSystem, frequency: float, n_modes: int) -> ShiftedModes:
+def nearest_modes(system: PlateSystem, frequency: float, n_modes: int, start: np.ndarray | None = None) -> ShiftedModes:
     """The ``n_modes`` elastic eigenpairs of K phi = omega^2 M phi with omega^2 nearest (2 pi frequency)^2.
 
     The rigid translation along z is projected out of the shift-invert operator, so it is never
-    returned even when the shift is low.
+    returned even when the shift is low.  ``start``: ARPACK's first vector (default all ones), e.g.
+    the modes of a lower level (:func:`~workflow.models.fem.prolongation.start_vector`).
     """
     shift = (2 * np.pi * frequency) ** 2
-    factor = factorise(system.stiffness - shift * system.mass)
-    return shift_invert_modes(system, shift, factor.solve, n_modes)
+    factor = factorise(system.shifted(shift))
+    return shift_invert_modes(system, shift, factor.solve, n_modes, start)
 
 
-def shift_invert_modes(system: PlateSystem, shift: float, solve_shifted: Callable, n_modes: int) -> ShiftedModes:
+def shift_invert_modes(system: PlateSystem, shift: float, solve_shifted: Callable, n_modes: int,
+                       start: np.ndarray | None = None) -> ShiftedModes:
     """The ``n_modes`` elastic eigenpairs nearest ``shift`` of the operator whose shifted inverse is given.
 
     Parameters
@@ -73,6 +75,8 @@ def shift_invert_modes(system: PlateSystem, shift: float, solve_shifted: Callabl
     solve_shifted : callable
         b -> (K - sigma M)^-1 b for the stiffness K whose modes are wanted.
     n_modes : int
+    start : array, optional
+        ARPACK's first vector (default all ones).
     """
     rigid = rigid_translation(system)
     rigid_mass = system.mass @ rigid
@@ -82,7 +86,7 @@ def shift_invert_modes(system: PlateSystem, shift: float, solve_shifted: Callabl
         return solution - rigid * (rigid_mass @ solution)
 
     operator = sla.LinearOperator(system.mass.shape, matvec=solve_elastic, dtype=float)
-    start = np.ones(system.mass.shape[0])
+    start = np.ones(system.mass.shape[0]) if start is None else start
     mass = system.mass.tocsc()
     mass_rows = sp.csr_matrix((mass.data, mass.indices, mass.indptr), shape=mass.shape)  # M = M^T: row-wise products are faster
     with threadpool_limits(limits=1, user_api="blas"):

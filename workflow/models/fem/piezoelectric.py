@@ -31,10 +31,11 @@ from scipy.optimize import brentq
 from workflow.models import analytical
 from workflow.models.fem.assembly import PlateSystem, assemble_system, element_dofs, reduce_system
 from workflow.models.fem.evaluate import QUARTERS, FemResult, fem_result
-from workflow.models.fem.harmonic import probe_modal_model
+from workflow.models.fem.harmonic import ModalSolution, modal_solution
 from workflow.models.fem.mesh import CERAMIC, BrickMesh, quarter_plate_mesh
 from workflow.models.fem.modes import ShiftedModes, shift_invert_modes
 from workflow.models.fem.probes import antinode_probe_points, probe_matrix
+from workflow.models.fem.prolongation import start_vector
 from workflow.models.fem.solvers import factorise
 from workflow.models.fem.settings import DEFAULT_SETTINGS, FemSettings
 from workflow.models.materials import PiezoMaterial
@@ -203,8 +204,9 @@ def electromechanical_system(mesh: BrickMesh, mechanical: PlateSystem, ceramic: 
     return PiezoSystem(replace(mechanical, load=drive * voltage), coupling_inner, permittivity_inner, drive, capacitance)
 
 
-def coupled_modes(system: PiezoSystem, frequency: float, n_modes: int) -> CoupledModes:
-    """Short-circuit modes nearest ``frequency`` [Hz] and their charges, from one saddle-point factorisation."""
+def coupled_modes(system: PiezoSystem, frequency: float, n_modes: int, start: np.ndarray | None = None) -> CoupledModes:
+    """Short-circuit modes nearest ``frequency`` [Hz] and their charges, from one saddle-point factorisation
+    (``start``: ARPACK's first vector, default all ones)."""
     mechanical = system.mechanical
     shift = (2 * np.pi * frequency) ** 2
     n_u = mechanical.stiffness.shape[0]
@@ -230,7 +232,7 @@ def coupled_modes(system: PiezoSystem, frequency: float, n_modes: int) -> Couple
         solution = solve_short(rhs)
         return solution - response * (system.drive @ solution) / (system.clamped_capacitance + static_charge)
 
-    short = shift_invert_modes(mechanical, shift, solve_short, n_modes)
+    short = shift_invert_modes(mechanical, shift, solve_short, n_modes, start)
     modal_drive = short.vectors.T @ system.drive
     residual = static_charge - np.sum(modal_drive**2 / (short.eigenvalues - shift))
     return CoupledModes(short, modal_drive, float(residual), system.clamped_capacitance, solve_open)
@@ -247,7 +249,7 @@ def open_circuit_modes(system: PiezoSystem, modes: CoupledModes, n_modes: int) -
 
 
 def evaluate_fem_coupled(
-    plate: Plate, q: float, voltage: float, settings: FemSettings = DEFAULT_SETTINGS
+    plate: Plate, q: float, voltage: float, settings: FemSettings = DEFAULT_SETTINGS, start: ModalSolution | None = None
 ) -> FemResult:
     """Evaluate the coupled piezoelectric quarter-plate FEM: resonances, antiresonances, deflections.
 
@@ -261,6 +263,8 @@ def evaluate_fem_coupled(
         Drive amplitude across each ceramic [V].
     settings : FemSettings
         Mesh resolution and number of modes.
+    start : ModalSolution, optional
+        Short-circuit modes of the same cells at a lower degree, to start the eigen solve.
 
     Returns
     -------
@@ -270,11 +274,15 @@ def evaluate_fem_coupled(
     """
     mesh = quarter_plate_mesh(plate, settings)
     system = electromechanical_system(mesh, assemble_system(mesh, plate, voltage), plate.ceramic, voltage)
-    modes = coupled_modes(system, float(analytical.resonance_frequency(plate)), settings.n_modes)
-    probes = probe_matrix(mesh, antinode_probe_points(plate))[:, system.mechanical.free_dofs]
-    result = fem_result(probe_modal_model(system.mechanical, modes.short_circuit, probes), q, voltage, system.mechanical)
+    free = system.mechanical.free_dofs
+    modes = coupled_modes(system, float(analytical.resonance_frequency(plate)), settings.n_modes,
+                          start_vector(start, mesh, free))
+    probes = probe_matrix(mesh, antinode_probe_points(plate))[:, free]
+    solution = modal_solution(mesh, system.mechanical, modes.short_circuit)
+    result = fem_result(solution.probe_model(probes), q, voltage, system.mechanical)
     return replace(
         result,
+        solution=solution,
         antiresonances=tuple(float(f) for f in np.sqrt(modes.antiresonance_eigenvalues()) / (2 * np.pi)),
         clamped_capacitance=QUARTERS * system.clamped_capacitance,
         charge_residual=QUARTERS * modes.charge_residual,

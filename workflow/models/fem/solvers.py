@@ -51,14 +51,35 @@ def _mkl_pardiso():
     return PyPardisoSolver()._mkl_pardiso
 
 
+UPPER_STRUCTURES = 4
+"""Upper-triangle selections kept, one per sparsity structure (the assembly shares its structures) [-]."""
+_upper_structures: list = []
+
+
+def _upper_selection(matrix: sp.csc_matrix):
+    """(entries kept, CSR indices, CSR indptr) of the upper triangle of a canonical CSC structure, remembered for
+    structures that are shared and read-only (those of :mod:`~workflow.models.fem.assembly`'s patterns)."""
+    indptr, indices = matrix.indptr, matrix.indices
+    for held_indptr, held_indices, selection in _upper_structures:
+        if held_indptr() is indptr and held_indices() is indices:
+            return selection
+    rows = np.repeat(np.arange(matrix.shape[0], dtype=indices.dtype), np.diff(indptr))
+    keep = np.flatnonzero(indices >= rows)
+    upper_indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[keep], minlength=matrix.shape[0]))])
+    selection = (keep, indices[keep], upper_indptr)
+    if not indices.flags.writeable and not indptr.flags.writeable:
+        _upper_structures.insert(0, (weakref.ref(indptr), weakref.ref(indices), selection))
+        del _upper_structures[UPPER_STRUCTURES:]
+    return selection
+
+
 def upper_triangle(matrix) -> sp.csr_matrix:
     """Upper triangle of a symmetric sparse matrix as CSR with sorted indices (its CSC structure read as CSR)."""
     matrix = sp.csc_matrix(matrix)
-    matrix.sum_duplicates()
-    rows = np.repeat(np.arange(matrix.shape[0], dtype=matrix.indices.dtype), np.diff(matrix.indptr))
-    keep = matrix.indices >= rows
-    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[keep], minlength=matrix.shape[0]))])
-    return sp.csr_matrix((matrix.data[keep], matrix.indices[keep], indptr), shape=matrix.shape)
+    if not matrix.has_canonical_format:
+        matrix.sum_duplicates()
+    keep, indices, indptr = _upper_selection(matrix)
+    return sp.csr_matrix((matrix.data[keep], indices, indptr), shape=matrix.shape)
 
 
 def _pardiso(handle, phase: int, matrix: tuple, iparm, rhs, solution) -> None:

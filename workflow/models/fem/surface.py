@@ -14,9 +14,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from workflow.models.fem.accuracy import FemAccuracy, mesh_for_level
-from workflow.models.fem.evaluate import FemResult, discretise, evaluate_fem, fem_result, working_modes
-from workflow.models.fem.harmonic import ProbeModalModel, probe_modal_model
+from workflow.models.fem.accuracy import FemAccuracy, evaluate_to_accuracy
+from workflow.models.fem.evaluate import FemResult, evaluate_fem
+from workflow.models.fem.harmonic import ProbeModalModel
 from workflow.models.fem.mesh import top_face
 from workflow.models.fem.probes import probe_matrix
 from workflow.models.fem.settings import FemSettings
@@ -106,9 +106,8 @@ def surface_grid(plate: Plate) -> tuple[np.ndarray, np.ndarray]:
 def evaluate_surface(plate: Plate, q: float, voltage: float, settings: FemSettings | FemAccuracy) -> tuple[FemResult, SurfaceModes]:
     """The FEM result of ``plate`` and its modes over the top face (eigenstrain drive).
 
-    With an accuracy, the FEM is evaluated to it first and the surface is sampled on the mesh
-    level that met it (one more solve on that mesh); the returned result is the accuracy
-    evaluation, with its error estimate.
+    The surface is sampled from the modes of the evaluation itself (with an accuracy, of the level that met
+    it: no further solve); the returned result is the evaluation, with its error estimate if it has one.
 
     Parameters
     ----------
@@ -120,19 +119,18 @@ def evaluate_surface(plate: Plate, q: float, voltage: float, settings: FemSettin
         Drive amplitude across each ceramic [V].
     settings : FemSettings or FemAccuracy
     """
-    if isinstance(settings, FemAccuracy):
-        result = evaluate_fem(plate, q, voltage, replace(settings, piezo="eigenstrain"))
-        mesh = mesh_for_level(plate, result.error.level, settings.n_modes)
-        return result, evaluate_surface(plate, q, voltage, mesh)[1]
     settings = replace(settings, piezo="eigenstrain")
-    mesh, system, probes = discretise(plate, voltage, settings)
-    modes = working_modes(plate, system, settings)
-    result = fem_result(probe_modal_model(system, modes, probes), q, voltage, system)
+    if isinstance(settings, FemAccuracy):
+        evaluate_mesh = lambda mesh, lower: evaluate_fem(plate, q, voltage, mesh, lower)  # noqa: E731
+        result = evaluate_to_accuracy(plate, settings, evaluate_mesh, keep_solution=True)
+    else:
+        result = evaluate_fem(plate, q, voltage, settings)
+    solution = result.solution
     x, y = surface_grid(plate)
     xx, yy = np.meshgrid(x, y, indexing="ij")
     points = np.column_stack([xx.ravel(), yy.ravel(), np.full(xx.size, top_face(plate))])
-    grid = probe_matrix(mesh, points)[:, system.free_dofs]
-    return result, SurfaceModes(x, y, probe_modal_model(system, modes, grid), result.best_index)
+    grid = probe_matrix(solution.mesh, points)[:, solution.free_dofs]
+    return result.stripped(), SurfaceModes(x, y, solution.probe_model(grid), result.best_index)
 
 
 def modal_assurance_criterion(measured, predicted) -> float:
