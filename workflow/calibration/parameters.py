@@ -21,6 +21,7 @@ import numpy as np
 from scipy import stats
 
 from workflow.errors import InputFileError
+from workflow.inputfiles import load_toml
 from workflow.models.builtplate import scaled_ceramic, scaled_material
 from workflow.models.plate import Plate
 from workflow.units import UM
@@ -178,12 +179,7 @@ def load_settings(path=None) -> CalibrationSettings:
     """The defaults, overridden by the TOML file ``path`` if given (see :func:`parse_settings`)."""
     if path is None:
         return default_settings()
-    try:
-        user = tomllib.loads(open(path, encoding="utf-8").read())
-    except OSError as error:
-        raise InputFileError(f"{path}: cannot read ({error.strerror or error})") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
-        raise InputFileError(f"{path}: not valid TOML ({error})") from None
+    user = load_toml(path, str(path))
     defaults = tomllib.loads(resources.files(__package__).joinpath(DEFAULTS_FILE).read_text(encoding="utf-8"))
     unknown = sorted(set(user) - set(defaults))
     if unknown:

@@ -10,7 +10,7 @@ from workflow.damping.laws import SAMPLED_LAWS
 from workflow.damping.likelihood import ForwardModel
 from workflow.damping.logs import drop_short_sweeps, read_logs
 from workflow.execution.parallel import map_evaluations
-from workflow.pipeline.config import LIMITS
+from workflow.models.limits import LIMITS
 from workflow.pipeline.damping_files import FIT_OUTPUTS, stated_noise, write_fit
 from workflow.pipeline.outputs import output_folder
 

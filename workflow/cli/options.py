@@ -16,7 +16,7 @@ from workflow.models.fem.accuracy import ACCURACY_RANGE, DEFAULT_ACCURACY, FemAc
 from workflow.models.fem.settings import PIEZO_MODELS
 from workflow.models.plate import ORIGINAL_PLATE, Plate, check_design_space
 from workflow.optimise.problem import DesignProblem
-from workflow.pipeline.config import LIMITS
+from workflow.models.limits import LIMITS
 from workflow.units import MM, UM
 
 GLUE_RANGE_UM = (0.0, 500.0)

@@ -21,6 +21,8 @@ import numpy as np
 from workflow import logformat
 from workflow.damping.mode_shape import BeamMode, measurement_factor
 from workflow.errors import InputFileError
+from workflow.inputfiles import MAX_LOG_BYTES, open_input
+from workflow.models.limits import LIMITS, problem
 from workflow.units import MM
 
 _QUANTITY_STEMS = {
@@ -32,15 +34,10 @@ _QUANTITY_STEMS = {
 
 _MISSING = {"", "nan", "NaN", "NAN"}
 
-MAX_LINE_LENGTH = 10_000
-"""Longest accepted line [characters]; a data row is under 200."""
-_MAX_LINE_BYTES = 4 * MAX_LINE_LENGTH + 8
-"""Bytes read at most for one line: any line of :data:`MAX_LINE_LENGTH` UTF-8 characters and its line end."""
+_MAX_LINE_BYTES = 4 * logformat.MAX_LINE_LENGTH + 8
+"""Bytes read at most for one line: any line of :data:`~workflow.logformat.MAX_LINE_LENGTH` UTF-8 characters and its line end."""
 MAX_ROWS = 1_000_000
 """Most data rows accepted in one log (a campaign is a few hundred; 200 000 are read in 2.4 to 5 s)."""
-MAX_VELOCITY = 10.0
-"""Largest accepted velocity amplitude [m/s]: above any vibrometer decoder's range and any plate
-(10 m/s is 64 µm at 25 kHz); a larger value is a unit or transcription error."""
 MIN_PEAK_VELOCITY = 1e-6
 """Smallest accepted peak velocity of a sweep [m/s]: a sweep whose every velocity is below this
 (all zeros, or "tiny" values such as a velocity in km/s) holds no resonance to fit."""
@@ -124,6 +121,8 @@ class RingdownLog:
     temperature : numpy.ndarray
         Plate temperature [deg C]; NaN where not reported.
     sources : tuple of str
+    warnings : tuple of str
+        One line per tolerated problem.
     """
 
     frequency: np.ndarray
@@ -134,6 +133,7 @@ class RingdownLog:
     mode_factor: np.ndarray
     temperature: np.ndarray
     sources: Tuple[str, ...]
+    warnings: Tuple[str, ...] = ()
 
     @property
     def n_bursts(self) -> int:
@@ -196,7 +196,7 @@ def read_logs(paths: Sequence) -> CampaignLog:
         velocity=np.concatenate([log.velocity for log in logs] + [np.zeros(0)]),
         sweep=np.concatenate([log.sweep + offset for log, offset in zip(logs, offsets)] + [np.zeros(0, dtype=int)]),
         sources=tuple(source for log in logs for source in log.sources),
-        warnings=tuple(warning for log in read for warning in getattr(log, "warnings", ())),
+        warnings=tuple(warning for log in read for warning in log.warnings),
         timestamp=np.concatenate(timestamps) if logs and all(t is not None for t in timestamps) else None,
         mode_factor=None if all(m is None for m in factors) else np.concatenate([log.measurement_factor() for log in logs]),
         ringdown=_concatenate_ringdowns(decays) if decays else None,
@@ -210,44 +210,68 @@ def _concatenate_ringdowns(logs: Sequence[RingdownLog]) -> RingdownLog:
         **{name: np.concatenate([getattr(log, name) for log in logs]) for name in columns},
         burst=np.concatenate([log.burst + offset for log, offset in zip(logs, offsets)]),
         sources=tuple(source for log in logs for source in log.sources),
+        warnings=tuple(warning for log in logs for warning in log.warnings),
     )
 
 
-def read_log(path):
-    """Read one interferometer log, line by line (memory: the rows' numbers, about 50 bytes a row).
+@dataclass(frozen=True)
+class LogTable:
+    """The numeric columns of one log, as read by :func:`read_table`.
 
-    Without a ``sweep`` column, a new sweep starts wherever the drive voltage changes
-    between consecutive rows.  A log with a ``decay_time_s`` column is a ring-down log and
-    reads as a :class:`RingdownLog` (``sweep`` is the burst id); any other as a
-    :class:`CampaignLog`.  The measurement point (``x_mm``, ``y_mm`` columns or metadata)
-    needs the plate's ``lambda_mm`` metadata to be mapped onto the beam mode.
+    Attributes
+    ----------
+    arrays : dict
+        Column name -> values (one per kept row) [the column's unit].
+    line_numbers : numpy.ndarray
+        Line of each kept row in the file [-].
+    metadata : dict
+        key -> (value text, line number) of the ``# key: value`` lines before the header.
+    warnings : list of str
+        Tolerated problems (dropped dropouts, an ignored partial last line).
+    """
+
+    arrays: dict
+    line_numbers: np.ndarray
+    metadata: dict
+    warnings: list
+
+
+def read_table(path, required: tuple = logformat.REQUIRED_COLUMNS, phase: bool = False) -> LogTable:
+    """The known columns of a log, read line by line (memory: the rows' numbers, about 50 bytes a row).
+
+    Rows without a velocity reading (empty or ``nan``: vibrometer dropouts) are dropped with a warning.
+    Every value is checked against its plausible range (:data:`~workflow.models.limits.LIMITS`).
+
+    Parameters
+    ----------
+    path : path-like
+    required : tuple of str
+        Columns the log must have (default: those of every log).
+    phase : bool
+        Read the ``phase_deg`` column too (a scan's; a sweep's phase is not used).
 
     Raises
     ------
     InputFileError
-        Unreadable, empty, binary or non-UTF-8 file; no header or no data rows; more than
-        :data:`MAX_ROWS` data rows or a line over :data:`MAX_LINE_LENGTH`; a required column
-        missing, duplicated or given in an unknown unit; a row with the wrong number of
-        fields; a non-numeric or non-physical value.
+        Unreadable, oversized, empty, binary or non-UTF-8 file, or not a regular file; no header or no
+        data rows; more than :data:`MAX_ROWS` data rows or a line over :data:`~workflow.logformat.MAX_LINE_LENGTH`;
+        a required column missing, duplicated or given in an unknown unit; a row with the wrong number
+        of fields; a non-numeric or implausible value.
     """
     path = Path(path)
     warnings, metadata = [], {}
-    try:
-        stream = open(path, "rb")
-    except OSError as error:
-        raise InputFileError(f"{path}: cannot read ({error.strerror or error})") from None
-    with stream:
+    with open_input(path, str(path), MAX_LOG_BYTES) as stream:
         lines = _content_lines(path, stream, warnings, metadata)
         header_number, header_line = next(lines, (None, None))
         if header_line is None:
-            raise InputFileError(f"{path}: no header row (expected columns {', '.join(logformat.REQUIRED_COLUMNS)})")
+            raise InputFileError(f"{path}: no header row (expected columns {', '.join(required)})")
         header = [name.strip() for name in _fields(path, header_number, header_line)]
         separator = next((mark for mark in ";\t" if len(header) == 1 and mark in header[0]), None)
         if separator:
             raise InputFileError(
                 f"{path}, line {header_number}: fields separated by {separator!r}; a log separates them by ','"
             )
-        columns = _column_indices(path, header_number, header)
+        columns = _column_indices(path, header_number, header, required, phase)
         table = {name: array("d") for name in columns}
         line_numbers, rows, dropouts = array("q"), 0, 0
         for number, line in lines:
@@ -273,8 +297,39 @@ def read_log(path):
     arrays = {name: np.frombuffer(values, dtype=float) for name, values in table.items()}
     line_numbers = np.frombuffer(line_numbers, dtype=np.int64)
     _check_physical(path, arrays, line_numbers)
+    return LogTable(arrays, line_numbers, metadata, warnings)
+
+
+def header_columns(path) -> list:
+    """The column names of a log's header row (empty when it has none), reading no further."""
+    path = Path(path)
+    with open_input(path, str(path), MAX_LOG_BYTES) as stream:
+        number, line = next(_content_lines(path, stream, [], {}), (None, None))
+        return [] if line is None else [name.strip() for name in _fields(path, number, line)]
+
+
+def read_log(path):
+    """Read one interferometer log (:func:`read_table`) as sweeps or ring-downs.
+
+    Without a ``sweep`` column, a new sweep starts wherever the drive voltage changes
+    between consecutive rows.  A log with a ``decay_time_s`` column is a ring-down log and
+    reads as a :class:`RingdownLog` (``sweep`` is the burst id; a burst also ends where the decay
+    time falls back: a decay recorded again); any other as a :class:`CampaignLog`.  The measurement
+    point (``x_mm``, ``y_mm`` columns or metadata) needs the plate's ``lambda_mm`` metadata to be mapped
+    onto the beam mode.
+
+    Raises
+    ------
+    InputFileError
+        Those of :func:`read_table`; a sweep (or burst) whose velocities all lie below
+        :data:`MIN_PEAK_VELOCITY`; a measurement point off the plate or near a node.
+    """
+    path = Path(path)
+    table = read_table(path)
+    arrays, warnings = table.arrays, table.warnings
     sweep = _sweep_index(path, arrays)
-    factor = _mode_factor(path, arrays, metadata, warnings)
+    factor = _mode_factor(path, arrays, table.metadata, warnings)
+    _check_peaks(path, arrays[logformat.VELOCITY], sweep, table.line_numbers)
     if logformat.DECAY_TIME in arrays:
         return RingdownLog(
             frequency=arrays[logformat.FREQUENCY],
@@ -285,8 +340,8 @@ def read_log(path):
             mode_factor=np.ones_like(arrays[logformat.VELOCITY]) if factor is None else factor,
             temperature=arrays.get(logformat.TEMPERATURE, np.full_like(arrays[logformat.VELOCITY], np.nan)),
             sources=(str(path),),
+            warnings=tuple(warnings),
         )
-    _check_peaks(path, arrays[logformat.VELOCITY], sweep, line_numbers)
     return CampaignLog(
         frequency=arrays[logformat.FREQUENCY],
         drive_voltage=arrays[logformat.DRIVE_VOLTAGE],
@@ -344,7 +399,7 @@ def _content_lines(path: Path, stream, warnings: list, metadata: dict):
             raise InputFileError(f"{path}, line {number}: binary data (NUL bytes), not a CSV log")
         complete = raw.endswith(b"\n")
         if not complete and len(raw) == _MAX_LINE_BYTES:
-            raise InputFileError(f"{path}, line {number}: longer than the {MAX_LINE_LENGTH} characters accepted per line")
+            raise InputFileError(f"{path}, line {number}: longer than the {logformat.MAX_LINE_LENGTH} characters accepted per line")
         try:
             line = raw.decode("utf-8-sig" if number == 1 else "utf-8")
         except UnicodeDecodeError as error:
@@ -353,9 +408,9 @@ def _content_lines(path: Path, stream, warnings: list, metadata: dict):
             ) from None
         offset += len(raw)
         line = line[:-1] if complete else line
-        if len(line) > MAX_LINE_LENGTH:
+        if len(line) > logformat.MAX_LINE_LENGTH:
             raise InputFileError(f"{path}, line {number}: {len(line)} characters, longer than the "
-                                 f"{MAX_LINE_LENGTH} accepted per line")
+                                 f"{logformat.MAX_LINE_LENGTH} accepted per line")
         seen_text = seen_text or bool(line.strip())
         line = line.rstrip("\r")
         if not line.strip() or line.lstrip().startswith("#"):
@@ -384,8 +439,8 @@ def _fields(path: Path, number: int, line: str) -> list:
         raise InputFileError(f"{path}, line {number}: not a CSV row ({error})") from None
 
 
-def _column_indices(path: Path, line: int, header) -> dict:
-    """Required and known optional column name -> index in the header."""
+def _column_indices(path: Path, line: int, header, required: tuple, phase: bool) -> dict:
+    """Required and known optional column name -> index in the header (``phase_deg`` only with ``phase``)."""
     indices = {}
     for name in logformat.READ_COLUMNS:
         positions = [i for i, column in enumerate(header) if column == name]
@@ -393,10 +448,10 @@ def _column_indices(path: Path, line: int, header) -> dict:
             raise InputFileError(f"{path}, line {line}: column '{name}' appears {len(positions)} times (ambiguous)")
         if positions:
             indices[name] = positions[0]
-    for name in logformat.REQUIRED_COLUMNS:
+    for name in required:
         if name in indices:
             continue
-        lookalikes = [c for c in header if c.lower().replace(" ", "_").startswith(_QUANTITY_STEMS[name])]
+        lookalikes = [c for c in header if c.lower().replace(" ", "_").startswith(_QUANTITY_STEMS.get(name, (name,)))]
         if lookalikes:
             raise InputFileError(
                 f"{path}, line {line}: column {lookalikes[0]!r} has an unknown unit or name; expected '{name}'"
@@ -406,7 +461,7 @@ def _column_indices(path: Path, line: int, header) -> dict:
             f"{path}, line {line}: missing required column '{name}' "
             f"(header: {(shown if shown.isprintable() else repr(shown)) or 'empty'})"
         )
-    return {name: index for name, index in indices.items() if name != logformat.PHASE}
+    return {name: index for name, index in indices.items() if phase or name != logformat.PHASE}
 
 
 def _number(path: Path, line: int, column: str, cell: str) -> float:
@@ -425,42 +480,45 @@ def _number(path: Path, line: int, column: str, cell: str) -> float:
     return value
 
 
+PLAUSIBLE_COLUMNS = (logformat.FREQUENCY, logformat.DRIVE_VOLTAGE, logformat.VELOCITY, logformat.DECAY_TIME,
+                     logformat.TEMPERATURE)
+"""Columns checked against :data:`~workflow.models.limits.LIMITS` (a missing temperature is allowed)."""
+
+
 def _check_physical(path: Path, arrays: dict, line_numbers: np.ndarray) -> None:
-    """Refuse non-positive frequencies, negative voltages, and velocities outside 0 to :data:`MAX_VELOCITY`."""
-    velocity = arrays[logformat.VELOCITY]
-    checks = (
-        (logformat.FREQUENCY, arrays[logformat.FREQUENCY] <= 0, "a frequency must be positive"),
-        (logformat.DRIVE_VOLTAGE, arrays[logformat.DRIVE_VOLTAGE] < 0, "a peak voltage must be >= 0"),
-        (logformat.VELOCITY, (velocity < 0) | (velocity > MAX_VELOCITY),
-         f"a velocity amplitude must be in 0 to {MAX_VELOCITY:g} m/s"),
-    )
-    for column, bad, reason in checks:
+    """Refuse the first value of a :data:`PLAUSIBLE_COLUMNS` column outside its plausible range, naming its line."""
+    for column in (name for name in PLAUSIBLE_COLUMNS if name in arrays):
+        low, high = LIMITS[column]
+        values = arrays[column]
+        bad = (values < low) | (values > high)
         if bad.any():
-            value = arrays[column][bad][0]
-            line = line_numbers[np.argmax(bad)]
-            raise InputFileError(f"{path}, line {line}: {column} = {value:g}: {reason}")
+            index = int(np.argmax(bad))
+            raise InputFileError(f"{path}, line {line_numbers[index]}: {problem(column, values[index])}")
 
 
 def _check_peaks(path: Path, velocity: np.ndarray, sweep: np.ndarray, line_numbers: np.ndarray) -> None:
-    """Refuse a sweep whose peak velocity is below :data:`MIN_PEAK_VELOCITY`, naming its first line."""
+    """Refuse a sweep (or burst) whose peak velocity is below :data:`MIN_PEAK_VELOCITY`, naming its first line."""
     peaks = np.zeros(int(sweep.max()) + 1)
     np.maximum.at(peaks, sweep, velocity)
     low = np.nonzero(peaks < MIN_PEAK_VELOCITY)[0]
     if low.size:
         line = line_numbers[np.argmax(sweep == low[0])]
         raise InputFileError(
-            f"{path}, line {line}: the sweep starting here peaks at {peaks[low[0]]:g} m/s, below the "
+            f"{path}, line {line}: the sweep (or burst) starting here peaks at {peaks[low[0]]:g} m/s, below the "
             f"{MIN_PEAK_VELOCITY:g} m/s accepted (all-zero velocities, or a velocity not in m/s?)"
         )
 
 
 def _sweep_index(path: Path, arrays: dict) -> np.ndarray:
-    """0-based sweep index per row, from the ``sweep`` column or from voltage changes."""
+    """0-based sweep (or burst) index per row, from the ``sweep`` column or from voltage changes; a burst also
+    ends where its decay time falls back (the burst recorded again after a record cut short)."""
     if logformat.SWEEP in arrays:
         ids = arrays[logformat.SWEEP]
         if not np.all(ids == np.round(ids)):
             raise InputFileError(f"{path}: column '{logformat.SWEEP}' must hold integer sweep ids")
         starts = np.r_[True, ids[1:] != ids[:-1]]
+        if logformat.DECAY_TIME in arrays:
+            starts |= np.r_[False, np.diff(arrays[logformat.DECAY_TIME]) < 0]
     else:
         voltage = arrays[logformat.DRIVE_VOLTAGE]
         starts = np.r_[True, ~np.isclose(voltage[1:], voltage[:-1], rtol=1e-6, atol=1e-9)]

@@ -11,6 +11,7 @@ from workflow.calibration.logs import read_built_plate
 from workflow.calibration.measurements import scan_shape
 from workflow.calibration.parameters import CalibrationSettings
 from workflow.errors import InputFileError
+from workflow.inputfiles import MAX_CALIBRATION_BYTES, load_json
 from workflow.models.fem.surface import modal_assurance_criterion
 from workflow.pipeline.builtplate import is_scan_log, read_scan
 from workflow.optimise.robust import RobustDesign
@@ -79,17 +80,13 @@ def load_calibration(path) -> Calibration:
     Raises
     ------
     InputFileError
-        Missing, unreadable, not JSON, or not a calibration file, naming the path.
+        Missing, unreadable, oversized, too deeply nested (:func:`~workflow.inputfiles.load_json`), not JSON,
+        or not a calibration file (:meth:`Calibration.from_dict`), naming the path.
     """
     path = Path(path)
     if path.is_dir():
         path = path / CALIBRATION_FILE
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as error:
-        raise InputFileError(f"--calibration {path}: cannot read ({error.strerror or error})") from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise InputFileError(f"--calibration {path}: not a JSON calibration file ({error})") from None
+    data = load_json(path, f"--calibration {path}", MAX_CALIBRATION_BYTES)
     return Calibration.from_dict(data, f"--calibration {path}")
 
 

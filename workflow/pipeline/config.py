@@ -9,12 +9,12 @@ import math
 import sys
 from dataclasses import MISSING, fields
 from importlib import resources
-from pathlib import Path
 
-from instruments.simulator.vibrometer import RECORD_INTERVAL_US_RANGE, RECORD_SAMPLES_RANGE
 from workflow.damping.laws import SAMPLED_LAWS
 from workflow.errors import InputFileError
+from workflow.inputfiles import load_toml
 from workflow.models import materials
+from workflow.models.limits import LIMITS, mm_range
 from workflow.models.plate import ORIGINAL_PLATE
 from workflow.units import KHZ, MM, UM
 
@@ -23,73 +23,11 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-def _mm(bounds) -> tuple:
-    """A range in metres as millimetres, rounded as the configuration writes them."""
-    return tuple(round(x / MM, 9) for x in bounds)
-
-
-LIMITS = {
-    "campaign.ringdown_samples": RECORD_SAMPLES_RANGE,  # the vibrometer's envelope record
-    "campaign.ringdown_interval_us": RECORD_INTERVAL_US_RANGE,
-    "design.voltage_v": (1e-3, 1000.0),
-    "design.q": (1.0, 1e5),
-    "design.wavelength_min_mm": _mm(materials.WAVELENGTH_RANGE),
-    "design.wavelength_max_mm": _mm(materials.WAVELENGTH_RANGE),
-    "design.hi_min_mm": _mm(materials.RESONATOR_THICKNESS_RANGE),
-    "design.hi_max_mm": _mm(materials.RESONATOR_THICKNESS_RANGE),
-    "design.width_mm": _mm(materials.WIDTH_RANGE),
-    "design.min_frequency_khz": (1.0, 1000.0),
-    "design.target_deflection_um": (1e-3, 1000.0),
-    "campaign.voltages_v": (1e-3, 1000.0),
-    "campaign.ringdown_voltages_v": (1e-3, 1000.0),
-    "simulator.softening_s2_m2": (0.0, 100.0),
-    "campaign.span_hz": (1e-3, 1e6),
-    "simulator.low_velocity_q": (1.0, 1e5),
-    "simulator.working_q": (1.0, 1e5),
-    "simulator.amplifier_gain": (0.1, 1000.0),
-    "simulator.ceramic_voltage_limit_v": (1e-3, 1000.0),
-    "simulator.relative_noise": (0.0, 1.0),
-    "simulator.floor_fraction": (0.0, 1.0),
-    "simulator.phase_noise_deg": (0.0, 180.0),
-    "simulator.built_glue_um": (0.0, 500.0),
-    "simulator.built_ceramic_factor": (0.5, 1.5),
-    "simulator.built_resonator_factor": (0.5, 1.5),
-    "simulator.built_hi_offset_um": (-1000.0, 1000.0),
-    "simulator.built_ceramic_offset_mm": (-10.0, 10.0),
-    "fem.width_min_mm": _mm(materials.WIDTH_RANGE),
-    "fem.width_max_mm": _mm(materials.WIDTH_RANGE),
-    "fem.fine_width_min_mm": _mm(materials.WIDTH_RANGE),
-    "fem.fine_width_max_mm": _mm(materials.WIDTH_RANGE),
-    "maps.grid": (2, 400),
-    "maps.fem_grid": (2, 400),
-    "campaign.seed": (0, 2**32 - 1),
-    "damping.seed": (0, 2**32 - 1),
-    "damping.max_steps": (1, 1_000_000),
-    "damping.walkers": (0, 10_000),
-    "damping.posterior_draws": (1, 10_000),
-    "fem.width_points": (2, 1000),
-    "design.glue_um": (0.0, 500.0),
-    "fem.accuracy": (0.0, 0.05),
-    "loop.scan_grid": (1, 100),
-    "loop.reliability": (0.5, 0.999),
-    "loop.stock_hi_mm": _mm(materials.RESONATOR_THICKNESS_RANGE),
-    "loop.search_start_khz": (1.0, 39.0),
-    "fem.survey_accuracy": (0.0, 0.05),
-}
-"""Accepted range of numeric keys, shared with the command-line options of the same quantity: drive
-amplitude [V peak across the ceramics], quality factor [-], map points per axis, random seeds, chain length
-(a million steps is about an hour per law), emcee walkers (0: max(32, 2 D + 2) for each law's D parameters;
-otherwise at least twice the parameters sampled: checked when the logs are read,
-:func:`~workflow.damping.fit.minimum_walkers`), posterior draws propagated,
-widths of the FEM sweep, FEM accuracy targets (relative frequency error; 0 means the fixed mesh of the
-[fem] mesh keys); the design space of Table 1 [mm], frequency [kHz], deflection [um], the
-campaign's drive [V] and span [Hz], the simulated bench.  Every other number must be finite."""
-
 CHOICES = {
     "damping.laws": SAMPLED_LAWS,
-    "design.ceramic_thicknesses_mm": _mm(materials.CERAMIC_THICKNESSES),
-    "maps.fem_ceramic_thicknesses_mm": _mm(materials.CERAMIC_THICKNESSES),
-    "loop.hp_mm": _mm(materials.CERAMIC_THICKNESSES),
+    "design.ceramic_thicknesses_mm": mm_range(materials.CERAMIC_THICKNESSES),
+    "maps.fem_ceramic_thicknesses_mm": mm_range(materials.CERAMIC_THICKNESSES),
+    "loop.hp_mm": mm_range(materials.CERAMIC_THICKNESSES),
 }
 """Accepted values of the items of list keys."""
 
@@ -216,25 +154,13 @@ def load_config(path=None) -> dict:
     Raises
     ------
     InputFileError
-        Unreadable or malformed file, unknown section or key, or a value of the wrong type,
-        naming the file and the key.
+        Unreadable, oversized or malformed file (:func:`~workflow.inputfiles.load_toml`), unknown section
+        or key, or a value of the wrong type or outside its range, naming the file and the key.
     """
     config = default_config()
     if path is None:
         return config
-    path = Path(path)
-    try:
-        user = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputFileError(f"{path}: no such configuration file") from None
-    except IsADirectoryError:
-        raise InputFileError(f"{path}: is a folder, not a TOML configuration file") from None
-    except OSError as error:
-        raise InputFileError(f"{path}: cannot read the configuration file ({error.strerror or error})") from None
-    except UnicodeDecodeError:
-        raise InputFileError(f"{path}: not a UTF-8 text file") from None
-    except tomllib.TOMLDecodeError as error:
-        raise InputFileError(f"{path}: not valid TOML: {error}") from None
+    user = load_toml(path, str(path))
     return merge(config, user, source=str(path))
 
 

@@ -15,6 +15,7 @@ from typing import Any, Callable, Dict, List, Optional
 
 from workflow.errors import TactileError
 from workflow.execution.cache import EvaluationCache, content_key, source_version
+from workflow.inputfiles import MAX_LOG_BYTES, read_input
 from workflow.progress import format_duration
 
 
@@ -80,7 +81,7 @@ class Step:
 def _step_key(context: RunContext, step: Step) -> str:
     """Content key of a step's result: step, configuration, logs' bytes, code."""
     package = Path(__file__).resolve().parents[1]
-    logs = [hashlib.sha256(Path(path).read_bytes()).hexdigest() for path in context.results.get("logs", [])]
+    logs = [hashlib.sha256(read_input(path, str(path), MAX_LOG_BYTES)).hexdigest() for path in context.results.get("logs", [])]
     return content_key(
         {
             "step": step.key,

@@ -127,7 +127,7 @@ def damping_fit(context: RunContext):
     from workflow.damping.fit import fit_damping, minimum_walkers
     from workflow.damping.logs import drop_short_sweeps, read_logs
     from workflow.execution.parallel import map_evaluations
-    from workflow.pipeline.config import LIMITS
+    from workflow.models.limits import LIMITS
 
     damping = context.config["damping"]
     log = drop_short_sweeps(read_logs(context.results["logs"]))

@@ -24,6 +24,7 @@ import numpy as np
 
 from workflow.errors import TactileError
 from workflow.models.fem.settings import PIEZO_MODELS, FemSettings
+from workflow.models.limits import LIMITS
 from workflow.models.plate import Plate
 
 LEVELS = (4, 6, 8, 10, 12, 16)
@@ -38,7 +39,7 @@ DEFAULT_ACCURACY = 2e-3
 """Default target relative frequency error of an FEM evaluation [-] (0.2 %)."""
 SURVEY_ACCURACY = 0.01
 """Default target of maps and width sweeps (many geometries) [-] (1 %)."""
-ACCURACY_RANGE = (1e-4, 0.05)
+ACCURACY_RANGE = LIMITS["fem_accuracy"]
 """Accepted targets [-]."""
 
 
