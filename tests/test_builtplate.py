@@ -63,9 +63,12 @@ def test_built_plate_metadata_round_trip(tmp_path):
 @pytest.mark.parametrize("metadata, message", [
     ({"lambda_mm": 20, "h_i_mm": 1, "h_p_mm": 1}, "no '# b_mm: ...' metadata line"),
     ({"lambda_mm": "20 mm", "h_i_mm": 1, "h_p_mm": 1, "b_mm": 49}, "line 2: metadata lambda_mm = '20 mm' is not a finite number"),
-    ({"lambda_mm": 20, "h_i_mm": -1, "h_p_mm": 1, "b_mm": 49}, "line 3: h_i_mm must be positive"),
+    ({"lambda_mm": 20, "h_i_mm": -1, "h_p_mm": 1, "b_mm": 49}, "line 3: h_i_mm = -1 is outside the plausible range 0.05 to 20 mm"),
+    ({"lambda_mm": 20, "h_i_mm": 1e-6, "h_p_mm": 1, "b_mm": 49}, "line 3: h_i_mm = 1e-06 is outside the plausible range"),
+    ({"lambda_mm": 1e6, "h_i_mm": 1, "h_p_mm": 1, "b_mm": 49}, "line 2: lambda_mm = 1e[+]06 is outside the plausible range"),
     ({"lambda_mm": 20, "h_i_mm": 1, "h_p_mm": 1, "b_mm": 49, "ceramic": "PZT-9"}, "line 6: ceramic 'PZT-9' is not a material record"),
-    ({"lambda_mm": 20, "h_i_mm": 1, "h_p_mm": 1, "b_mm": 49, "glue_um": -3}, "line 6: glue_um must be >= 0"),
+    ({"lambda_mm": 20, "h_i_mm": 1, "h_p_mm": 1, "b_mm": 49, "glue_um": -3}, "line 6: glue_um = -3 is outside the plausible range 0 to 500 um"),
+    ({"lambda_mm": 20, "h_i_mm": 1, "h_p_mm": 1, "b_mm": 49, "glue_um": 1e9}, "line 6: glue_um = 1e[+]09 is outside"),
 ])
 def test_built_plate_metadata_errors_name_file_and_line(tmp_path, metadata, message):
     path = write_log(tmp_path / "bad.csv", metadata)

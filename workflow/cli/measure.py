@@ -21,10 +21,12 @@ from workflow.cli.options import (
     add_json_flag,
     bench_settings,
     bounded,
+    limit_text,
     built_plate_from_args,
     built_plate_model,
 )
 from workflow.errors import TactileError
+from workflow.models.limits import LIMITS, point_problem
 from workflow.units import MM
 
 DEFAULT_DATA_DIR = Path("measurements")
@@ -32,14 +34,16 @@ DEFAULT_DATA_DIR = Path("measurements")
 PROCEDURES = ("resonance", "campaign", "voltage-sweep", "scan", "ringdown")
 
 
+VOLTAGE = bounded(float, *LIMITS["campaign.voltages_v"], "V")
+"""argparse type of a drive voltage [V peak across the ceramics]."""
+
+
 def _voltages(text: str) -> tuple:
+    """Comma-separated drive voltages, each in the range of :data:`VOLTAGE`."""
     try:
-        values = tuple(float(item) for item in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated volts, e.g. 2.5,5,7.5; got {text!r}") from None
-    if not values or any(not v > 0 for v in values):
-        raise argparse.ArgumentTypeError(f"voltages must be positive, got {text!r}")
-    return values
+        return tuple(VOLTAGE(item) for item in text.split(","))
+    except argparse.ArgumentTypeError as error:
+        raise argparse.ArgumentTypeError(f"expected comma-separated volts, e.g. 2.5,5,7.5: {error}") from None
 
 
 def register(subparsers) -> None:
@@ -65,10 +69,12 @@ def register(subparsers) -> None:
                        help="reply timeout [s], 0.001 to 3600 (default 1)")
     ports.add_argument("--retries", type=bounded(int, 0, 100), default=3,
                        help="retries of a point after a timeout or garbled reply, 0 to 100 (default 3)")
-    ports.add_argument("--amplifier-gain", type=float, default=DEFAULT_GAIN,
-                       help=f"power amplifier voltage gain (default {DEFAULT_GAIN:g})")
-    ports.add_argument("--max-voltage", type=float, default=DEFAULT_CERAMIC_VOLTAGE_LIMIT, metavar="VOLTS",
-                       help=f"safety limit, peak volts across the ceramics (default {DEFAULT_CERAMIC_VOLTAGE_LIMIT:g})")
+    ports.add_argument("--amplifier-gain", type=bounded(float, *LIMITS["amplifier_gain"]), default=DEFAULT_GAIN,
+                       help=f"power amplifier voltage gain, {limit_text('amplifier_gain')} (default {DEFAULT_GAIN:g})")
+    ports.add_argument("--max-voltage", type=bounded(float, *LIMITS["simulator.ceramic_voltage_limit_v"], "V"),
+                       default=DEFAULT_CERAMIC_VOLTAGE_LIMIT, metavar="VOLTS",
+                       help=f"safety limit, peak volts across the ceramics, {limit_text('simulator.ceramic_voltage_limit_v', 'V')} "
+                       f"(default {DEFAULT_CERAMIC_VOLTAGE_LIMIT:g})")
     ports.add_argument("--out", type=Path, help=f"log file (default: {DEFAULT_DATA_DIR}/<procedure>.csv in the working "
                        "directory, a folder git ignores; the path is printed at the end)")
     ports.add_argument("--restart", action="store_true", help="overwrite an existing log tactile wrote instead of resuming it (any other file is never overwritten nor appended to: the command refuses it)")
@@ -79,7 +85,7 @@ def register(subparsers) -> None:
     resonance = procedures.add_parser("resonance", parents=[common], help="coarse then fine sweep to find f_r",
                                       description="Find the resonance: a coarse sweep then a fine one around its peak.")
     _add_search_flags(resonance, 25e3, 61)
-    resonance.add_argument("--voltage", type=float, default=2.0, help="drive, peak volts across the ceramics (default 2)")
+    resonance.add_argument("--voltage", type=VOLTAGE, default=2.0, help="drive, peak volts across the ceramics (default 2)")
 
     campaign = procedures.add_parser("campaign", parents=[common], help="Q(v) campaign: sweeps at several voltages",
                                      description="Frequency sweeps around the resonance at several drive voltages "
@@ -88,7 +94,8 @@ def register(subparsers) -> None:
     campaign.add_argument("--voltages", type=_voltages, default=(2.5, 5.0, 7.5, 10.0, 12.5, 15.0),
                           help="peak volts across the ceramics, comma-separated (default 2.5,5,7.5,10,12.5,15)")
     campaign.add_argument("--points", type=int, default=51, help="frequency points per sweep, 3 to 10000; at most 100000 points in all (default 51)")
-    campaign.add_argument("--span-hz", type=float, default=1600.0, help="sweep width [Hz] (default 1600)")
+    campaign.add_argument("--span-hz", type=bounded(float, *LIMITS["campaign.span_hz"], "Hz"), default=1600.0,
+                          help=f"sweep width [Hz], {limit_text('campaign.span_hz', 'Hz')} (default 1600)")
     campaign.add_argument("--center-hz", type=float, help="sweep centre [Hz] (default: see above)")
 
     sweep = procedures.add_parser("voltage-sweep", parents=[common], help="deflection versus voltage at resonance",
@@ -125,7 +132,7 @@ def register(subparsers) -> None:
     scan.add_argument("--points", type=_points, help="explicit points instead of --grid: 'x:y,x:y,...' [mm from the centre]")
     scan.add_argument("--margin-mm", type=float, default=DEFAULT_MARGIN / MM,
                       help=f"distance of the outer grid points from the edges [mm] (default {DEFAULT_MARGIN / MM:g})")
-    scan.add_argument("--voltage", type=float, default=DEFAULT_VOLTAGE,
+    scan.add_argument("--voltage", type=VOLTAGE, default=DEFAULT_VOLTAGE,
                       help=f"drive, peak volts across the ceramics (default {DEFAULT_VOLTAGE:g})")
     scan.add_argument("--frequency-hz", type=float, help="drive frequency [Hz] (default: see above)")
     _add_search_flags(scan, 15e3, 101)
@@ -162,11 +169,6 @@ def _open_station(args):
     from instruments.procedures.sweeps import open_station
     from instruments.simulator import register_url_handler
 
-    if not (math.isfinite(args.max_voltage) and args.max_voltage > 0):
-        raise TactileError(f"--max-voltage must be a finite number of volts > 0 (peak across the ceramics; default "
-                           f"{DEFAULT_CERAMIC_VOLTAGE_LIMIT:g}), got {args.max_voltage:g}")
-    if not (math.isfinite(args.amplifier_gain) and args.amplifier_gain > 0):
-        raise TactileError(f"--amplifier-gain must be a finite number > 0 [V/V], got {args.amplifier_gain:g}")
     options = {"retries": args.retries}
     if args.simulate:
         if args.generator or args.vibrometer:
@@ -213,8 +215,13 @@ def _check_plan_flags(args) -> None:
         sweeps = {"--coarse-points": args.coarse_points, "--fine-points": args.fine_points}
         check_sizes(sweeps, sum(sweeps.values()), "--coarse-points + --fine-points")
     if args.procedure == "scan":
-        if built_plate_from_args(args) is None:
+        built = built_plate_from_args(args)
+        if built is None:
             raise TactileError("a scan needs the plate: give --lambda-mm, --hi-mm and --hp-mm (and --b-mm)")
+        for x, y in args.points or ():
+            off = point_problem(built.plate(), x, y)
+            if off:
+                raise TactileError(f"--points: {off}")
         if args.points is None and min(args.grid) < 1:
             raise TactileError(f"--grid needs at least 1 point along each axis, got {args.grid[0]} {args.grid[1]}")
         check_sizes({}, len(args.points) if args.points else args.grid[0] * args.grid[1], "scan points")
