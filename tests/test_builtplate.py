@@ -106,7 +106,7 @@ def test_built_plate_resonance_follows_the_fem_of_the_deviated_plate(nominal, bu
                              fsync=False)
     assert found.summary["resonance_frequency_hz"] == pytest.approx(built.resonance_frequency, rel=2e-3)
     assert read_built_plate(tmp_path / "r.csv").wavelength == pytest.approx(DESIGN.wavelength)
-    metadata, _, _ = read_log(tmp_path / "r.csv")
+    metadata = read_log(tmp_path / "r.csv").metadata
     assert metadata["simulator_deviation_glue_um"] == "40.0"
 
 
@@ -127,7 +127,7 @@ def test_scanner_commands_and_off_plate_refusal(built):
 
 
 def scan_keys(path):
-    _, rows, _ = read_log(Path(path), logformat.SCAN_COLUMNS)
+    rows = read_log(Path(path), logformat.SCAN_COLUMNS).rows
     return [(row[logformat.X_POSITION], row[logformat.Y_POSITION]) for row in rows]
 
 

@@ -7,8 +7,10 @@ the generator is left with its output off at its lowest amplitude (docs/safety.m
 """
 
 import argparse
+import glob
 import math
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 
 from instruments.drivers.amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT, DEFAULT_GAIN
@@ -17,6 +19,7 @@ from workflow.cli.options import (
     Stopped,
     StopSignals,
     add_bench_arguments,
+    add_force_option,
     add_built_plate_arguments,
     add_json_flag,
     bench_settings,
@@ -27,6 +30,7 @@ from workflow.cli.options import (
 )
 from workflow.errors import TactileError
 from workflow.models.limits import LIMITS, point_problem
+from workflow.pipeline.outputs import output_folder
 from workflow.units import MM
 
 DEFAULT_DATA_DIR = Path("measurements")
@@ -77,6 +81,7 @@ def register(subparsers) -> None:
                        f"(default {DEFAULT_CERAMIC_VOLTAGE_LIMIT:g})")
     ports.add_argument("--out", type=Path, help=f"log file (default: {DEFAULT_DATA_DIR}/<procedure>.csv in the working "
                        "directory, a folder git ignores; the path is printed at the end)")
+    add_force_option(ports, "a scan's figure (--figure)")
     ports.add_argument("--restart", action="store_true", help="overwrite an existing log tactile wrote instead of resuming it (any other file is never overwritten nor appended to: the command refuses it)")
     add_bench_arguments(common)
     add_built_plate_arguments(common)
@@ -240,16 +245,19 @@ def run(args):
 
     _check_plan_flags(args)
     out = args.out or DEFAULT_DATA_DIR / f"{args.procedure}.csv"
-    with exclusive(out), StopSignals() as signals:
-        station, metadata = _open_station(args)
-        try:
-            result = _measure(args, station, metadata, out)
-        except BaseException as error:
-            problem = _shut_down(station, signals)
-            if isinstance(error, Stopped):
-                error.outcome = problem or "generator output off (OUTP 0, lowest amplitude)"
-            raise
-        _shut_down(station, signals)
+    with exclusive(out), _figure_output(args, out) as figure:
+        with StopSignals() as signals:
+            station, metadata = _open_station(args)
+            try:
+                result = _measure(args, station, metadata, out)
+            except BaseException as error:
+                problem = _shut_down(station, signals)
+                if isinstance(error, Stopped):
+                    error.outcome = problem or "generator output off (OUTP 0, lowest amplitude)"
+                raise
+            _shut_down(station, signals)
+        if figure is not None:
+            scan = _scan_figure(args, result.path, figure)
     summary = {
         "log": str(result.path),
         "procedure": result.procedure,
@@ -257,10 +265,13 @@ def run(args):
         "measured": result.measured,
         "resumed": result.resumed,
         "truncated_bytes": result.truncated_bytes,
+        "warnings": list(result.warnings),
         **result.summary,
     }
-    if result.procedure == "scan":
-        summary.update(_scan_figure(args, result.path))
+    for warning in result.warnings:
+        print(f"tactile measure: warning: {warning}", file=sys.stderr)
+    if figure is not None:
+        summary.update(scan)
     if not args.json:
         print(f"{result.procedure}: {result.measured} points measured, {result.resumed} already logged "
               f"({result.planned} planned); log: {result.path}")
@@ -306,15 +317,42 @@ def _scan(args, station, metadata: dict, out: Path):
     return deflection_scan(station, out, ScanPlan(frequency, args.voltage, points), metadata, args.restart)
 
 
-def _scan_figure(args, log: Path) -> dict:
-    """Compare a scan with the FEM's map of the nominal plate: write the figure; its path, the MAC and the FEM's f_r."""
+@contextmanager
+def _figure_output(args, log: Path):
+    """Context manager: the scan's figure path (None for the other procedures), checked before any measurement.
+
+    The figure may replace only a file tactile wrote there (the folder's record of its outputs,
+    :mod:`workflow.pipeline.outputs`) unless ``--force``; it may be neither the log, nor its resonance log.
+    """
+    if args.procedure != "scan":
+        yield None
+        return
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    from instruments.procedures.sweeps import resonance_log_path
+
+    figure, option = args.figure or log.with_suffix(".png"), "--figure"
+    formats = FigureCanvasBase.get_supported_filetypes()
+    if figure.suffix.lower().lstrip(".") not in formats:
+        raise TactileError(f"{option} {figure}: the figure needs a file name ending in one of "
+                           f"{', '.join('.' + name for name in sorted(formats))}")
+    if figure.is_dir():
+        raise TactileError(f"{option} {figure}: is a folder; give the figure's file name")
+    if figure.resolve() in {log.resolve(), resonance_log_path(log).resolve()}:
+        raise TactileError(f"{option} {figure}: the figure would replace the scan's log; give another {option}")
+    with output_folder(figure.parent, [glob.escape(figure.name)], force=args.force, option=option) as folder:
+        yield folder / figure.name
+
+
+def _scan_figure(args, log: Path, path: Path) -> dict:
+    """Compare a scan with the FEM's map of the nominal plate: write the figure at ``path``; its path, the MAC and
+    the FEM's f_r."""
     from workflow.pipeline.builtplate import read_scan, scan_mac
     from workflow.pipeline.figures.scan import scan_figure
 
     scan = read_scan(log)
     nominal = built_plate_model(args, scan.plate)
     mac = scan_mac(scan, nominal)
-    path = args.figure or log.with_suffix(".png")
     figure = scan_figure(scan, nominal, mac)
     try:
         figure.savefig(path, dpi=120)

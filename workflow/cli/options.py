@@ -76,12 +76,12 @@ def seed_option(parser, default: int, help: str) -> None:
                         help=f"{help}, {limit_text('campaign.seed')} (default {default})")
 
 
-def add_force_option(parser: argparse.ArgumentParser) -> None:
-    """``--force``: overwrite files in --out that tactile did not write (docs/cli.md, "Output folders")."""
+def add_force_option(parser, what: str = "files in --out") -> None:
+    """``--force``: overwrite ``what`` even where tactile did not write it (docs/cli.md, "Output folders")."""
     parser.add_argument(
         "--force",
         action="store_true",
-        help="overwrite files in --out that tactile did not write (or that changed since); without it the "
+        help=f"overwrite {what} that tactile did not write (or that changed since); without it the "
         "command refuses them before any work",
     )
 
