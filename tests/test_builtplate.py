@@ -202,7 +202,11 @@ def test_cli_scan_writes_log_figure_and_resumes(tmp_path, capsys, monkeypatch):
 @pytest.mark.parametrize("argv, message", [
     ([], "a scan needs the plate"),
     (["--lambda-mm", "20", "--hi-mm", "0.75"], "--hp-mm missing"),
-    (["--lambda-mm", "20", "--hi-mm", "0.75", "--hp-mm", "1", "--dev-ceramic-factor", "3"], "bad --dev-\\* flag"),
+    (["--lambda-mm", "20", "--hi-mm", "0.75", "--hp-mm", "1", "--dev-ceramic-factor", "3"],
+     "argument --dev-ceramic-factor: 3 is outside the accepted range 0.5 to 1.5"),
+    (["--lambda-mm", "20", "--hi-mm", "0.75", "--hp-mm", "1", "--dev-hi-offset-um", "-800"],
+     "resonator_thickness must be a positive finite length"),
+    (["--lambda-mm", "20", "--hi-mm", "0.75", "--hp-mm", "1", "--points", "1:2,300:0"], "--points: point \\(300, 0\\) mm is off the plate"),
     (["--lambda-mm", "20", "--hi-mm", "0.75", "--hp-mm", "1", "--points", "1:2,3"], "expected points as x:y"),
 ])
 def test_cli_scan_errors_are_one_line(tmp_path, capsys, argv, message):

@@ -30,6 +30,8 @@ P2 = Plate(15.66e-3, 0.5e-3, 0.5e-3, 49e-3)
 TRUTH = np.array([0.93, 1.04, 30e-6, -15e-6])
 """Hidden deviations of the simulated built plates: ceramic and resonator factors, glue [m], h_i offset [m]."""
 FAST = replace(default_settings(), steps=2000, surrogate_points=18)
+FEM_RECORD = {"q": 54.0, "voltage_v": 15.0, "accuracy": 0.01, "piezo": "eigenstrain"}
+"""The FEM conditions a calibration records (what ``tactile calibrate`` binds)."""
 
 
 @pytest.fixture(scope="module")
@@ -192,7 +194,7 @@ def test_calibrate_refuses_a_bad_settings_file_and_a_missing_calibration(tmp_pat
 
 def test_calibration_file_round_trips(coarse_model):
     plate = MeasuredPlate("P1", P1, built_plate_frequency(coarse_model, P1))
-    calibration = calibrate([plate], replace(FAST, steps=300, kept_samples=200), coarse_model.evaluate_plates, {"q": 54.0})
+    calibration = calibrate([plate], replace(FAST, steps=300, kept_samples=200), coarse_model.evaluate_plates, FEM_RECORD)
     again = Calibration.from_dict(json.loads(json.dumps(calibration.to_dict())))
     assert np.array_equal(again.samples, calibration.samples)
     assert again.surrogates[0].log_frequency(TRUTH) == pytest.approx(calibration.surrogates[0].log_frequency(TRUTH))
@@ -312,7 +314,7 @@ def test_run_step_predicts_the_recommended_designs_with_the_calibration(tmp_path
     from workflow.pipeline.steps import calibrated_designs
 
     plate = MeasuredPlate("P1", P1, built_plate_frequency(coarse_model, P1))
-    calibration = calibrate([plate], FAST, coarse_model.evaluate_plates, {"accuracy": 0.05, "piezo": "eigenstrain"})
+    calibration = calibrate([plate], FAST, coarse_model.evaluate_plates, {**FEM_RECORD, "accuracy": 0.05})
     files = write_calibration(calibration, tmp_path, figures=False)
     designs = {1e-3: SimpleNamespace(plate=P1, frequency=25.1e3)}
     context = SimpleNamespace(calibration=Path(files["calibration"]), config=default_config(), cache=None,

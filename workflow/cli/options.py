@@ -397,7 +397,8 @@ def built_plate_from_args(args):
 
 
 def deviations_from_args(args):
-    """The simulated built plate's :class:`~workflow.models.builtplate.PlateDeviations` of --deviations and --dev-*."""
+    """The simulated built plate's :class:`~workflow.models.builtplate.PlateDeviations` of --deviations and --dev-*
+    (each within its plausible range: the options' types)."""
     from dataclasses import replace
 
     from workflow.models.builtplate import DEMONSTRATION_DEVIATIONS, PlateDeviations
@@ -414,10 +415,7 @@ def deviations_from_args(args):
         )
         if getattr(args, option) is not None
     }
-    try:
-        return replace(base, **changes)
-    except ValueError as error:
-        raise TactileError(f"bad --dev-* flag: {error}") from None
+    return replace(base, **changes)
 
 
 def built_plate_model(args, built, deviations=None):
