@@ -86,6 +86,18 @@ def add_force_option(parser, what: str = "files in --out") -> None:
     )
 
 
+def add_mixed_plates_option(parser: argparse.ArgumentParser, default: str | None = "refuse") -> None:
+    """``--mixed-plates refuse|warn``: logs that are not of one plate (their metadata or their resonances)."""
+    from workflow.damping.logs import MIXED_PLATES, SAME_PLATE_TOLERANCE
+
+    kept = "the configuration's [damping] mixed_plates" if default is None else default
+    parser.add_argument(
+        "--mixed-plates", choices=MIXED_PLATES, default=default,
+        help="logs that name different plates in their metadata, or whose resonances are more than "
+        f"{SAME_PLATE_TOLERANCE * 100:g} %% apart: refuse them, or go on with a warning (default: {kept})",
+    )
+
+
 def add_model_option(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", choices=MODELS, default="analytical", help="plate model (default: analytical)")
 
@@ -240,13 +252,14 @@ def add_fem_options(
 
 
 def override_config(config: dict, args) -> dict:
-    """The run's configuration with the FEM and build options given on the command line."""
+    """The run's configuration with the FEM, build and --mixed-plates options given on the command line."""
     for section, key, option in (
         ("fem", "accuracy", "accuracy"),
         ("fem", "piezo", "piezo"),
         ("design", "ceramic", "ceramic"),
         ("design", "resonator", "resonator"),
         ("design", "glue_um", "glue_um"),
+        ("damping", "mixed_plates", "mixed_plates"),
     ):
         if getattr(args, option) is not None:
             config[section][key] = getattr(args, option)

@@ -22,6 +22,7 @@ from workflow import logformat
 from workflow.damping.mode_shape import BeamMode, measurement_factor
 from workflow.errors import InputFileError
 from workflow.inputfiles import MAX_LOG_BYTES, open_input
+from workflow.models.builtplate import BuiltPlate
 from workflow.models.limits import LIMITS, problem
 from workflow.units import MM
 
@@ -171,20 +172,32 @@ def drop_short_sweeps(log: CampaignLog, min_points: int = MIN_POINTS_PER_SWEEP) 
     return log.subset(keep, renumbered, log.warnings + (warning,))
 
 
-def read_logs(paths: Sequence) -> CampaignLog:
+MIXED_PLATES = ("refuse", "warn")
+"""What to do with logs of different plates given together: refuse them, or fit them with a warning."""
+SAME_PLATE_TOLERANCE = 0.02
+"""Largest relative spread of the logs' resonances still taken for one plate [-]: drift, temperature and
+softening move a plate's resonance by well under 1 %; the paper's two built plates are 3.4 % apart."""
+
+
+def read_logs(paths: Sequence, mixed_plates: str = "refuse") -> CampaignLog:
     """Read and concatenate several logs; sweeps (and bursts) are renumbered so they never collide.
 
     Ring-down logs (a ``decay_time_s`` column) are gathered in :attr:`CampaignLog.ringdown`;
-    with ring-down logs alone the sweeps are empty.
+    with ring-down logs alone the sweeps are empty.  Logs that are not of one plate
+    (:func:`plate_mismatch`) are refused, or with ``mixed_plates="warn"`` read with a warning.
 
     Raises
     ------
     InputFileError
-        On the first malformed file, naming it.
+        On the first malformed file, naming it; logs of different plates unless ``mixed_plates="warn"``.
     """
     if not paths:
         raise InputFileError("no log file given")
     read = [read_log(path) for path in paths]
+    mismatch = plate_mismatch(paths, read)
+    if mismatch and mixed_plates == "refuse":
+        raise InputFileError(f"{mismatch}; logs of different plates are not fitted together (--mixed-plates warn "
+                             "fits them anyway)")
     logs = [log for log in read if isinstance(log, CampaignLog)]
     decays = [log for log in read if isinstance(log, RingdownLog)]
     offsets = np.cumsum([0] + [log.n_sweeps for log in logs[:-1]])
@@ -196,11 +209,43 @@ def read_logs(paths: Sequence) -> CampaignLog:
         velocity=np.concatenate([log.velocity for log in logs] + [np.zeros(0)]),
         sweep=np.concatenate([log.sweep + offset for log, offset in zip(logs, offsets)] + [np.zeros(0, dtype=int)]),
         sources=tuple(source for log in logs for source in log.sources),
-        warnings=tuple(warning for log in read for warning in log.warnings),
+        warnings=tuple(warning for log in read for warning in log.warnings) + ((mismatch,) if mismatch else ()),
         timestamp=np.concatenate(timestamps) if logs and all(t is not None for t in timestamps) else None,
         mode_factor=None if all(m is None for m in factors) else np.concatenate([log.measurement_factor() for log in logs]),
         ringdown=_concatenate_ringdowns(decays) if decays else None,
     )
+
+
+def log_resonance(log) -> float:
+    """The resonance a log measured [Hz]: the median of its sweeps' peak frequencies, or of its bursts' frequency."""
+    if isinstance(log, RingdownLog):
+        return float(np.median(log.frequency))
+    return float(np.median([log.frequency[log.sweep == k][np.argmax(log.velocity[log.sweep == k])]
+                            for k in range(log.n_sweeps)]))
+
+
+def plate_mismatch(paths: Sequence, logs: Sequence) -> str | None:
+    """Why the logs (read from ``paths``) are not of one plate, or None: two name different built plates in
+    their metadata (:class:`~workflow.models.builtplate.BuiltPlate`), or their resonances (:func:`log_resonance`)
+    spread by more than :data:`SAME_PLATE_TOLERANCE`."""
+    named = [(path, logformat.read_metadata(path)) for path in paths]
+    plates = [(path, BuiltPlate.from_metadata(metadata, str(path))) for path, metadata in named
+              if all(key in metadata for key in logformat.BUILT_PLATE_KEYS)]
+    for path, plate in plates[1:]:
+        if plate != plates[0][1]:
+            return (f"{plates[0][0]} and {path} name different plates in their metadata ({_described(plates[0][1])}; "
+                    f"{_described(plate)})")
+    resonances = [log_resonance(log) for log in logs]
+    low, high = int(np.argmin(resonances)), int(np.argmax(resonances))
+    if resonances[high] > (1 + SAME_PLATE_TOLERANCE) * resonances[low]:
+        return (f"{paths[low]} (resonance {resonances[low]:.0f} Hz) and {paths[high]} ({resonances[high]:.0f} Hz) are "
+                f"{(resonances[high] / resonances[low] - 1) * 100:.1f} % apart, more than the "
+                f"{SAME_PLATE_TOLERANCE * 100:g} % of one plate")
+    return None
+
+
+def _described(plate: BuiltPlate) -> str:
+    return ", ".join(f"{key} {value}" for key, value in plate.metadata().items())
 
 
 def _concatenate_ringdowns(logs: Sequence[RingdownLog]) -> RingdownLog:

@@ -11,6 +11,7 @@ from dataclasses import MISSING, fields
 from importlib import resources
 
 from workflow.damping.laws import SAMPLED_LAWS
+from workflow.damping.logs import MIXED_PLATES
 from workflow.errors import InputFileError
 from workflow.inputfiles import load_toml
 from workflow.models import materials
@@ -25,11 +26,15 @@ else:  # pragma: no cover
 
 CHOICES = {
     "damping.laws": SAMPLED_LAWS,
+    "damping.mixed_plates": MIXED_PLATES,
     "design.ceramic_thicknesses_mm": mm_range(materials.CERAMIC_THICKNESSES),
     "maps.fem_ceramic_thicknesses_mm": mm_range(materials.CERAMIC_THICKNESSES),
     "loop.hp_mm": mm_range(materials.CERAMIC_THICKNESSES),
 }
 """Accepted values of the items of list keys."""
+
+LIST_ITEMS = {"campaign.logs": ""}
+"""An item of each list key whose default is empty, for its type (the logs' paths are strings)."""
 
 NOT_EMPTY = ("damping.laws", "design.ceramic_thicknesses_mm", "campaign.voltages_v", "loop.stock_hi_mm")
 """List keys that need at least one item."""
@@ -244,9 +249,8 @@ def _checked(value, default, name: str, source: str):
     if isinstance(default, list):
         if not isinstance(value, list):
             raise InputFileError(f"{source}: '{name}' must be a list, got {type(value).__name__} {value!r}")
-        if default:
-            return [_checked(item, default[0], f"{name}[{i}]", source) for i, item in enumerate(value)]
-        return value
+        item = default[0] if default else LIST_ITEMS[name]
+        return [_checked(entry, item, f"{name}[{i}]", source) for i, entry in enumerate(value)]
     if type(value) is not expected:
         raise InputFileError(f"{source}: '{name}' must be {_type_name(expected)}, got {type(value).__name__} {value!r}")
     return value
@@ -266,11 +270,16 @@ def to_toml(config: dict) -> str:
     return "\n".join(lines)
 
 
+_TOML_ESCAPES = {'"': '\\"', "\\": "\\\\", "\b": "\\b", "\t": "\\t", "\n": "\\n", "\f": "\\f", "\r": "\\r"}
+"""Characters a TOML basic string escapes by name; the other control characters are written \\uXXXX."""
+
+
 def _toml_value(value) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, str):
-        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+        return '"' + "".join(_TOML_ESCAPES.get(c) or (f"\\u{ord(c):04X}" if ord(c) < 0x20 or ord(c) == 0x7F else c)
+                             for c in value) + '"'
     if isinstance(value, list):
         return "[" + ", ".join(_toml_value(v) for v in value) + "]"
     return repr(value)

@@ -130,7 +130,7 @@ def damping_fit(context: RunContext):
     from workflow.models.limits import LIMITS
 
     damping = context.config["damping"]
-    log = drop_short_sweeps(read_logs(context.results["logs"]))
+    log = drop_short_sweeps(read_logs(context.results["logs"], damping["mixed_plates"]))
     for warning in log.warnings:
         print(f"warning: {warning}", file=sys.stderr)
     forward = run_forward_model(damping, log)
