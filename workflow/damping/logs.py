@@ -363,18 +363,25 @@ def read_log(path):
     point (``x_mm``, ``y_mm`` columns or metadata) needs the plate's ``lambda_mm`` metadata to be mapped
     onto the beam mode.
 
+    A ring-down sample that repeats the one before it (same burst, decay time and velocity: a row
+    pasted twice) is dropped with a warning.
+
     Raises
     ------
     InputFileError
         Those of :func:`read_table`; a sweep (or burst) whose velocities all lie below
-        :data:`MIN_PEAK_VELOCITY`; a measurement point off the plate or near a node.
+        :data:`MIN_PEAK_VELOCITY`; a measurement point off the plate or near a node; two samples of a
+        burst at one decay time with different velocities.
     """
     path = Path(path)
     table = read_table(path)
-    arrays, warnings = table.arrays, table.warnings
+    arrays, warnings, line_numbers = table.arrays, table.warnings, table.line_numbers
     sweep = _sweep_index(path, arrays)
+    if logformat.DECAY_TIME in arrays:
+        keep = _unrepeated_samples(path, arrays, sweep, line_numbers, warnings)
+        arrays, sweep, line_numbers = {name: values[keep] for name, values in arrays.items()}, sweep[keep], line_numbers[keep]
     factor = _mode_factor(path, arrays, table.metadata, warnings)
-    _check_peaks(path, arrays[logformat.VELOCITY], sweep, table.line_numbers)
+    _check_peaks(path, arrays[logformat.VELOCITY], sweep, line_numbers)
     if logformat.DECAY_TIME in arrays:
         return RingdownLog(
             frequency=arrays[logformat.FREQUENCY],
@@ -397,6 +404,28 @@ def read_log(path):
         timestamp=arrays.get(logformat.TIMESTAMP),
         mode_factor=factor,
     )
+
+
+def _unrepeated_samples(path: Path, arrays: dict, burst: np.ndarray, line_numbers: np.ndarray, warnings: list) -> np.ndarray:
+    """Mask of the ring-down rows to keep: all but exact repeats of the row before (a warning counts them).
+
+    Raises
+    ------
+    InputFileError
+        A sample at the decay time of the one before it in its burst with another velocity (a decay is
+        sampled at increasing times).
+    """
+    time, velocity = arrays[logformat.DECAY_TIME], arrays[logformat.VELOCITY]
+    repeat = np.r_[False, (burst[1:] == burst[:-1]) & (time[1:] == time[:-1])]
+    conflict = repeat & np.r_[False, velocity[1:] != velocity[:-1]]
+    if conflict.any():
+        index = int(np.argmax(conflict))
+        raise InputFileError(f"{path}, line {line_numbers[index]}: decay time {time[index]:g} s again, with another "
+                             f"velocity than line {line_numbers[index - 1]}; a decay's samples come at increasing times")
+    if repeat.any():
+        warnings.append(f"{path}: dropped {int(repeat.sum())} ring-down row(s) repeating the row before them "
+                        f"(first: line {line_numbers[int(np.argmax(repeat))]})")
+    return ~repeat
 
 
 def _mode_factor(path: Path, arrays: dict, metadata: dict, warnings: list):

@@ -217,22 +217,29 @@ def _check_range(value, name: str, source: str) -> None:
 
 
 def _check_consistency(config: dict, source: str) -> None:
-    """Refuse a low bound not below its high bound (:data:`ORDERED`), FEM mesh keys the FEM refuses and
-    material records that do not exist."""
+    """Refuse a low bound not below its high bound (:data:`ORDERED`), FEM mesh keys the FEM refuses (or whose mesh
+    of the original plate exceeds the memory budget) and material records that do not exist."""
     from workflow.errors import TactileError
     from workflow.models.fem import FemSettings
+    from workflow.models.fem.mesh import check_memory
 
     for low, high in ORDERED:
         (section, low_key), (_, high_key) = low.split("."), high.split(".")
         if not config[section][low_key] < config[section][high_key]:
             raise InputFileError(f"{source}: '{low}' = {config[section][low_key]!r} must be below "
                                  f"'{high}' = {config[section][high_key]!r}")
+    fem = config["fem"]
+    fine = int((fem["fine_width_max_mm"] - fem["fine_width_min_mm"]) / fem["fine_width_step_mm"] + 1e-9) + 1
+    if fine > LIMITS["fem.width_points"][1]:
+        raise InputFileError(f"{source}: 'fem.fine_width_step_mm' = {fem['fine_width_step_mm']!r} gives {fine} widths from "
+                             f"{fem['fine_width_min_mm']:g} to {fem['fine_width_max_mm']:g} mm, more than the "
+                             f"{LIMITS['fem.width_points'][1]} of a width sweep")
     if len(config["loop"]["scan_grid"]) != 2:
         raise InputFileError(f"{source}: 'loop.scan_grid' must be [points along x, points across], "
                              f"got {config['loop']['scan_grid']!r}")
     mesh = {name: config["fem"][name] for name in FemSettings().as_dict()}
     try:
-        FemSettings(**mesh)
+        check_memory(ORIGINAL_PLATE, FemSettings(**mesh))
     except TactileError as error:
         raise InputFileError(f"{source}: [fem] {error}") from None
     for kind, lookup in (("ceramic", materials.ceramic), ("resonator", materials.resonator)):
