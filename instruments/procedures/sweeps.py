@@ -352,11 +352,13 @@ def run_procedure(station: Station, path, procedure: str, plan: dict, voltages, 
 
 
 def _sweep_rows(rows: list[dict], sweep: int) -> tuple[np.ndarray, np.ndarray]:
+    """(frequency [Hz], velocity [m/s]) of a sweep's rows by frequency, a row repeating a frequency left out
+    (the first kept: a row pasted twice must not move the peak)."""
     chosen = [row for row in rows if row[logformat.SWEEP] == str(sweep)]
     frequency = np.array([float(row[logformat.FREQUENCY]) for row in chosen])
     velocity = np.array([float(row[logformat.VELOCITY]) for row in chosen])
-    order = np.argsort(frequency)
-    return frequency[order], velocity[order]
+    frequency, first = np.unique(frequency, return_index=True)
+    return frequency, velocity[first]
 
 
 def peak_of(frequency: np.ndarray, velocity: np.ndarray) -> tuple[float, float]:

@@ -12,6 +12,7 @@ from pathlib import Path
 from workflow.damping.posterior import load_posterior
 from workflow.errors import GeometryError, TactileError
 from workflow.models import materials
+from workflow.models.analytical import resonance_frequency
 from workflow.models.fem.accuracy import ACCURACY_RANGE, DEFAULT_ACCURACY, FemAccuracy
 from workflow.models.fem.settings import PIEZO_MODELS
 from workflow.models.plate import ORIGINAL_PLATE, Plate, check_design_space
@@ -392,7 +393,14 @@ def add_built_plate_arguments(parser) -> None:
 
 
 def built_plate_from_args(args):
-    """The :class:`~workflow.models.builtplate.BuiltPlate` of --lambda-mm, --hi-mm, --hp-mm, ..., or None if not given."""
+    """The :class:`~workflow.models.builtplate.BuiltPlate` of --lambda-mm, --hi-mm, --hp-mm, ..., or None if not given.
+
+    Raises
+    ------
+    TactileError
+        Only some of the three given; a geometry :class:`~workflow.models.plate.Plate` refuses; a beam-model
+        resonance outside the plausible frequencies (:data:`~workflow.models.limits.LIMITS`).
+    """
     from workflow.models.builtplate import BuiltPlate
 
     geometry = {flag: getattr(args, flag.lstrip("-").replace("-", "_"), None) for flag in ("--lambda-mm", "--hi-mm", "--hp-mm")}
@@ -405,7 +413,9 @@ def built_plate_from_args(args):
     width = args.b_mm if args.b_mm is not None else ORIGINAL_PLATE.width / MM
     glue = None if args.glue_um is None else args.glue_um * UM
     built = BuiltPlate(args.lambda_mm * MM, args.hi_mm * MM, args.hp_mm * MM, width * MM, args.ceramic, args.resonator, glue)
-    built.plate()  # checks the geometry (GeometryError)
+    implausible = problem("frequency_hz", float(resonance_frequency(built.plate())), name="its beam-model resonance")
+    if implausible:
+        raise TactileError(f"the built plate of --lambda-mm, --hi-mm, --hp-mm, --b-mm is no tactile plate: {implausible}")
     return built
 
 
@@ -460,12 +470,7 @@ def bench_settings(args):
         if args.point_mm != (0.0, 0.0):
             raise TactileError("--point-mm points the paper's plate; a built plate's spot is moved by its scanner "
                                "('tactile measure scan --points')")
-        settings = built_bench_settings(built_plate_model(args, built, deviations_from_args(args)), **fields)
-        implausible = problem("frequency_hz", settings.response.resonance_frequency, name="its resonance")
-        if implausible:
-            raise TactileError(f"the simulated built plate (--lambda-mm, --hi-mm, --hp-mm, --b-mm) is no tactile plate: "
-                               f"{implausible}")
-        return settings
+        return built_bench_settings(built_plate_model(args, built, deviations_from_args(args)), **fields)
     point = tuple(value * MM for value in args.point_mm)
     off = point_problem(ORIGINAL_PLATE, *point)
     if off:

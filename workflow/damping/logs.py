@@ -22,6 +22,7 @@ from workflow import logformat
 from workflow.damping.mode_shape import BeamMode, measurement_factor
 from workflow.errors import InputFileError
 from workflow.inputfiles import MAX_LOG_BYTES, open_input
+from workflow.models import materials
 from workflow.models.builtplate import BuiltPlate
 from workflow.models.limits import LIMITS, problem
 from workflow.units import MM
@@ -307,7 +308,7 @@ def read_table(path, required: tuple = logformat.REQUIRED_COLUMNS, phase: bool =
     warnings, metadata = [], {}
     with open_input(path, str(path), MAX_LOG_BYTES) as stream:
         lines = _content_lines(path, stream, warnings, metadata)
-        header_number, header_line = next(lines, (None, None))
+        header_number, header_line, _ = next(lines, (None, None, True))
         if header_line is None:
             raise InputFileError(f"{path}: no header row (expected columns {', '.join(required)})")
         header = [name.strip() for name in _fields(path, header_number, header_line)]
@@ -319,14 +320,17 @@ def read_table(path, required: tuple = logformat.REQUIRED_COLUMNS, phase: bool =
         columns = _column_indices(path, header_number, header, required, phase)
         table = {name: array("d") for name in columns}
         line_numbers, rows, dropouts = array("q"), 0, 0
-        for number, line in lines:
-            rows += 1
-            if rows > MAX_ROWS:
+        for number, line, complete in lines:
+            if rows == MAX_ROWS:
                 raise InputFileError(f"{path}, line {number}: more than the {MAX_ROWS} data rows accepted in one log")
-            cells = _fields(path, number, line)
-            if len(cells) != len(header):
-                raise InputFileError(f"{path}, line {number}: expected {len(header)} fields, got {len(cells)}")
-            values = {name: _number(path, number, name, cells[index]) for name, index in columns.items()}
+            try:
+                values = _values(path, number, line, header, columns)
+            except InputFileError:
+                if complete:
+                    raise
+                warnings.append(f"{path}, line {number}: ignored an incomplete last line (no newline; interrupted writer?)")
+                break
+            rows += 1
             if math.isnan(values[logformat.VELOCITY]):
                 dropouts += 1
                 continue
@@ -349,7 +353,7 @@ def header_columns(path) -> list:
     """The column names of a log's header row (empty when it has none), reading no further."""
     path = Path(path)
     with open_input(path, str(path), MAX_LOG_BYTES) as stream:
-        number, line = next(_content_lines(path, stream, [], {}), (None, None))
+        number, line, _ = next(_content_lines(path, stream, [], {}), (None, None, True))
         return [] if line is None else [name.strip() for name in _fields(path, number, line)]
 
 
@@ -430,7 +434,8 @@ def _unrepeated_samples(path: Path, arrays: dict, burst: np.ndarray, line_number
 
 def _mode_factor(path: Path, arrays: dict, metadata: dict, warnings: list):
     """|phi| at each row's measurement point (columns, else metadata), or None when the log names no point
-    (or no wavelength to map it with: a warning is appended to ``warnings``)."""
+    (or no wavelength to map it with: a warning is appended to ``warnings``); a point off the plate (its length
+    from the wavelength, its width from ``b_mm`` when named) is refused."""
     n = len(arrays[logformat.VELOCITY])
     position = {}
     for name in logformat.POSITION_COLUMNS:
@@ -444,7 +449,18 @@ def _mode_factor(path: Path, arrays: dict, metadata: dict, warnings: list):
         warnings.append(f"{path}: a measurement point ({', '.join(position)}) without the plate's "
                         f"'# {logformat.LAMBDA_MM}: ...' metadata cannot be mapped onto the mode; read as an antinode")
         return None
-    mode = BeamMode(logformat.metadata_number(metadata, logformat.LAMBDA_MM, path) * MM)
+    wavelength = logformat.metadata_number(metadata, logformat.LAMBDA_MM, path)
+    reason = problem(logformat.LAMBDA_MM, wavelength)
+    if reason:
+        raise InputFileError(f"{path}, line {metadata[logformat.LAMBDA_MM][1]}: {reason}")
+    half = {logformat.X_POSITION: (2 * materials.N_CERAMICS + 1) * wavelength / 8}
+    if logformat.B_MM in metadata:
+        half[logformat.Y_POSITION] = logformat.metadata_number(metadata, logformat.B_MM, path) / 2
+    for name, values in position.items():
+        if name in half and np.any(np.abs(values) > half[name] * (1 + 1e-9)):
+            raise InputFileError(f"{path}: measurement point {name} = {values[np.argmax(np.abs(values))]:g} is off the "
+                                 f"plate (within +-{half[name]:g} mm of its centre)")
+    mode = BeamMode(wavelength * MM)
     zeros = np.zeros(n)
     try:
         return measurement_factor(mode, position.get(logformat.X_POSITION, zeros) * MM,
@@ -454,10 +470,10 @@ def _mode_factor(path: Path, arrays: dict, metadata: dict, warnings: list):
 
 
 def _content_lines(path: Path, stream, warnings: list, metadata: dict):
-    """(line number, text) of the header and data lines of a UTF-8 file read from ``stream``, one line
-    in memory at a time: comments and blank lines skipped (``# key: value`` lines before the header
-    collected into ``metadata`` as key -> (value, line number)), an incomplete last data line dropped
-    (with a warning appended to ``warnings``)."""
+    """(line number, text, whether it ends with a newline) of the header and data lines of a UTF-8 file read
+    from ``stream``, one line in memory at a time: comments and blank lines skipped (``# key: value`` lines
+    before the header collected into ``metadata`` as key -> (value, line number)).  Only the last line can
+    lack its newline (a row whose writing was cut short, or a file saved without a final line end)."""
     head = stream.peek(_MAX_LINE_BYTES)  # the file's first block: a binary file is named so even if its first line is not UTF-8
     if head.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
         raise InputFileError(f"{path}: UTF-16 text, not UTF-8 (save the log as UTF-8)")
@@ -492,13 +508,18 @@ def _content_lines(path: Path, stream, warnings: list, metadata: dict):
             if separator and not header_seen:
                 metadata.setdefault(key.strip(), (value.strip(), number))
             continue
-        if not complete and header_seen:  # the last line, cut short
-            warnings.append(f"{path}, line {number}: ignored an incomplete last line (no newline; interrupted writer?)")
-            return
         header_seen = True
-        yield number, line
+        yield number, line, complete
     if not seen_text:
         raise InputFileError(f"{path}: empty file")
+
+
+def _values(path: Path, number: int, line: str, header: list, columns: dict) -> dict:
+    """Column name -> value of the data line ``number`` (:func:`_number`), checked against the header's width."""
+    cells = _fields(path, number, line)
+    if len(cells) != len(header):
+        raise InputFileError(f"{path}, line {number}: expected {len(header)} fields, got {len(cells)}")
+    return {name: _number(path, number, name, cells[index]) for name, index in columns.items()}
 
 
 def _fields(path: Path, number: int, line: str) -> list:
