@@ -26,7 +26,7 @@ from workflow.calibration.posterior import (
 from workflow.errors import InputFileError, TactileError
 from workflow.models import materials
 from workflow.models.fem.settings import PIEZO_MODELS
-from workflow.models.limits import plate_problem, problem
+from workflow.models.limits import LIMITS, plate_problem, problem
 from workflow.models.plate import Plate
 
 FORMAT = "tactile-calibration"
@@ -172,6 +172,8 @@ class Calibration:
             surrogates = tuple(PlateSurrogate.from_dict(s) for s in data["surrogates"])
             if len(surrogates) != len(plates) or any(s.names != settings.names for s in surrogates):
                 raise ValueError(f"one surrogate of the parameters {', '.join(settings.names)} per plate")
+            for k, surrogate in enumerate(surrogates):
+                _check_predictions(surrogate, samples, f"{origin}: field 'surrogates': plate {k}")
             field = "diagnostics"
             diagnostics = ChainDiagnostics.from_dict(data["diagnostics"])
             field = "fem"
@@ -206,6 +208,20 @@ def _checked_fem(record, origin: str) -> dict:
     return dict(record)
 
 
+def _check_predictions(surrogate: PlateSurrogate, samples: np.ndarray, where: str) -> None:
+    """Refuse a surrogate that predicts, at some posterior sample, a resonance outside the plausible frequencies
+    or a deflection that is not a finite positive length (damaged coefficients)."""
+    with np.errstate(over="ignore"):
+        frequency, deflection = surrogate.frequency(samples), surrogate.deflection(samples)
+    low, high = LIMITS["frequency_hz"]
+    bad = ~((frequency >= low) & (frequency <= high))
+    if bad.any():
+        raise InputFileError(f"{where}: its surrogate predicts f_r = {frequency[bad][0]:g} Hz at a posterior sample, "
+                             f"outside the plausible {low:g} to {high:g} Hz")
+    if not np.all(np.isfinite(deflection) & (deflection > 0)):
+        raise InputFileError(f"{where}: its surrogate predicts a deflection that is not a finite length")
+
+
 def _checked_samples(values, settings: CalibrationSettings, origin: str) -> np.ndarray:
     """The posterior samples: a finite (n >= 1, n_parameters) table, each column within its parameter's prior."""
     samples = np.asarray(values, dtype=float)
@@ -215,7 +231,7 @@ def _checked_samples(values, settings: CalibrationSettings, origin: str) -> np.n
     for column, parameter in zip(samples.T, settings.parameters):
         outside = (column < parameter.low) | (column > parameter.high)
         if outside.any():
-            value, unit = column[outside][0] / parameter.display_scale, "" if parameter.unit == "-" else f" {parameter.unit}"
+            value, unit = float(column[outside][0]) / parameter.display_scale, "" if parameter.unit == "-" else f" {parameter.unit}"
             raise InputFileError(
                 f"{origin}: field 'samples': {parameter.name} = {value:g}{unit}, outside its prior "
                 f"[{parameter.low / parameter.display_scale:g}, {parameter.high / parameter.display_scale:g}]{unit}")
