@@ -5,12 +5,14 @@ sections) exits 2 with one error line naming the file, line or option; no exit 3
 only what is missing, or is refused byte for byte as it was."""
 
 import json
+import re
 import shutil
 
 import pytest
-from hostile import CORPUS, MANIFEST, Hung, cases, error_lines, prepare, resume_cases, run_in_process, run_process
+from hostile import CORPUS, MANIFEST, ROOT, Hung, cases, error_lines, prepare, resume_cases, run_in_process, run_process
 
 from instruments.procedures.logwriter import INCOMPLETE_ROW
+from workflow.models.limits import LIMITS
 
 CASES = cases()
 
@@ -80,3 +82,16 @@ def test_a_hand_edited_log_resumes_appending_only_what_is_missing_or_is_refused_
     status, out, err = run_in_process(argv)
     assert status == 0 and json.loads(out.strip().splitlines()[-1])["measured"] == 0, err[-2000:]
     assert log.read_bytes() == after
+
+
+def test_the_plausible_ranges_documented_are_those_of_the_one_table():
+    """docs/safety.md lists each physical quantity of LIMITS with its range (one source of truth)."""
+    text = (ROOT / "docs" / "safety.md").read_text(encoding="utf-8").replace("\u2212", "-")
+    for key, (low, high) in LIMITS.items():
+        if "." in key:
+            continue
+        row = next((line for line in text.splitlines() if line.startswith("| ") and f"| `{key}` |" in line), None)
+        assert row is not None, f"{key} missing from docs/safety.md"
+        numbers = [float(value) * (1e6 if unit == "MHz" else 1) for value, unit in re.findall(r"(-?\d+(?:\.\d+)?)\s*(MHz)?",
+                                                                                              row.split("|")[3])]
+        assert numbers == [low, high], (key, row)
