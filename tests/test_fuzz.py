@@ -107,6 +107,21 @@ def log_like_bytes(draw):
 log_inputs = st.one_of(st.binary(max_size=2000), log_like_bytes(), st.text(max_size=500).map(str.encode))
 
 
+def read_or_refused(name: str, data: bytes, reader):
+    """``reader(path)`` of a file ``name`` holding ``data``, or None when it raised one InputFileError line naming
+    the file; the file's bytes are unchanged either way."""
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / name
+        path.write_bytes(data)
+        try:
+            return reader(path)
+        except InputFileError as error:
+            assert str(path) in str(error) and len(str(error).splitlines()) == 1, error
+            return None
+        finally:
+            assert path.read_bytes() == data
+
+
 def read_file_bytes(data: bytes):
     """read_logs on a file holding ``data``: (log or None, error or None); the file's bytes are unchanged."""
     with tempfile.TemporaryDirectory() as folder:
@@ -391,16 +406,9 @@ def damaged_calibrations(draw) -> str:
 def test_the_calibration_reader_returns_a_checked_calibration_or_one_line_naming_the_file(text):
     """Any damage: a calibration whose priors are plausible, whose samples lie inside them and whose surrogates
     predict plausible resonances there, or one InputFileError line naming the file; the file unchanged."""
-    with tempfile.TemporaryDirectory() as folder:
-        path = Path(folder) / "calibration.json"
-        path.write_text(text, encoding="utf-8")
-        try:
-            calibration = load_calibration(path)
-        except InputFileError as error:
-            assert str(path) in str(error) and len(str(error).splitlines()) == 1, error
-            return
-        finally:
-            assert path.read_text(encoding="utf-8") == text
+    calibration = read_or_refused("calibration.json", text.encode(), load_calibration)
+    if calibration is None:
+        return
     for k, parameter in enumerate(calibration.settings.parameters):
         parameter.check("fuzz")
         assert np.all((calibration.samples[:, k] >= parameter.low) & (calibration.samples[:, k] <= parameter.high))
@@ -480,16 +488,9 @@ def scan_logs(draw) -> bytes:
 def test_the_scan_reader_returns_points_on_the_plate_or_one_line_naming_the_file(data):
     """A scan with hostile metadata or values: points on its plausible plate with a velocity above the floor, or
     one InputFileError line naming the file; the file unchanged."""
-    with tempfile.TemporaryDirectory() as folder:
-        path = Path(folder) / "scan.csv"
-        path.write_bytes(data)
-        try:
-            scan = read_scan(path)
-        except InputFileError as error:
-            assert str(path) in str(error) and len(str(error).splitlines()) == 1, error
-            return
-        finally:
-            assert path.read_bytes() == data
+    scan = read_or_refused("scan.csv", data, read_scan)
+    if scan is None:
+        return
     plate = scan.plate.plate()
     assert plate_problem(plate) is None and scan.velocity.max() >= MIN_PEAK_VELOCITY
     assert all(point_problem(plate, x, y) is None for x, y in zip(scan.x, scan.y))

@@ -111,27 +111,23 @@ def nesting_depth(text: str, toml: bool = False) -> int:
     return int(np.cumsum(step).max(initial=0))
 
 
-def _check_nesting(text: str, what: str, toml: bool) -> None:
+def _load(path, what: str, limit: int, toml: bool):
+    """The JSON or TOML document in ``path``, read within ``limit`` bytes and :data:`MAX_NESTING`."""
+    text = read_text(path, what, limit)
     depth = nesting_depth(text, toml)
     if depth > MAX_NESTING:
         raise InputFileError(f"{what}: arrays or tables nested {depth} deep, more than the {MAX_NESTING} accepted")
+    try:
+        return tomllib.loads(text) if toml else json.loads(text)
+    except (tomllib.TOMLDecodeError, json.JSONDecodeError) as error:
+        raise InputFileError(f"{what}: not valid {'TOML' if toml else 'JSON'}: {error}") from None
 
 
 def load_json(path, what: str, limit: int):
     """The JSON document in ``path``, read within ``limit`` bytes and :data:`MAX_NESTING`."""
-    text = read_text(path, what, limit)
-    _check_nesting(text, what, toml=False)
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError as error:
-        raise InputFileError(f"{what}: not valid JSON ({error})") from None
+    return _load(path, what, limit, toml=False)
 
 
 def load_toml(path, what: str, limit: int = MAX_CONFIG_BYTES) -> dict:
     """The TOML document in ``path``, read within ``limit`` bytes and :data:`MAX_NESTING`."""
-    text = read_text(path, what, limit)
-    _check_nesting(text, what, toml=True)
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as error:
-        raise InputFileError(f"{what}: not valid TOML: {error}") from None
+    return _load(path, what, limit, toml=True)

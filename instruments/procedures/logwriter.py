@@ -371,7 +371,7 @@ class LogWriter:
         self.rows, self.lines = logged.rows, logged.lines
         self.truncated_bytes = len(logged.tail)
         if logged.tail_is_row:
-            self._tail_fix = (logged.length, logged.tail + b"\n")
+            self._tail_fix = (logged.length + len(logged.tail), b"\n")
             self.warnings.append(f"{self.path}, line {self.lines[-1]}: the last row has no line end; it is kept")
         elif logged.tail:
             self._tail_fix = (logged.length, INCOMPLETE_ROW.encode() + logged.tail + b"\n")
@@ -406,12 +406,10 @@ class LogWriter:
 
     def _write(self, text: str) -> None:
         if self._file is None:
-            if self._tail_fix is not None:
-                length, fix = self._tail_fix
+            if self._tail_fix is not None:  # one write, over the unterminated line and past it: nothing is cut
+                offset, fix = self._tail_fix
                 with open(self.path, "r+b") as file:
-                    file.truncate(length)
-                    file.seek(length)
-                    file.write(fix)
+                    os.pwrite(file.fileno(), fix, offset)
                 self._tail_fix = None
             self._file = open(self.path, "a", encoding="utf-8", newline="")
         self._file.write(text)
