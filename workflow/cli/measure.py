@@ -203,6 +203,8 @@ def _centre(args, station, metadata, out: Path, key: str) -> float:
 
     plan = ResonancePlan(args.start_hz, args.stop_hz, args.coarse_points, args.fine_points) if args.procedure == "scan" else ResonancePlan()
     frequency, search = working_frequency(station, out, key, metadata, args.restart, plan)
+    for warning in () if search is None else search.warnings:
+        print(f"tactile measure: warning: {warning}", file=sys.stderr)
     if search is not None and not args.json:
         print(f"resonance search: {frequency:.1f} Hz; log: {search.path}")
     return frequency
