@@ -349,6 +349,8 @@ def _figure_output(args, log: Path):
 def _scan_figure(args, log: Path, path: Path) -> dict:
     """Compare a scan with the FEM's map of the nominal plate: write the figure at ``path``; its path, the MAC and
     the FEM's f_r."""
+    import matplotlib.pyplot as plt
+
     from workflow.pipeline.builtplate import read_scan, scan_mac
     from workflow.pipeline.figures.scan import scan_figure
 
@@ -360,6 +362,8 @@ def _scan_figure(args, log: Path, path: Path) -> dict:
         figure.savefig(path, dpi=120)
     except OSError as error:
         raise TactileError(f"cannot write the figure {path}: {error.strerror or error}") from None
+    finally:
+        plt.close(figure)
     return {"mac": mac, "figure": str(path), "nominal_fem_frequency_hz": nominal.resonance_frequency}
 
 
