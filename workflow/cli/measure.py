@@ -334,12 +334,12 @@ def _figure_output(args, log: Path):
     from instruments.procedures.sweeps import resonance_log_path
 
     figure, option = args.figure or log.with_suffix(".png"), "--figure"
+    if figure.is_dir():
+        raise TactileError(f"{option} {figure}: is a folder; give the figure's file name")
     formats = FigureCanvasBase.get_supported_filetypes()
     if figure.suffix.lower().lstrip(".") not in formats:
         raise TactileError(f"{option} {figure}: the figure needs a file name ending in one of "
                            f"{', '.join('.' + name for name in sorted(formats))}")
-    if figure.is_dir():
-        raise TactileError(f"{option} {figure}: is a folder; give the figure's file name")
     if figure.resolve() in {log.resolve(), resonance_log_path(log).resolve()}:
         raise TactileError(f"{option} {figure}: the figure would replace the scan's log; give another {option}")
     with output_folder(figure.parent, [glob.escape(figure.name)], force=args.force, option=option) as folder:
