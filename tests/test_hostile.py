@@ -95,3 +95,19 @@ def test_the_plausible_ranges_documented_are_those_of_the_one_table():
         numbers = [float(value) * (1e6 if unit == "MHz" else 1) for value, unit in re.findall(r"(-?\d+(?:\.\d+)?)\s*(MHz)?",
                                                                                               row.split("|")[3])]
         assert numbers == [low, high], (key, row)
+
+
+def test_logs_of_different_plates_are_read_with_a_warning_when_the_user_chooses_so():
+    """--mixed-plates warn: the same logs the corpus refuses are read, with one warning naming both."""
+    from workflow.calibration.parameters import default_settings
+    from workflow.damping.logs import read_logs
+    from workflow.pipeline.calibration_files import measured_plates
+
+    sweeps, decays = CORPUS / "logs" / "p1.csv", CORPUS / "resume" / "ringdown" / "complete.csv"
+    log = read_logs([sweeps, decays], mixed_plates="warn")
+    assert log.n_sweeps == 1 and log.ringdown.n_bursts == 2
+    assert any(str(sweeps) in warning and str(decays) in warning and "% apart" in warning for warning in log.warnings)
+    warnings = []
+    plates = measured_plates([sweeps, CORPUS / "logs" / "p1_scan_off_resonance.csv"], default_settings(),
+                             mixed_plates="warn", warnings=warnings)
+    assert len(plates) == 1 and plates[0].scan is not None and "another plate" in warnings[0]
