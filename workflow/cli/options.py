@@ -7,7 +7,6 @@ import argparse
 import math
 import signal
 from contextlib import contextmanager
-from pathlib import Path
 
 from workflow.damping.posterior import load_posterior
 from workflow.errors import GeometryError, TactileError
@@ -15,9 +14,9 @@ from workflow.models import materials
 from workflow.models.analytical import resonance_frequency
 from workflow.models.fem.accuracy import ACCURACY_RANGE, DEFAULT_ACCURACY, FemAccuracy
 from workflow.models.fem.settings import PIEZO_MODELS
+from workflow.models.limits import LIMITS, point_problem, problem, unit
 from workflow.models.plate import ORIGINAL_PLATE, Plate, check_design_space
 from workflow.optimise.problem import DesignProblem
-from workflow.models.limits import LIMITS, point_problem, problem, unit
 from workflow.units import MM, UM
 
 MODELS = ("analytical", "fem")
