@@ -17,3 +17,5 @@ TRUTH = np.array([0.93, 1.04, 30e-6, -15e-6])
 """Hidden deviations of the simulated built plates: ceramic and resonator factors, glue [m], h_i offset [m]."""
 FAST = replace(default_settings(), steps=2000, surrogate_points=18)
 """Calibration settings with a short chain and a small surrogate design."""
+FEM_RECORD = {"q": 54.0, "voltage_v": 15.0, "accuracy": 0.01, "piezo": "eigenstrain"}
+"""The FEM conditions a calibration records (what ``tactile calibrate`` binds)."""

@@ -81,7 +81,7 @@ CASES = {
     "measure timeout -1": ("measure resonance --simulate --timeout -1 --out r.csv", ["--timeout", "3600 s"]),
     "measure baudrate 0": ("measure resonance --simulate --baudrate 0 --out r.csv", ["--baudrate", "50 to"]),
     "measure retries -1": ("measure resonance --simulate --retries -1 --out r.csv", ["--retries", "0 to 100"]),
-    "bench limit inf": ("measure resonance --simulate --bench-limit inf --out r.csv", ["--bench-limit", "finite"]),
+    "bench limit inf": ("measure resonance --simulate --bench-limit inf --out r.csv", ["--bench-limit", "0.001 to 1000 V"]),
     # output locations
     "maps out file": ("maps --hp-mm 1 --grid 2 --out file.txt", ["--out file.txt", "not a folder"]),
     "maps out under file": ("maps --hp-mm 1 --grid 2 --out file.txt/sub", ["--out file.txt/sub"]),

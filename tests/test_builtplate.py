@@ -63,9 +63,12 @@ def test_built_plate_metadata_round_trip(tmp_path):
 @pytest.mark.parametrize("metadata, message", [
     ({"lambda_mm": 20, "h_i_mm": 1, "h_p_mm": 1}, "no '# b_mm: ...' metadata line"),
     ({"lambda_mm": "20 mm", "h_i_mm": 1, "h_p_mm": 1, "b_mm": 49}, "line 2: metadata lambda_mm = '20 mm' is not a finite number"),
-    ({"lambda_mm": 20, "h_i_mm": -1, "h_p_mm": 1, "b_mm": 49}, "line 3: h_i_mm must be positive"),
+    ({"lambda_mm": 20, "h_i_mm": -1, "h_p_mm": 1, "b_mm": 49}, "line 3: h_i_mm = -1 is outside the plausible range 0.05 to 20 mm"),
+    ({"lambda_mm": 20, "h_i_mm": 1e-6, "h_p_mm": 1, "b_mm": 49}, "line 3: h_i_mm = 1e-06 is outside the plausible range"),
+    ({"lambda_mm": 1e6, "h_i_mm": 1, "h_p_mm": 1, "b_mm": 49}, "line 2: lambda_mm = 1e[+]06 is outside the plausible range"),
     ({"lambda_mm": 20, "h_i_mm": 1, "h_p_mm": 1, "b_mm": 49, "ceramic": "PZT-9"}, "line 6: ceramic 'PZT-9' is not a material record"),
-    ({"lambda_mm": 20, "h_i_mm": 1, "h_p_mm": 1, "b_mm": 49, "glue_um": -3}, "line 6: glue_um must be >= 0"),
+    ({"lambda_mm": 20, "h_i_mm": 1, "h_p_mm": 1, "b_mm": 49, "glue_um": -3}, "line 6: glue_um = -3 is outside the plausible range 0 to 500 um"),
+    ({"lambda_mm": 20, "h_i_mm": 1, "h_p_mm": 1, "b_mm": 49, "glue_um": 1e9}, "line 6: glue_um = 1e[+]09 is outside"),
 ])
 def test_built_plate_metadata_errors_name_file_and_line(tmp_path, metadata, message):
     path = write_log(tmp_path / "bad.csv", metadata)
@@ -103,7 +106,7 @@ def test_built_plate_resonance_follows_the_fem_of_the_deviated_plate(nominal, bu
                              fsync=False)
     assert found.summary["resonance_frequency_hz"] == pytest.approx(built.resonance_frequency, rel=2e-3)
     assert read_built_plate(tmp_path / "r.csv").wavelength == pytest.approx(DESIGN.wavelength)
-    metadata, _, _ = read_log(tmp_path / "r.csv")
+    metadata = read_log(tmp_path / "r.csv").metadata
     assert metadata["simulator_deviation_glue_um"] == "40.0"
 
 
@@ -124,7 +127,7 @@ def test_scanner_commands_and_off_plate_refusal(built):
 
 
 def scan_keys(path):
-    _, rows, _ = read_log(Path(path), logformat.SCAN_COLUMNS)
+    rows = read_log(Path(path), logformat.SCAN_COLUMNS).rows
     return [(row[logformat.X_POSITION], row[logformat.Y_POSITION]) for row in rows]
 
 
@@ -199,7 +202,11 @@ def test_cli_scan_writes_log_figure_and_resumes(tmp_path, capsys, monkeypatch):
 @pytest.mark.parametrize("argv, message", [
     ([], "a scan needs the plate"),
     (["--lambda-mm", "20", "--hi-mm", "0.75"], "--hp-mm missing"),
-    (["--lambda-mm", "20", "--hi-mm", "0.75", "--hp-mm", "1", "--dev-ceramic-factor", "3"], "bad --dev-\\* flag"),
+    (["--lambda-mm", "20", "--hi-mm", "0.75", "--hp-mm", "1", "--dev-ceramic-factor", "3"],
+     "argument --dev-ceramic-factor: 3 is outside the accepted range 0.5 to 1.5"),
+    (["--lambda-mm", "20", "--hi-mm", "0.75", "--hp-mm", "1", "--dev-hi-offset-um", "-800"],
+     "resonator_thickness must be a positive finite length"),
+    (["--lambda-mm", "20", "--hi-mm", "0.75", "--hp-mm", "1", "--points", "1:2,300:0"], "--points: point \\(300, 0\\) mm is off the plate"),
     (["--lambda-mm", "20", "--hi-mm", "0.75", "--hp-mm", "1", "--points", "1:2,3"], "expected points as x:y"),
 ])
 def test_cli_scan_errors_are_one_line(tmp_path, capsys, argv, message):

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from calibration_setup import FAST, P1, P2, TRUTH
+from calibration_setup import FAST, FEM_RECORD, P1, P2, TRUTH
 
 from workflow.calibration.calibration import Calibration, MeasuredPlate, calibrate, nominal_theta, predict
 from workflow.calibration.case_study import cross_predictions
@@ -158,7 +158,7 @@ def test_calibrate_refuses_a_bad_settings_file_and_a_missing_calibration(tmp_pat
 
 def test_calibration_file_round_trips(coarse_model):
     plate = MeasuredPlate("P1", P1, built_plate_frequency(coarse_model, P1))
-    calibration = calibrate([plate], replace(FAST, steps=300, kept_samples=200), coarse_model.evaluate_plates, {"q": 54.0})
+    calibration = calibrate([plate], replace(FAST, steps=300, kept_samples=200), coarse_model.evaluate_plates, FEM_RECORD)
     again = Calibration.from_dict(json.loads(json.dumps(calibration.to_dict())))
     assert np.array_equal(again.samples, calibration.samples)
     assert again.surrogates[0].log_frequency(TRUTH) == pytest.approx(calibration.surrogates[0].log_frequency(TRUTH))
@@ -278,7 +278,7 @@ def test_run_step_predicts_the_recommended_designs_with_the_calibration(tmp_path
     from workflow.pipeline.steps import calibrated_designs
 
     plate = MeasuredPlate("P1", P1, built_plate_frequency(coarse_model, P1))
-    calibration = calibrate([plate], FAST, coarse_model.evaluate_plates, {"accuracy": 0.05, "piezo": "eigenstrain"})
+    calibration = calibrate([plate], FAST, coarse_model.evaluate_plates, {**FEM_RECORD, "accuracy": 0.05})
     files = write_calibration(calibration, tmp_path, figures=False)
     designs = {1e-3: SimpleNamespace(plate=P1, frequency=25.1e3)}
     context = SimpleNamespace(calibration=Path(files["calibration"]), config=default_config(), cache=None,

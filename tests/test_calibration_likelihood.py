@@ -10,7 +10,7 @@ import json
 
 import numpy as np
 import pytest
-from calibration_setup import FAST, P1, TRUTH
+from calibration_setup import FAST, FEM_RECORD, P1, TRUTH
 
 from instruments.procedures.scan import grid_points
 from instruments.simulator.physics import plate_response
@@ -98,7 +98,8 @@ def test_known_deviations_recovered_with_and_without_the_extra_terms(coarse_mode
         "frequency": MeasuredPlate("P1", P1, built["frequency"]),
         "all": MeasuredPlate("P1", P1, built["frequency"], built["g"], scan),
     }
-    calibrations = {label: calibrate([plate], FAST, coarse_model.evaluate_plates, {}, coarse_model.results_with_surfaces) for label, plate in runs.items()}
+    calibrations = {label: calibrate([plate], FAST, coarse_model.evaluate_plates, FEM_RECORD, coarse_model.results_with_surfaces)
+                    for label, plate in runs.items()}
     mean, sd = FAST.prior_scale()
     for calibration in calibrations.values():
         assert calibration.diagnostics.converged

@@ -88,7 +88,7 @@ def test_too_few_walkers_for_the_logs_is_a_configuration_error_before_the_chain(
 
 
 def test_missing_configuration_file_is_named(tmp_path):
-    with pytest.raises(InputFileError, match="no such configuration file"):
+    with pytest.raises(InputFileError, match="absent.toml: no such file"):
         load_config(tmp_path / "absent.toml")
 
 

@@ -1,5 +1,6 @@
-"""Property-based (Hypothesis) tests of the parsers at the boundaries: the interferometer-log
-reader, the simulator's SCPI and vibrometer command parsers, and the generator driver's limit.
+"""Property-based (Hypothesis) tests of the parsers at the boundaries: the interferometer-log reader (sweeps,
+ring-downs, scans), the calibration reader, the run configuration's sections, the resume of an edited log,
+the simulator's SCPI and vibrometer command parsers, and the generator driver's limit.
 
 Each property runs twice: under the default profile (40 examples per property, about two
 seconds in all) and, marked ``slow``, under the ``long`` profile (thousands of examples):
@@ -8,7 +9,12 @@ runs the default-suite tests with the long profile too.  Profiles are registered
 ``tests/conftest.py``.
 """
 
+import copy
+import functools
+import json
 import math
+import operator
+import sys
 import tempfile
 from dataclasses import replace
 from pathlib import Path
@@ -17,16 +23,30 @@ import numpy as np
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
+from hostile import CORPUS
 from ports import DevicePort
 
 from instruments.drivers.errors import InstrumentError
 from instruments.drivers.generator import FunctionGenerator
+from instruments.procedures.logwriter import INCOMPLETE_ROW, read_log, row_key
+from instruments.procedures.simulated import simulated_station
+from instruments.procedures.sweeps import CampaignPlan, q_campaign
+from instruments.simulator import default_bench_settings
 from instruments.simulator.generator import FUNCTIONS, MAX_ERRORS, GeneratorDevice, GeneratorState
 from instruments.simulator.scpi import split_program
 from instruments.simulator.vibrometer import VibrometerDevice
 from workflow import logformat
-from workflow.damping.logs import read_logs
+from workflow.damping.logs import MIN_PEAK_VELOCITY, read_logs
 from workflow.errors import InputFileError, TactileError
+from workflow.models.limits import LIMITS, plate_problem, point_problem
+from workflow.pipeline.builtplate import read_scan
+from workflow.pipeline.calibration_files import load_calibration
+from workflow.pipeline.config import default_config, merge, to_toml
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
 
 pytestmark = pytest.mark.timeout(300)  # a hang fails the test instead of stalling the suite
 
@@ -87,6 +107,21 @@ def log_like_bytes(draw):
 log_inputs = st.one_of(st.binary(max_size=2000), log_like_bytes(), st.text(max_size=500).map(str.encode))
 
 
+def read_or_refused(name: str, data: bytes, reader):
+    """``reader(path)`` of a file ``name`` holding ``data``, or None when it raised one InputFileError line naming
+    the file; the file's bytes are unchanged either way."""
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / name
+        path.write_bytes(data)
+        try:
+            return reader(path)
+        except InputFileError as error:
+            assert str(path) in str(error) and len(str(error).splitlines()) == 1, error
+            return None
+        finally:
+            assert path.read_bytes() == data
+
+
 def read_file_bytes(data: bytes):
     """read_logs on a file holding ``data``: (log or None, error or None); the file's bytes are unchanged."""
     with tempfile.TemporaryDirectory() as folder:
@@ -111,7 +146,8 @@ def test_the_log_reader_returns_a_log_or_one_line_naming_the_file(data):
         assert np.all(log.frequency > 0) and np.all(log.drive_voltage >= 0) and np.all(log.velocity >= 0)
 
 
-positive = st.floats(min_value=0, max_value=1e300, exclude_min=True, allow_subnormal=True)
+frequencies = st.floats(*LIMITS[logformat.FREQUENCY])
+"""Frequencies a log may hold [Hz] (docs/log-format.md: the plausible range)."""
 velocities = st.floats(min_value=1e-6, max_value=10.0)
 """Velocities a sweep may hold [m/s] (docs/log-format.md: 0 to 10 m/s, each sweep peaking at 1 um/s or more)."""
 
@@ -122,9 +158,9 @@ def valid_logs(draw):
     other value), whether it has a sweep column, whether it ends with a newline)."""
     optional = draw(st.lists(st.sampled_from(logformat.OPTIONAL_COLUMNS + ("x_mm", "note")), unique=True))
     header = draw(st.permutations(list(logformat.REQUIRED_COLUMNS) + optional))
-    quarter_volts = st.integers(0, 10_000).map(lambda quarters: quarters / 4)  # distinct beyond the reader's tolerance
+    quarter_volts = st.integers(0, 4000).map(lambda quarters: quarters / 4)  # distinct beyond the reader's tolerance
     voltages = draw(st.lists(quarter_volts, min_size=1, max_size=3, unique=True))
-    rows = draw(st.lists(st.tuples(positive, st.sampled_from(voltages), st.one_of(velocities, st.none()),
+    rows = draw(st.lists(st.tuples(frequencies, st.sampled_from(voltages), st.one_of(velocities, st.none()),
                                    st.integers(-5, 5), st.floats(allow_nan=False, allow_infinity=False)),
                          min_size=1, max_size=20))
     values = {logformat.FREQUENCY: 0, logformat.DRIVE_VOLTAGE: 1, logformat.VELOCITY: 2, logformat.SWEEP: 3}
@@ -148,10 +184,9 @@ def valid_logs(draw):
 
 @fuzz(case=valid_logs())
 def test_valid_logs_read_back_with_the_values_written(case):
-    """A log built from the format with random values reads back exactly: values, dropouts, sweeps."""
-    data, rows, has_sweep, final_newline = case
-    if not final_newline:
-        rows = rows[:-1]  # an incomplete last line is ignored
+    """A log built from the format with random values reads back exactly: values, dropouts, sweeps (a complete
+    last row is read whether or not a newline ends the file)."""
+    data, rows, has_sweep, _ = case
     kept = [row for row in rows if row[2] is not None]
     log, error = read_file_bytes(data)
     if not kept:
@@ -164,7 +199,7 @@ def test_valid_logs_read_back_with_the_values_written(case):
     starts = [True] + [a != b for a, b in zip(key[1:], key[:-1])]
     assert list(log.sweep) == list(np.cumsum(starts) - 1)
     unmapped_point = logformat.X_POSITION in data.decode("utf-8-sig").splitlines()[2]  # no lambda_mm: one warning
-    assert len(log.warnings) == (len(kept) < len(rows)) + (not final_newline) + unmapped_point
+    assert len(log.warnings) == (len(kept) < len(rows)) + unmapped_point
 
 
 @fuzz(case=valid_logs(), line=st.integers(min_value=0), bad=st.sampled_from(["inf", "-1", "abc", "1e999", "-inf"]))
@@ -323,6 +358,262 @@ def test_no_sequence_of_driver_calls_exceeds_the_drivers_limit(calls, limit):
             pass
         if device.state.output:
             assert device.state.peak_voltage <= limit * (1 + 1e-9), (name, value, device.state)
+
+
+# --- calibration.json (--calibration) ------------------------------------------------------------
+
+VALID_CALIBRATION = json.loads((CORPUS / "calibrations" / "valid.json").read_text(encoding="utf-8"))
+"""A small calibration written by ``tactile calibrate`` on a coarse mesh (tests/data/hostile/README.md)."""
+json_values = st.one_of(
+    st.none(), st.booleans(), st.integers(-(10**30), 10**30), st.floats(), st.text(max_size=12),
+    st.sampled_from(["paper", "eigenstrain", "coupled", "uniform", "normal", "glue_um", "tactile-calibration"]),
+    st.lists(st.floats(), max_size=4), st.dictionaries(st.text(max_size=6), st.floats(), max_size=2),
+)
+
+
+def _json_paths(data, prefix=()):
+    """The path (keys and indices) of every value of a JSON tree, its root included."""
+    yield prefix
+    items = data.items() if isinstance(data, dict) else enumerate(data) if isinstance(data, list) else ()
+    for key, value in items:
+        yield from _json_paths(value, prefix + (key,))
+
+
+CALIBRATION_PATHS = list(_json_paths(VALID_CALIBRATION))
+
+
+@st.composite
+def damaged_calibrations(draw) -> str:
+    """A valid calibration with one to three values replaced by anything JSON holds, or deleted."""
+    data = copy.deepcopy(VALID_CALIBRATION)
+    for _ in range(draw(st.integers(1, 3))):
+        path = draw(st.sampled_from(CALIBRATION_PATHS))
+        if not path:
+            data = draw(json_values)
+            continue
+        try:
+            parent = functools.reduce(operator.getitem, path[:-1], data)
+            if draw(st.booleans()):
+                del parent[path[-1]]
+            else:
+                parent[path[-1]] = draw(json_values)
+        except (KeyError, IndexError, TypeError):  # an earlier change removed that place
+            pass
+    return json.dumps(data)
+
+
+@fuzz(text=damaged_calibrations())
+def test_the_calibration_reader_returns_a_checked_calibration_or_one_line_naming_the_file(text):
+    """Any damage: a calibration whose priors are plausible, whose samples lie inside them and whose surrogates
+    predict plausible resonances there, or one InputFileError line naming the file; the file unchanged."""
+    calibration = read_or_refused("calibration.json", text.encode(), load_calibration)
+    if calibration is None:
+        return
+    for k, parameter in enumerate(calibration.settings.parameters):
+        parameter.check("fuzz")
+        assert np.all((calibration.samples[:, k] >= parameter.low) & (calibration.samples[:, k] <= parameter.high))
+    assert {"q", "voltage_v", "accuracy", "piezo"} <= set(calibration.fem)
+    for surrogate in calibration.surrogates:
+        low, high = LIMITS[logformat.FREQUENCY]
+        assert np.all((surrogate.frequency(calibration.samples) >= low) & (surrogate.frequency(calibration.samples) <= high))
+
+
+# --- ring-down and scan logs ---------------------------------------------------------------------
+
+anything = st.one_of(number_texts, st.floats(-1e3, 1e3).map(repr), st.just(""))
+
+
+@st.composite
+def ringdown_logs(draw) -> bytes:
+    """A ring-down log (docs/log-format.md): bursts of envelope samples, some values hostile, rows repeated or moved."""
+    rows = []
+    for burst in range(draw(st.integers(1, 3))):
+        level, samples = draw(st.sampled_from([1.0, 5.0, 15.0])), draw(st.integers(1, 6))
+        for k in range(samples):
+            rows.append([str(burst), "1.000", repr(k * 5e-5), "32126", repr(level), repr(0.1 * 0.9**k), "22.5"])
+    for _ in range(draw(st.integers(0, 4))):
+        row, column = draw(st.integers(0, len(rows) - 1)), draw(st.integers(0, 6))
+        action = draw(st.sampled_from(["value", "repeat", "move"]))
+        if action == "value":
+            rows[row][column] = draw(anything)
+        elif action == "repeat":
+            rows.insert(row, list(rows[row]))
+        else:
+            rows.insert(draw(st.integers(0, len(rows))), rows.pop(row))
+    lines = ["# tactile interferometer log", ",".join(logformat.RINGDOWN_COLUMNS)] + [",".join(row) for row in rows]
+    return ("\n".join(lines) + "\n").encode()
+
+
+@fuzz(data=ringdown_logs())
+def test_the_ringdown_reader_returns_plausible_decays_or_one_line_naming_the_file(data):
+    """A ring-down log with hostile values, repeated or moved rows: decays whose samples lie in their plausible
+    ranges at strictly increasing times within each burst, each burst above the velocity floor; or one line."""
+    log, _ = read_file_bytes(data)
+    if log is None:
+        return
+    decays = log.ringdown
+    assert decays is not None and log.n_sweeps == 0
+    for burst in range(decays.n_bursts):
+        mine = decays.burst == burst
+        assert np.all(np.diff(decays.decay_time[mine]) > 0) and decays.velocity[mine].max() >= MIN_PEAK_VELOCITY
+    for column, values in ((logformat.DECAY_TIME, decays.decay_time), (logformat.VELOCITY, decays.velocity),
+                           (logformat.FREQUENCY, decays.frequency), (logformat.DRIVE_VOLTAGE, decays.drive_voltage)):
+        low, high = LIMITS[column]
+        assert np.all((values >= low) & (values <= high)), column
+
+
+lengths_mm = st.one_of(st.sampled_from(["20.56", "0.75", "1.0", "49", "1e-6", "1e6", "-1", "0", "nan", "abc", ""]),
+                       st.floats(-1e3, 1e3).map(repr))
+
+
+@st.composite
+def scan_logs(draw) -> bytes:
+    """A scan of a built plate (docs/log-format.md): its metadata and points, any of them hostile."""
+    geometry = {"lambda_mm": "20.56", "h_i_mm": "0.75", "h_p_mm": "1.0", "b_mm": "49"}
+    for key in draw(st.lists(st.sampled_from(sorted(geometry)), max_size=2, unique=True)):
+        geometry[key] = draw(lengths_mm)
+    lines = ["# tactile interferometer log"] + [f"# {key}: {value}" for key, value in geometry.items()]
+    lines.append(",".join(logformat.SCAN_COLUMNS))
+    for x, y in draw(st.lists(st.tuples(st.floats(-60, 60), st.floats(-30, 30)), min_size=1, max_size=6)):
+        lines.append(f"23160,5,{draw(st.floats(0, 0.2))!r},0,1.000,{draw(st.floats(-180, 180))!r},{x!r},{y!r}")
+    for _ in range(draw(st.integers(0, 2))):
+        row = draw(st.integers(2 + len(geometry), len(lines) - 1))
+        cells = lines[row].split(",")
+        cells[draw(st.integers(0, len(cells) - 1))] = draw(anything)
+        lines[row] = ",".join(cells)
+    return ("\n".join(lines) + "\n").encode()
+
+
+@fuzz(data=scan_logs())
+def test_the_scan_reader_returns_points_on_the_plate_or_one_line_naming_the_file(data):
+    """A scan with hostile metadata or values: points on its plausible plate with a velocity above the floor, or
+    one InputFileError line naming the file; the file unchanged."""
+    scan = read_or_refused("scan.csv", data, read_scan)
+    if scan is None:
+        return
+    plate = scan.plate.plate()
+    assert plate_problem(plate) is None and scan.velocity.max() >= MIN_PEAK_VELOCITY
+    assert all(point_problem(plate, x, y) is None for x, y in zip(scan.x, scan.y))
+
+
+# --- the run configuration's sections ------------------------------------------------------------
+
+DEFAULTS = default_config()
+config_values = st.one_of(
+    st.integers(-(10**20), 10**20), st.floats(), st.booleans(), st.text(max_size=8),
+    st.lists(st.one_of(st.floats(-1e3, 1e3), st.integers(-5, 500), st.text(max_size=4)), max_size=4),
+)
+
+
+def near(default):
+    """Values like ``default``: mostly of its type and near it (so that some configurations are valid)."""
+    if isinstance(default, bool):
+        return st.booleans()
+    if isinstance(default, int):
+        return st.integers(-2 * abs(default) - 2, 2 * abs(default) + 2)
+    if isinstance(default, float):
+        return st.floats(-2 * abs(default) - 1.0, 2 * abs(default) + 1.0)
+    if isinstance(default, list):
+        return st.lists(near(default[0]) if default else st.text(max_size=6), min_size=len(default) > 0, max_size=4)
+    return st.sampled_from(sorted({default, "paper", "PZT-5H", "eigenstrain", "coupled", "warn", "refuse", ""}))
+
+
+@st.composite
+def configurations(draw) -> dict:
+    """A user configuration: a few keys of a few sections, each set to something like its default or to anything."""
+    user = {}
+    for section in draw(st.lists(st.sampled_from(sorted(DEFAULTS)), min_size=1, max_size=3, unique=True)):
+        keys = draw(st.lists(st.sampled_from(sorted(DEFAULTS[section])), min_size=1, max_size=3, unique=True))
+        user[section] = {key: draw(st.one_of(near(DEFAULTS[section][key]), config_values)) for key in keys}
+    return user
+
+
+@fuzz(user=configurations())
+def test_a_configuration_is_refused_naming_its_file_or_checked_and_printed_as_toml_that_reads_back(user):
+    """Any values in any section: one InputFileError naming the file; or a configuration whose numbers lie in their
+    ranges and whose --print-config text is TOML that reads back to it."""
+    try:
+        config = merge(DEFAULTS, user, source="user.toml")
+    except InputFileError as error:
+        assert str(error).startswith("user.toml: ") and len(str(error).splitlines()) == 1, error
+        return
+    assert tomllib.loads(to_toml(config)) == config
+    for key, (low, high) in LIMITS.items():
+        section, _, name = key.partition(".")
+        if name in config.get(section, {}):
+            value = config[section][name]
+            assert all(low <= item <= high for item in (value if isinstance(value, list) else [value])), key
+
+
+# --- resuming a log after any hand edit ----------------------------------------------------------
+
+RESUMED_PLAN = CampaignPlan(32126.0, span=600.0, points_per_sweep=7, voltages=(5.0, 10.0))
+"""The plan of the corpus's campaign log (tests/data/hostile/resume/campaign/complete.csv)."""
+RESUMED_LOG = (CORPUS / "resume" / "campaign" / "complete.csv").read_text(encoding="utf-8")
+edits = st.lists(st.tuples(st.sampled_from(["repeat", "delete", "reformat", "move", "comment", "blank", "spoil"]),
+                           st.integers(0, 20), st.integers(0, 20)), max_size=5)
+
+
+def edited_log(actions, cut: int) -> tuple[str, bool]:
+    """The campaign log with ``actions`` applied to its rows and ``cut`` characters taken off its end; and whether
+    a row then holds a point of no plan (a frequency moved beyond the log's precision; an unterminated last line
+    with its six fields is a row)."""
+    lines = RESUMED_LOG.splitlines()
+    header = lines.index(",".join(logformat.COLUMNS))
+    head, rows = lines[: header + 1], lines[header + 1:]
+    for action, i, j in actions:
+        i, j = i % len(rows), j % len(rows)
+        cells = rows[i].split(",")
+        if action == "repeat":
+            rows.insert(j, rows[i])
+        elif action == "delete" and len(rows) > 1:
+            rows.pop(i)
+        elif action == "reformat" and not rows[i].startswith("#") and rows[i].strip():
+            cells[0], cells[1], cells[3] = f"{float(cells[0]):.12e}", f"{float(cells[1]):.4f}", f"{float(cells[3]):.1f}"
+            rows[i] = ",".join(cells)
+        elif action == "move":
+            rows.insert(j, rows.pop(i))
+        elif action in ("comment", "blank"):
+            rows.insert(j, "# a note" if action == "comment" else "")
+        elif action == "spoil" and not rows[i].startswith("#") and rows[i].strip():
+            cells[0] = repr(float(cells[0]) + 0.5)
+            rows[i] = ",".join(cells)
+    text = "\n".join(head + rows) + "\n"
+    text = text[: len(text) - cut] if cut else text
+    spoiled = any(line.split(",")[0] not in PLANNED_FREQUENCIES and line.count(",") == 5  # a last line cut in
+                  for line in text.splitlines()[header + 1:] if not line.startswith("#"))  # its phase is a row
+    return text, spoiled
+
+
+PLANNED_FREQUENCIES = {f"{point.frequency:.12g}" for point in RESUMED_PLAN.points()} | {
+    f"{point.frequency:.12e}" for point in RESUMED_PLAN.points()}
+
+
+@fuzz(actions=edits, cut=st.integers(0, 80))
+def test_a_resume_after_any_edit_appends_only_the_missing_points_or_refuses_leaving_the_log(actions, cut):
+    """Rows repeated, deleted, moved, reformatted, notes added, the end cut off: the resume appends exactly the
+    planned points no row holds, after every byte of the log (a cut last line kept as a comment); a row moved off
+    the plan makes it refuse in one line with the log byte for byte as it was."""
+    text, spoiled = edited_log(actions, cut)
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "campaign.csv"
+        path.write_text(text, encoding="utf-8")
+        before = read_log(path).rows
+        station, _ = simulated_station(default_bench_settings(), settle_time=0.0)
+        try:
+            result = q_campaign(station, path, RESUMED_PLAN, fsync=False)
+        except InputFileError as error:
+            assert spoiled and str(path) in str(error) and len(str(error).splitlines()) == 1, error
+            assert path.read_text(encoding="utf-8") == text
+            return
+        assert not spoiled
+        after = path.read_bytes()
+        cut_at = text.rfind("\n") + 1
+        assert after.startswith(text.encode()) or after.startswith((text[:cut_at] + INCOMPLETE_ROW + text[cut_at:] + "\n").encode())
+        planned = {point.key for point in RESUMED_PLAN.points()}
+        held = {row_key(row) for row in before}
+        assert result.measured == len(planned - held)
+        assert planned <= {row_key(row) for row in read_log(path).rows}
 
 
 # --- what the fuzzing found, kept as plain regression tests --------------------------------------

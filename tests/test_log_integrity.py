@@ -28,7 +28,7 @@ def run_cli(capsys, *argv):
 
 
 def row_keys(path):
-    _, rows, _ = read_log(path)
+    rows = read_log(path).rows
     return [(r[logformat.SWEEP], r[logformat.FREQUENCY], r[logformat.DRIVE_VOLTAGE]) for r in rows]
 
 

@@ -31,7 +31,7 @@ PLAN = CampaignPlan(32126.0, span=1200.0, points_per_sweep=21, voltages=(2.5, 7.
 
 
 def keys(path):
-    _, rows, _ = read_log(Path(path))
+    rows = read_log(Path(path)).rows
     return [(r[logformat.SWEEP], r[logformat.FREQUENCY], r[logformat.DRIVE_VOLTAGE]) for r in rows]
 
 
@@ -43,7 +43,7 @@ def test_simulate_campaign_is_fast_complete_and_readable_by_the_fit(tmp_path):
     assert result.planned == result.measured == 6 * 51
     log = read_for_fit(result.path)
     assert log.n_sweeps == 6 and len(log.velocity) == 306
-    metadata, _, _ = read_log(result.path)
+    metadata = read_log(result.path).metadata
     assert metadata["simulated"] == "yes" and metadata["simulator_law"] == "quadratic"
     assert metadata["simulator_seed"] == "3" and metadata["format_version"] == "1"
     peaks = [s["peak_velocity_m_s"] for s in result.summary["sweeps"]]
@@ -203,7 +203,8 @@ def test_shipped_sample_campaign_regenerates_identically(tmp_path):
                     "campaign", "--simulate", "--seed", "0", "--restart", "--out", str(out)],
                    check=True, capture_output=True, cwd=tmp_path)
     assert out.read_text() == shipped.read_text()
-    metadata, rows, _ = read_log(shipped)
+    logged = read_log(shipped)
+    metadata, rows = logged.metadata, logged.rows
     assert metadata["simulated"] == "yes" and len(rows) == 306
 
 
@@ -226,7 +227,7 @@ def test_real_generator_identifies():
         (["campaign", "--points", "2"], "--points must be at least 3"),
         (["resonance", "--start-hz", "40000", "--stop-hz", "30000"], "must be below --stop-hz"),
         (["voltage-sweep", "--frequency-hz", "-3"], "--frequency-hz must be positive"),
-        (["campaign", "--max-voltage", "0"], "--max-voltage must be a finite number of volts > 0"),
+        (["campaign", "--max-voltage", "0"], "argument --max-voltage: 0 is outside the accepted range 0.001 to 1000 V"),
         (["campaign", "--drop-rate", "1.5"], "bad fault flag"),
         (["campaign", "--generator", "/dev/ttyUSB0"], "not both"),
     ],

@@ -87,7 +87,7 @@ def test_ringdown_record_over_range_steps_up_and_logs_temperature(tmp_path):
     assert np.all(np.isfinite(decays.temperature)) and result.summary["bursts"][0]["temperature_c"] > 20
 
 
-def test_ringdown_resumes_after_a_disconnect_and_drops_a_burst_cut_short(tmp_path):
+def test_ringdown_resumes_after_a_disconnect_and_records_a_burst_cut_short_again(tmp_path):
     path = tmp_path / "r.csv"
     plan = RingdownPlan(32126.0, (4.0, 8.0, 12.0), samples=20)
     settings = default_bench_settings(faults=FaultSettings(disconnect_at=100))
@@ -97,14 +97,17 @@ def test_ringdown_resumes_after_a_disconnect_and_drops_a_burst_cut_short(tmp_pat
     partial = read_logs([path]).ringdown.n_bursts
     assert 1 <= partial < 3
     with open(path, "a") as file:  # a burst cut short: two of its rows, then half a row
-        file.write("2,9.000,0,32126,12,0.1,22\n2,9.000,4e-05,32126,12,0.09,22\n2,9.0")
+        file.write("2,9.000,0,32126,12,0.1,22\n2,9.000,5e-05,32126,12,0.09,22\n2,9.0")
+    before = path.read_bytes()
     ports = [serial.serial_for_url(p.port.port, timeout=1) for p in (station.generator, station.vibrometer)]
     again = open_station(*ports, station.amplifier, station.voltage_limit, clock=bench.clock, sleep=bench.sleep)
     result = ringdown(again, path, plan, fsync=False)
-    assert result.resumed == 20 * partial and result.measured == 20 * (3 - partial)
-    assert result.truncated_bytes == len("2,9.0")
+    assert result.resumed == 20 * partial + 2 and result.measured == 20 * (3 - partial)
+    assert result.truncated_bytes == len("2,9.0") and "kept as a comment" in result.warnings[0]
+    after = path.read_bytes()  # nothing deleted: the half row became a comment line, the burst was recorded again
+    assert after.startswith(before[: -len("2,9.0")]) and b"resume: 2,9.0\n" in after
     decays = read_logs([path]).ringdown
-    assert np.array_equal(np.bincount(decays.burst), [20, 20, 20])
+    assert sorted(np.bincount(decays.burst)) == [2, 20, 20, 20]  # the two kept rows read as a short decay
 
 
 def test_cli_measure_ringdown_simulated_resumes(tmp_path, capsys):

@@ -5,10 +5,12 @@ line), then one header row and the data rows.  Readers live in
 :mod:`workflow.damping.logs`; the writer in :mod:`instruments.procedures.logwriter`.
 """
 
+import io
 import math
 from pathlib import Path
 
 from workflow.errors import InputFileError
+from workflow.inputfiles import MAX_LOG_BYTES, open_input
 
 FORMAT_VERSION = 1
 
@@ -69,6 +71,8 @@ BUILT_PLATE_KEYS = (LAMBDA_MM, HI_MM, HP_MM, B_MM)
 
 MAX_HEADER_LINES = 10_000
 """Most metadata lines read before the header row [-]."""
+MAX_LINE_LENGTH = 10_000
+"""Longest accepted line [characters]; a data row is under 200."""
 
 
 def read_metadata(path: Path) -> dict:
@@ -77,25 +81,29 @@ def read_metadata(path: Path) -> dict:
     Raises
     ------
     InputFileError
-        If the file cannot be read, is not UTF-8, or has more than :data:`MAX_HEADER_LINES` lines before its header.
+        If the file cannot be read (or is no regular file, or is too large: :func:`~workflow.inputfiles.open_input`),
+        is not UTF-8, has a line over :data:`MAX_LINE_LENGTH` or more than :data:`MAX_HEADER_LINES` lines before its header.
     """
     metadata = {}
-    try:
-        with open(path, encoding="utf-8-sig", newline="") as stream:
-            for number, line in enumerate(stream, start=1):
+    with io.TextIOWrapper(open_input(path, str(path), MAX_LOG_BYTES), encoding="utf-8-sig", newline="") as stream:
+        try:
+            for number in range(1, MAX_HEADER_LINES + 2):
+                line = stream.readline(MAX_LINE_LENGTH + 3)
+                if not line:
+                    break
                 if number > MAX_HEADER_LINES:
                     raise InputFileError(f"{path}, line {number}: no header row within {MAX_HEADER_LINES} lines")
-                if not line.strip():
-                    continue
-                if not line.lstrip().startswith("#"):
+                if len(line.rstrip("\r\n")) > MAX_LINE_LENGTH:
+                    raise InputFileError(f"{path}, line {number}: longer than the {MAX_LINE_LENGTH} characters accepted per line")
+                if line.strip() and not line.lstrip().startswith("#"):
                     break
                 key, separator, value = line.lstrip()[1:].partition(":")
                 if separator and key.strip():
                     metadata.setdefault(key.strip(), (value.strip(), number))
-    except OSError as error:
-        raise InputFileError(f"{path}: cannot read ({error.strerror or error})") from None
-    except UnicodeDecodeError as error:
-        raise InputFileError(f"{path}: not UTF-8 (byte {error.start} of a line)") from None
+        except OSError as error:
+            raise InputFileError(f"{path}: cannot read ({error.strerror or error})") from None
+        except UnicodeDecodeError as error:
+            raise InputFileError(f"{path}: not UTF-8 (byte {error.start} of a line)") from None
     return metadata
 
 

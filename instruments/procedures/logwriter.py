@@ -1,12 +1,15 @@
-"""Writer of interferometer logs (docs/log-format.md, format version 1) that survives crashes.
+"""Writer of interferometer logs (docs/log-format.md, format version 1) that survives crashes and hand edits.
 
-Every row is written, flushed and fsync'd as soon as it is measured.  Resuming a log
-reads the rows already there; the procedures skip the planned points they cover (keyed
-by sweep id and the exact text of frequency and voltage).  A crash can leave only an
-unterminated final line (a row being written): resuming truncates that line alone, so
-every complete row is kept and the file stays a valid log.  A log is only resumed by
-the same procedure with the same plan (the ``plan_*`` metadata); anything else is an
-error, not a guess.
+Every row is written, flushed and fsync'd as soon as it is measured.  Resuming a log never
+deletes nor rewrites a row it holds (docs/log-format.md, "Resuming a log"): the procedures
+match its rows to their planned points by value, at the precision the log writes them
+(:func:`point_key`: ``-36.55`` is the point ``-36.5500``), and append only the points no row
+covers.  Rows that repeat a point are kept (a warning names them); a row that is no point of
+the plan, or a line that is not a row of this log, makes the resume refuse in one line and
+leaves the file byte for byte as it was.  An unterminated last line (a write cut short) is
+kept: as a row, its newline added, when it is a complete row, else as a comment line.  A log is
+only resumed by the same procedure with the same plan (the ``plan_*`` metadata, compared by
+value); anything else is an error, not a guess.
 
 A log has one writer: :func:`exclusive` holds an ``fcntl.flock`` on ``<log>.lock`` (which
 holds the writer's pid, for the message a second writer gets) for as long as the log is
@@ -19,13 +22,18 @@ import contextlib
 import csv
 import fcntl
 import io
+import math
 import os
 import stat
 import threading
+from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from workflow import logformat
 from workflow.errors import InputFileError
+from workflow.inputfiles import MAX_LOG_BYTES, read_input
 
 TITLE = "tactile interferometer log"
 _FORMATS = {
@@ -40,25 +48,28 @@ _FORMATS = {
     logformat.X_POSITION: "{:.4f}",
     logformat.Y_POSITION: "{:.4f}",
 }
-KEY_COLUMNS = (logformat.SWEEP, logformat.FREQUENCY, logformat.DRIVE_VOLTAGE, logformat.X_POSITION, logformat.Y_POSITION)
+KEY_COLUMNS = (logformat.SWEEP, logformat.FREQUENCY, logformat.DRIVE_VOLTAGE, logformat.X_POSITION, logformat.Y_POSITION,
+               logformat.DECAY_TIME)
 """The columns that identify a planned point (those a log has)."""
+REQUIRED = (logformat.SWEEP, logformat.FREQUENCY, logformat.DRIVE_VOLTAGE, logformat.VELOCITY) + KEY_COLUMNS[3:]
+"""Columns every row of ours fills (the others may be empty)."""
+INCOMPLETE_ROW = "# incomplete row (a write cut short), kept as a comment by the resume: "
+"""Prefix the resume puts before an unterminated last line that is not a complete row."""
 
 
 def format_value(column: str, value) -> str:
-    """The text of ``value`` in ``column``, as written to the log."""
-    return _FORMATS[column].format(value)
+    """The text of ``value`` in ``column``, as written to the log (-0 written as 0)."""
+    return _FORMATS[column].format(value + 0 if column != logformat.SWEEP else int(value))
 
 
-def point_key(sweep: int, frequency: float, voltage: float, position: tuple | None = None) -> tuple:
-    """Identity of a planned point: (sweep, frequency, voltage) as the log writes them, and (x_mm, y_mm) of a scan."""
-    values = {logformat.SWEEP: sweep, logformat.FREQUENCY: frequency, logformat.DRIVE_VOLTAGE: voltage}
-    if position is not None:
-        values.update(zip((logformat.X_POSITION, logformat.Y_POSITION), position))
-    return tuple(format_value(column, value) for column, value in values.items())
+def point_key(values: dict) -> tuple:
+    """Identity of a planned point: its :data:`KEY_COLUMNS` values (column -> number, those it has) as the log
+    writes them, so that rows and points match by value at the log's precision."""
+    return tuple(format_value(column, values[column]) for column in KEY_COLUMNS if column in values)
 
 
 def row_key(row: dict) -> tuple:
-    """The :func:`point_key` of a logged row (column -> text)."""
+    """The :func:`point_key` of a logged row (column -> text, already normalised by :func:`read_log`)."""
     return tuple(row[column] for column in KEY_COLUMNS if column in row)
 
 
@@ -164,43 +175,130 @@ def _lock(path: Path) -> int:
     return descriptor
 
 
-def read_log(path: Path, columns: tuple = logformat.COLUMNS) -> tuple[dict, list[dict], int]:
-    """Metadata, complete rows (column -> text) and the byte length of the complete lines of a log we wrote with ``columns``.
+@dataclass(frozen=True)
+class LoggedRows:
+    """What a log of ours holds, as :func:`read_log` read it.
 
-    The length is 0 when there is no header row yet (a crash while the log was being created).
+    Attributes
+    ----------
+    metadata : dict
+        key -> text of the ``# key: value`` lines before the header.
+    rows : list of dict
+        column -> text of each row, the :data:`KEY_COLUMNS` normalised to the writer's format.
+    lines : list of int
+        Line number of each row [-].
+    length : int
+        Bytes of the file up to the end of its last complete line (0 without a header row: a log cut
+        inside its header, which holds no row).
+    tail : bytes
+        The unterminated last line, if any ("" otherwise).
+    tail_is_row : bool
+        Whether ``tail`` is a complete row (then the last of ``rows``).
+    """
+
+    metadata: dict
+    rows: list
+    lines: list
+    length: int
+    tail: bytes = b""
+    tail_is_row: bool = False
+
+
+def _fields(path: Path, number: int, line: str) -> list:
+    """The comma-separated fields of line ``number``."""
+    try:
+        return next(csv.reader([line]), [])
+    except csv.Error as error:
+        raise InputFileError(f"{path}, line {number}: not a CSV row ({error}); not resuming a damaged log") from None
+
+
+def _row(path: Path, number: int, fields: list, columns: tuple) -> dict:
+    """A row of ours (column -> text), its key columns normalised; :class:`InputFileError` naming the line."""
+    if len(fields) != len(columns):
+        raise InputFileError(f"{path}, line {number}: expected {len(columns)} fields, got {len(fields)}; "
+                             "not resuming a damaged log (fix or remove the line, or choose another --out)")
+    row = dict(zip(columns, fields))
+    for column, text in row.items():
+        if not text.strip() and column not in REQUIRED:
+            continue
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not math.isfinite(value) or (column == logformat.SWEEP and value != round(value)):
+            kind = "an integer" if column == logformat.SWEEP else "a finite number"
+            raise InputFileError(f"{path}, line {number}: {column} {text!r} is not {kind}; not resuming a damaged "
+                                 "log (fix the line, or choose another --out)")
+        if column in KEY_COLUMNS:
+            row[column] = format_value(column, value)
+    return row
+
+
+def read_log(path: Path, columns: tuple = logformat.COLUMNS) -> LoggedRows:
+    """The metadata and rows of a log we wrote with ``columns``, within :data:`~workflow.inputfiles.MAX_LOG_BYTES`.
+
+    Blank lines and ``#`` comment lines after the header are skipped.  An unterminated last line is a
+    row when it is a complete one, else ignored (:attr:`LoggedRows.tail` holds it).
 
     Raises
     ------
     InputFileError
-        If the header row is not ours, the file is not UTF-8 or a complete row is malformed (file and line named).
+        If the header row is not ours, the file is not UTF-8 or a complete line is no row of ours
+        (wrong number of fields, a value that is not a number, a sweep id that is not an integer),
+        naming the file and line.
     """
-    data = path.read_bytes()
-    complete = data[: data.rfind(b"\n") + 1]
+    data = read_input(path, str(path), MAX_LOG_BYTES)
+    cut = data.rfind(b"\n") + 1
+    complete, tail = data[:cut], data[cut:]
     try:
         text = complete.decode("utf-8")
     except UnicodeDecodeError as error:
         raise InputFileError(f"{path}: not a UTF-8 text log (byte {error.start}); not resuming it") from None
-    metadata, rows, header = {}, [], None
-    for number, line in enumerate(text.splitlines(), start=1):
+    metadata, rows, lines, header = {}, [], [], None
+    for number, line in enumerate(text.split("\n")[:-1], start=1):
+        line = line.removesuffix("\r")
         if header is None and line.startswith("#"):
             key, separator, value = line[1:].partition(":")
             if separator:
                 metadata[key.strip()] = value.strip()
             continue
-        fields = next(csv.reader([line]))
+        if header is not None and (not line.strip() or line.startswith("#")):
+            continue
+        fields = _fields(path, number, line)
         if header is None:
             if tuple(fields) != columns:
-                raise InputFileError(f"{path}:{number}: header {fields} is not {list(columns)}; not a log this writer can resume")
+                raise InputFileError(f"{path}, line {number}: header {fields} is not {list(columns)}; not a log this "
+                                     "writer can resume")
             header = fields
-        elif len(fields) != len(header):
-            raise InputFileError(f"{path}:{number}: expected {len(header)} fields, got {len(fields)}; not resuming a damaged log")
-        else:
-            rows.append(dict(zip(header, fields)))
-    return metadata, rows, len(complete) if header is not None else 0
+            continue
+        rows.append(_row(path, number, fields, columns))
+        lines.append(number)
+    if header is None:
+        return LoggedRows(metadata, [], [], 0, tail)
+    if not tail:
+        return LoggedRows(metadata, rows, lines, len(complete))
+    number = text.count("\n") + 1
+    try:
+        rows.append(_row(path, number, _fields(path, number, tail.decode("utf-8")), columns))
+    except (InputFileError, UnicodeDecodeError):
+        return LoggedRows(metadata, rows, lines, len(complete), tail)
+    lines.append(number)
+    return LoggedRows(metadata, rows, lines, len(complete), tail, tail_is_row=True)
+
+
+def _same_value(old: str | None, new: str) -> bool:
+    """Whether two metadata texts say the same: equal, or the same numbers (comma-separated) to 1e-9."""
+    if old == new:
+        return True
+    try:
+        a, b = (np.array([float(item) for item in text.split(",")]) for text in (old, new))
+    except (AttributeError, ValueError):
+        return False
+    return a.shape == b.shape and bool(np.allclose(a, b, rtol=1e-9, atol=0))
 
 
 class LogWriter:
-    """Append rows to a log, creating it with its metadata or resuming it.
+    """Append rows to a log, creating it with its metadata or resuming it (never deleting a row).
 
     Parameters
     ----------
@@ -214,6 +312,17 @@ class LogWriter:
         fsync after every row (durable against power loss, not only against crashes).
     columns : tuple of str
         The header (:data:`workflow.logformat.COLUMNS`, ``SCAN_COLUMNS`` for a scan, ``RINGDOWN_COLUMNS`` for a ring-down).
+
+    Attributes
+    ----------
+    rows : list of dict
+        The log's rows (column -> text), those resumed then those appended.
+    keys : dict
+        :func:`row_key` -> line of its first row.
+    warnings : list of str
+        What the resume tolerated: rows repeating a point, an unterminated last line.
+    truncated_bytes : int
+        Length of an unterminated last line found on resuming [bytes] (kept: see the module's docstring).
     """
 
     def __init__(self, path, metadata: dict, restart: bool = False, fsync: bool = True, columns: tuple = logformat.COLUMNS):
@@ -222,12 +331,25 @@ class LogWriter:
         self.fsync = fsync
         self.metadata = {"format_version": logformat.FORMAT_VERSION, **metadata}
         self.rows: list[dict] = []
+        self.lines: list[int] = []
+        self.warnings: list[str] = []
         self.truncated_bytes = 0
+        self._file = None
+        self._tail_fix = None
         with contextlib.ExitStack() as stack:
             stack.enter_context(exclusive(self.path))
             self._open(restart)
             self._lock = stack.pop_all()
-        self.keys = {row_key(row) for row in self.rows}
+        self.keys = {}
+        repeats = []
+        for row, line in zip(self.rows, self.lines):
+            first = self.keys.setdefault(row_key(row), line)
+            if first != line:
+                repeats.append((line, first))
+        if repeats:
+            more = f" and {len(repeats) - 1} more" if len(repeats) > 1 else ""
+            self.warnings.append(f"{self.path}, line {repeats[0][0]}: the same point as line {repeats[0][1]}{more} "
+                                 "(rows pasted twice?); every row is kept and no point is measured again")
 
     def _open(self, restart: bool) -> None:
         if not (self.path.exists() and not restart and self._resume()):
@@ -236,24 +358,60 @@ class LogWriter:
             self._write("\n".join(lines) + "\n" + ",".join(self.columns) + "\n")
 
     def _resume(self) -> bool:
-        old_metadata, self.rows, complete_length = read_log(self.path, self.columns)
-        if not complete_length:
+        logged = read_log(self.path, self.columns)
+        if not logged.length:
             return False
         wanted = {key: _metadata_text(value) for key, value in self.metadata.items() if key == "procedure" or key.startswith("plan_")}
         for key, value in wanted.items():
-            if old_metadata.get(key) != value:
+            if not _same_value(logged.metadata.get(key), value):
                 raise InputFileError(
-                    f"{self.path}: cannot resume: it was written with {key} = {old_metadata.get(key)!r}, "
+                    f"{self.path}: cannot resume: it was written with {key} = {logged.metadata.get(key)!r}, "
                     f"this run has {value!r}; use another output file or restart it"
                 )
-        size = self.path.stat().st_size
-        self.truncated_bytes = size - complete_length
-        with open(self.path, "r+b") as file:
-            file.truncate(complete_length)
-        self._file = open(self.path, "a", encoding="utf-8", newline="")
+        self.rows, self.lines = logged.rows, logged.lines
+        self.truncated_bytes = len(logged.tail)
+        if logged.tail_is_row:
+            self._tail_fix = (logged.length + len(logged.tail), b"\n")
+            self.warnings.append(f"{self.path}, line {self.lines[-1]}: the last row has no line end; it is kept")
+        elif logged.tail:
+            self._tail_fix = (logged.length, INCOMPLETE_ROW.encode() + logged.tail + b"\n")
+            self.warnings.append(f"{self.path}: an incomplete last line ({len(logged.tail)} bytes, a write cut short) "
+                                 "is kept as a comment line; its point is measured again")
         return True
 
+    def check_planned(self, keys, sweeps) -> None:
+        """Refuse (before anything is written) a row of the sweeps ``sweeps`` whose key is not in ``keys``.
+
+        Raises
+        ------
+        InputFileError
+            Naming the first such row's line: a row that is no point of the plan (edited, or from another log).
+        """
+        names = {str(sweep) for sweep in sweeps}
+        for row, line in zip(self.rows, self.lines):
+            if row[logformat.SWEEP] in names and row_key(row) not in keys:
+                shown = ", ".join(f"{column} {row[column]}" for column in KEY_COLUMNS if column in row)
+                raise InputFileError(f"{self.path}, line {line}: this row ({shown}) is no point of the plan being "
+                                     "resumed (edited by hand, or pasted from another log?); not resuming: fix or "
+                                     "remove the line, or choose another --out")
+
+    def check_sweeps(self, sweeps) -> None:
+        """Refuse a row whose sweep id is not one of ``sweeps`` (the procedure's), naming its line."""
+        names = {str(sweep) for sweep in sweeps}
+        for row, line in zip(self.rows, self.lines):
+            if row[logformat.SWEEP] not in names:
+                raise InputFileError(f"{self.path}, line {line}: sweep {row[logformat.SWEEP]} is not one of this plan's "
+                                     f"({', '.join(sorted(names, key=int))}); not resuming: fix or remove the line, "
+                                     "or choose another --out")
+
     def _write(self, text: str) -> None:
+        if self._file is None:
+            if self._tail_fix is not None:  # one write, over the unterminated line and past it: nothing is cut
+                offset, fix = self._tail_fix
+                with open(self.path, "r+b") as file:
+                    os.pwrite(file.fileno(), fix, offset)
+                self._tail_fix = None
+            self._file = open(self.path, "a", encoding="utf-8", newline="")
         self._file.write(text)
         self._file.flush()
         if self.fsync:
@@ -275,23 +433,14 @@ class LogWriter:
         self._write(buffer.getvalue())
         for text in texts:
             self.rows.append(text)
-            self.keys.add(row_key(text))
-
-    def keep_rows(self, count: int) -> None:
-        """Drop every row after the first ``count`` (an incomplete group of rows, e.g. a ring-down cut short)."""
-        self.rows = self.rows[:count]
-        self.keys = {row_key(row) for row in self.rows}
-        data = self.path.read_bytes()
-        end = data.index(("\n" + ",".join(self.columns) + "\n").encode()) + len(",".join(self.columns)) + 2
-        for _ in range(count):
-            end = data.index(b"\n", end) + 1
-        self._file.flush()
-        os.truncate(self.path, end)
+            self.lines.append(0)
+            self.keys.setdefault(row_key(text), 0)
 
     def close(self) -> None:
         """Close the log and release its lock."""
         try:
-            self._file.close()
+            if self._file is not None:
+                self._file.close()
         finally:
             self._lock.close()
 

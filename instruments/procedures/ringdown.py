@@ -5,15 +5,19 @@ For each burst level the generator is put in triggered burst mode (``BURS:MODE T
 fires one burst (``*TRG``), and the vibrometer's envelope record (``Get,Record,0,Envelope``,
 docs/instruments.md) gives the velocity from the burst's end on.  An over-range record steps
 the decoder range up and fires again.  Each burst's samples are appended in one write with
-the plate temperature where the bench reports it (docs/log-format.md, ring-down logs); a
-resumed log skips the bursts it holds in full and drops a burst cut short.
+the plate temperature where the bench reports it (docs/log-format.md, ring-down logs).  A
+resumed log skips the bursts whose every sample it holds (matched by value: burst, frequency,
+level, decay time); a burst cut short is recorded again in full after its rows, which are kept
+(a decay is one record: its missing samples cannot be measured alone).
 """
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from instruments.drivers.errors import InstrumentError
 from instruments.drivers.vibrometer import EnvelopeRecord
-from instruments.procedures.logwriter import LogWriter
+from instruments.procedures.logwriter import LogWriter, point_key, row_key
 from instruments.procedures.sweeps import PlanError, ProcedureResult, Station, check_frequencies, check_sizes
 from instruments.simulator.vibrometer import RECORD_INTERVAL_US_RANGE, RECORD_SAMPLES_RANGE
 from workflow import logformat
@@ -61,6 +65,15 @@ class RingdownPlan:
         if not low <= round(self.interval * 1e6) <= high:
             raise PlanError(f"ring-down plan: interval must be {low} to {high} us, got {self.interval * 1e6:g} us")
 
+    def decay_times(self) -> np.ndarray:
+        """Time of each envelope sample after the burst's end [s] (whole microseconds apart)."""
+        return round(self.interval * 1e6) * 1e-6 * np.arange(self.samples)
+
+    def sample_keys(self, burst: int) -> list:
+        """The log keys (:func:`~.logwriter.point_key`) of the samples of burst ``burst``, in time order."""
+        base = {logformat.SWEEP: burst, logformat.FREQUENCY: self.frequency, logformat.DRIVE_VOLTAGE: self.voltages[burst]}
+        return [point_key({**base, logformat.DECAY_TIME: t}) for t in self.decay_times()]
+
 
 def record_ringdown(station: Station, frequency: float, voltage: float, cycles: int) -> EnvelopeRecord:
     """Fire one burst of ``cycles`` at ``frequency`` [Hz] and ``voltage`` [V peak across the ceramics]; its decay record.
@@ -101,10 +114,12 @@ def ringdown(station: Station, path, plan: RingdownPlan, metadata: dict | None =
         **{f"plan_{key}": value for key, value in vars(plan).items()},
         **(metadata or {}),
     }
+    samples = {j: plan.sample_keys(j) for j in range(len(plan.voltages))}
     with LogWriter(path, header, restart=restart, fsync=fsync, columns=logformat.RINGDOWN_COLUMNS) as log:
-        complete = _complete_bursts(log, plan.samples)
+        log.check_sweeps(samples)
+        log.check_planned({key for keys in samples.values() for key in keys}, samples)
         resumed = len(log.rows)
-        todo = [j for j in range(len(plan.voltages)) if j not in complete]
+        todo = [j for j, keys in samples.items() if any(key not in log.keys for key in keys)]
         station.prepare()
         try:
             station.retry(lambda: _prepare_record(station, plan), "preparing the vibrometer's envelope record")
@@ -113,6 +128,10 @@ def ringdown(station: Station, path, plan: RingdownPlan, metadata: dict | None =
                     voltage = plan.voltages[j]
                     record = station.retry(lambda: record_ringdown(station, plan.frequency, voltage, plan.cycles),
                                            f"ring-down at {voltage:g} V")
+                    if record.time.shape != (plan.samples,) or not np.allclose(record.time, plan.decay_times()):
+                        raise InstrumentError(f"the vibrometer's record after the burst at {voltage:g} V is not the one "
+                                              f"set ({plan.samples} samples {plan.interval * 1e6:g} us apart); that burst "
+                                              "is not logged")
                     temperature = station.retry(station.vibrometer.read_temperature, "reading the plate temperature")
                     stamp = station.clock()
                     log.append_rows([
@@ -127,32 +146,14 @@ def ringdown(station: Station, path, plan: RingdownPlan, metadata: dict | None =
         rows = log.rows
     bursts = []
     for j, voltage in enumerate(plan.voltages):
-        mine = [row for row in rows if row[logformat.SWEEP] == str(j)]
-        bursts.append({"burst": j, "voltage_v": voltage, "initial_velocity_m_s": float(mine[0][logformat.VELOCITY]),
-                       "temperature_c": float(mine[0][logformat.TEMPERATURE]) if mine[0][logformat.TEMPERATURE] else None})
+        first = [row for row in rows if row_key(row) == samples[j][0]][-1]  # the burst's latest record
+        bursts.append({"burst": j, "voltage_v": voltage, "initial_velocity_m_s": float(first[logformat.VELOCITY]),
+                       "temperature_c": float(first[logformat.TEMPERATURE]) if first[logformat.TEMPERATURE] else None})
     counts = dict(path=log.path, procedure="ringdown", planned=len(plan.voltages) * plan.samples,
                   measured=len(todo) * plan.samples, resumed=resumed, truncated_bytes=log.truncated_bytes)
-    return ProcedureResult(**counts, summary={"bursts": bursts})
+    return ProcedureResult(**counts, summary={"bursts": bursts}, warnings=tuple(log.warnings))
 
 
 def _prepare_record(station: Station, plan: RingdownPlan) -> None:
     station.vibrometer.record_samples = plan.samples
     station.vibrometer.record_interval = plan.interval
-
-
-def _complete_bursts(log: LogWriter, samples: int) -> set:
-    """Burst ids the log holds in full; rows after the first incomplete burst are dropped (a burst cut short)."""
-    complete, count, current = set(), 0, None
-    for index, row in enumerate(log.rows):
-        burst = int(row[logformat.SWEEP])
-        if burst != current:
-            if current is not None and count != samples:
-                log.keep_rows(index - count)
-                return complete
-            current, count = burst, 0
-        count += 1
-        if count == samples:
-            complete.add(burst)
-    if current is not None and count != samples:
-        log.keep_rows(len(log.rows) - count)
-    return complete

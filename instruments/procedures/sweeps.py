@@ -26,7 +26,7 @@ from instruments.drivers.vibrometer import VelocityReading, Vibrometer, full_sca
 from instruments.procedures.logwriter import LogWriter, point_key
 from instruments.simulator.generator import FREQUENCY_RANGE
 from workflow import logformat
-from workflow.errors import TactileError
+from workflow.errors import InputFileError, TactileError
 from workflow.progress import Progress
 from workflow.units import MM
 
@@ -94,7 +94,8 @@ class PlannedPoint:
     @property
     def key(self) -> tuple:
         """Its identity in a log (:func:`~.logwriter.point_key`)."""
-        return point_key(self.sweep, self.frequency, self.voltage, self.position_mm)
+        values = {logformat.SWEEP: self.sweep, logformat.FREQUENCY: self.frequency, logformat.DRIVE_VOLTAGE: self.voltage}
+        return point_key({**values, **dict(zip(logformat.POSITION_COLUMNS, self.position_mm or ()))})
 
 
 class Station:
@@ -263,9 +264,11 @@ class ProcedureResult:
     planned, measured, resumed : int
         Planned points, points measured in this run, points found in the log.
     truncated_bytes : int
-        Bytes of an unterminated last line removed on resume.
+        Length of an unterminated last line found on resuming [bytes] (kept: :mod:`.logwriter`).
     summary : dict
         Procedure-specific results (JSON-able).
+    warnings : tuple of str
+        What the resume tolerated (rows repeating a point, an unterminated last line), one line each.
     """
 
     path: Path
@@ -275,6 +278,7 @@ class ProcedureResult:
     resumed: int
     truncated_bytes: int
     summary: dict
+    warnings: tuple = ()
 
 
 def _measure_points(station: Station, log: LogWriter, points: list[PlannedPoint], label: str) -> int:
@@ -302,11 +306,14 @@ def _measure_points(station: Station, log: LogWriter, points: list[PlannedPoint]
 
 
 def run_procedure(station: Station, path, procedure: str, plan: dict, voltages, stages: Callable, metadata: dict, restart: bool,
-         fsync: bool, columns: tuple = logformat.COLUMNS):
+         fsync: bool, columns: tuple = logformat.COLUMNS, sweeps=(0,)):
     """Common frame: safety check of ``voltages``, identify, open/resume the log, measure each stage's points.
 
     ``stages`` yields lists of points; it may look at the log's rows (adaptive plans).  ``columns``:
-    the log's header (``logformat.SCAN_COLUMNS`` for points with a position).
+    the log's header (``logformat.SCAN_COLUMNS`` for points with a position); ``sweeps``: every sweep id
+    the stages may plan.  A resumed log's rows must be points of the plan: a row of another sweep, a
+    row of a stage that is not one of its points, or a row of a later stage while an earlier one still
+    has points to measure is refused before anything is written (:meth:`LogWriter.check_planned`).
     Returns (log rows, counts) for the summary.
     """
     for voltage in voltages:
@@ -321,25 +328,37 @@ def run_procedure(station: Station, path, procedure: str, plan: dict, voltages, 
         **metadata,
     }
     with LogWriter(path, header, restart=restart, fsync=fsync, columns=columns) as log:
+        log.check_sweeps(sweeps)
+        logged = {int(row[logformat.SWEEP]) for row in log.rows}
         resumed = len(log.rows)
         planned = measured = 0
+        seen = set()
         station.prepare()
         try:
             for points in stages(log):
+                stage = {point.sweep for point in points}
+                log.check_planned({point.key for point in points}, stage)
+                seen |= stage
+                later = sorted(logged - seen)
+                if later and any(point.key not in log.keys for point in points):
+                    raise InputFileError(f"{log.path}: rows of sweep {later[0]} are logged while sweep "
+                                         f"{min(stage)} still has points to measure; not resuming an edited log")
                 planned += len(points)
                 measured += _measure_points(station, log, points, procedure)
         finally:
             station.shutdown()
         return log.rows, dict(path=Path(path), procedure=procedure, planned=planned, measured=measured,
-                              resumed=resumed, truncated_bytes=log.truncated_bytes)
+                              resumed=resumed, truncated_bytes=log.truncated_bytes, warnings=tuple(log.warnings))
 
 
 def _sweep_rows(rows: list[dict], sweep: int) -> tuple[np.ndarray, np.ndarray]:
+    """(frequency [Hz], velocity [m/s]) of a sweep's rows by frequency, a row repeating a frequency left out
+    (the first kept: a row pasted twice must not move the peak)."""
     chosen = [row for row in rows if row[logformat.SWEEP] == str(sweep)]
     frequency = np.array([float(row[logformat.FREQUENCY]) for row in chosen])
     velocity = np.array([float(row[logformat.VELOCITY]) for row in chosen])
-    order = np.argsort(frequency)
-    return frequency[order], velocity[order]
+    frequency, first = np.unique(frequency, return_index=True)
+    return frequency, velocity[first]
 
 
 def peak_of(frequency: np.ndarray, velocity: np.ndarray) -> tuple[float, float]:
@@ -405,7 +424,8 @@ def resonance_search(station: Station, path, plan: ResonancePlan = ResonancePlan
         centre, _ = peak_of(*_sweep_rows(log.rows, 0))
         yield [PlannedPoint(1, f, plan.voltage) for f in np.linspace(centre - 2 * step, centre + 2 * step, plan.fine_points)]
 
-    rows, counts = run_procedure(station, path, "resonance", vars(plan), [plan.voltage], stages, metadata or {}, restart, fsync)
+    rows, counts = run_procedure(station, path, "resonance", vars(plan), [plan.voltage], stages, metadata or {}, restart, fsync,
+                                 sweeps=(0, 1))
     frequency, velocity = _sweep_rows(rows, 1)
     f_r, v_peak = peak_of(frequency, velocity)
     bandwidth = half_power_bandwidth(frequency, velocity, v_peak)
@@ -418,11 +438,18 @@ def resonance_search(station: Station, path, plan: ResonancePlan = ResonancePlan
 
 
 def logged_plan_value(path: Path, key: str) -> float | None:
-    """The ``plan_<key>`` metadata of an existing log (what a resumed procedure was planned with), or None."""
+    """The ``plan_<key>`` metadata of an existing log (what a resumed procedure was planned with), or None.
+
+    Raises
+    ------
+    InputFileError
+        If the value is not a finite number, naming the file and line.
+    """
     if not Path(path).exists():
         return None
-    value, _ = logformat.read_metadata(Path(path)).get(f"plan_{key}", (None, None))
-    return float(value) if value is not None else None
+    metadata = logformat.read_metadata(Path(path))
+    name = f"plan_{key}"
+    return logformat.metadata_number(metadata, name, path) if name in metadata else None
 
 
 def resonance_log_path(path: Path) -> Path:
@@ -482,7 +509,8 @@ def q_campaign(station: Station, path, plan: CampaignPlan, metadata: dict | None
                fsync: bool = True) -> ProcedureResult:
     """Frequency sweeps at several voltages; summary ``sweeps``: voltage, peak frequency and velocity, Q estimate."""
     points = plan.points()
-    rows, counts = run_procedure(station, path, "campaign", vars(plan), plan.voltages, lambda log: [points], metadata or {}, restart, fsync)
+    rows, counts = run_procedure(station, path, "campaign", vars(plan), plan.voltages, lambda log: [points], metadata or {},
+                                 restart, fsync, sweeps=range(len(plan.voltages)))
     sweeps = []
     for sweep, voltage in enumerate(plan.voltages):
         frequency, velocity = _sweep_rows(rows, sweep)

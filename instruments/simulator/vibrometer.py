@@ -11,15 +11,16 @@ from collections.abc import Callable
 import numpy as np
 
 from instruments.drivers.vibrometer import format_position, format_range, full_scale
+from workflow.models.limits import LIMITS
 
 CONTROLLER_NAME = "OFV-5000 tactile-sim"
 CONTROLLER_VERSION = "1.0-sim"
 DECODER_NAME = "VD-09"
 DECODER_RANGES = tuple(mm_s_v * 1e-3 for mm_s_v in (1, 2, 5, 10, 20, 50, 100))
 """Velocity decoder ranges [m/s per volt of analog output]."""
-RECORD_SAMPLES_RANGE = (2, 256)
+RECORD_SAMPLES_RANGE = LIMITS["campaign.ringdown_samples"]
 """Samples of one envelope record (its reply line stays under the 4 kB output buffer) [-]."""
-RECORD_INTERVAL_US_RANGE = (1, 1_000_000)
+RECORD_INTERVAL_US_RANGE = LIMITS["campaign.ringdown_interval_us"]
 """Time between record samples [us]."""
 DEFAULT_RECORD_SAMPLES = 100
 DEFAULT_RECORD_INTERVAL_US = 50

@@ -12,7 +12,7 @@ import numpy as np
 
 from workflow.calibration.logs import BuiltPlateLog
 from workflow.calibration.measurements import ScanShape
-from workflow.calibration.parameters import CalibrationSettings, Parameter
+from workflow.calibration.parameters import CalibrationSettings, Parameter, checked_settings
 from workflow.calibration.plate_surrogate import Evaluate, EvaluateSurfaces, PlateSurrogate, build_plate_surrogate
 from workflow.calibration.posterior import (
     ChainDiagnostics,
@@ -23,8 +23,10 @@ from workflow.calibration.posterior import (
     prior_bounds,
     sample_posterior,
 )
-from workflow.errors import InputFileError
+from workflow.errors import InputFileError, TactileError
 from workflow.models import materials
+from workflow.models.fem.settings import PIEZO_MODELS
+from workflow.models.limits import LIMITS, plate_problem, problem
 from workflow.models.plate import Plate
 
 FORMAT = "tactile-calibration"
@@ -75,6 +77,16 @@ class MeasuredPlate:
         return {"name": self.name, "plate": plate_record(self.plate), "frequency_hz": self.frequency,
                 "deflection_per_volt_m_v": self.deflection_per_volt,
                 "scan": None if self.scan is None else self.scan.to_dict(), "data_used": self.data_used}
+
+    def checked(self, where: str) -> "MeasuredPlate":
+        """This plate, or :class:`InputFileError` naming ``where``: an implausible geometry (:func:`plate_problem`),
+        resonance frequency or deflection per volt."""
+        reason = plate_problem(self.plate) or problem("frequency_hz", self.frequency, name="frequency_hz")
+        if reason is None and self.deflection_per_volt is not None and not 0 < self.deflection_per_volt < 1e-3:
+            reason = f"deflection_per_volt_m_v = {self.deflection_per_volt:g} is not a deflection per volt [m/V]"
+        if reason:
+            raise InputFileError(f"{where}: {reason}")
+        return self
 
     @classmethod
     def from_dict(cls, data: dict) -> "MeasuredPlate":
@@ -143,25 +155,87 @@ class Calibration:
 
     @classmethod
     def from_dict(cls, data: dict, origin: str = "calibration") -> "Calibration":
-        """Inverse of :meth:`to_dict`; raises :class:`InputFileError` naming ``origin`` when it is not one."""
+        """Inverse of :meth:`to_dict`, every value checked; raises :class:`InputFileError` naming ``origin`` and the
+        field when it is not one (docs/calibration.md, "Using a calibration")."""
         if not isinstance(data, dict) or data.get("format") != FORMAT or data.get("version") != VERSION:
             raise InputFileError(f"{origin}: not a calibration file of 'tactile calibrate' ({FORMAT} version {VERSION})")
+        field = "settings"
         try:
             settings = dict(data["settings"])
             settings["parameters"] = tuple(Parameter(**p) for p in settings["parameters"])
-            samples = np.asarray(data["samples"], dtype=float)
-            if samples.ndim != 2 or samples.shape[1] != len(settings["parameters"]) or not np.all(np.isfinite(samples)):
-                raise ValueError("samples must be a finite table with one column per parameter")
-            return cls(
-                settings=CalibrationSettings(**settings),
-                samples=samples,
-                plates=tuple(MeasuredPlate.from_dict(p) for p in data["plates"]),
-                surrogates=tuple(PlateSurrogate.from_dict(s) for s in data["surrogates"]),
-                diagnostics=ChainDiagnostics.from_dict(data["diagnostics"]),
-                fem=dict(data["fem"]),
-            )
-        except (KeyError, TypeError, ValueError) as error:
-            raise InputFileError(f"{origin}: damaged calibration file ({type(error).__name__}: {error})") from None
+            settings = checked_settings(CalibrationSettings(**settings), f"{origin}: settings")
+            field = "samples"
+            samples = _checked_samples(data["samples"], settings, origin)
+            field = "plates"
+            plates = tuple(MeasuredPlate.from_dict(p).checked(f"{origin}: plate {k}") for k, p in enumerate(data["plates"]))
+            field = "surrogates"
+            surrogates = tuple(PlateSurrogate.from_dict(s) for s in data["surrogates"])
+            if len(surrogates) != len(plates) or any(s.names != settings.names for s in surrogates):
+                raise ValueError(f"one surrogate of the parameters {', '.join(settings.names)} per plate")
+            for k, surrogate in enumerate(surrogates):
+                _check_predictions(surrogate, samples, f"{origin}: field 'surrogates': plate {k}")
+            field = "diagnostics"
+            diagnostics = ChainDiagnostics.from_dict(data["diagnostics"])
+            field = "fem"
+            fem = _checked_fem(data["fem"], origin)
+        except InputFileError:
+            raise
+        except (KeyError, TypeError, ValueError, IndexError, AttributeError, TactileError) as error:
+            raise InputFileError(f"{origin}: damaged calibration file, field '{field}' "
+                                 f"({type(error).__name__}: {error})") from None
+        return cls(settings, samples, plates, surrogates, diagnostics, fem)
+
+
+FEM_KEYS = {"q": "q", "voltage_v": "design.voltage_v", "accuracy": "fem_accuracy"}
+"""Numeric keys of a calibration's ``fem`` record -> their range in :data:`~workflow.models.limits.LIMITS` (and ``piezo``)."""
+
+
+def _checked_fem(record, origin: str) -> dict:
+    """The ``fem`` record of a calibration file: Q, voltage, accuracy in range and a known piezo model."""
+    if not isinstance(record, dict):
+        raise InputFileError(f"{origin}: field 'fem' must be a table of {', '.join(FEM_KEYS)}, piezo")
+    for key, quantity in FEM_KEYS.items():
+        if key not in record:
+            raise InputFileError(f"{origin}: field 'fem' has no '{key}' (the FEM conditions of the calibration)")
+        value = record[key]
+        reason = "is not a number" if not isinstance(value, (int, float)) or isinstance(value, bool) else problem(
+            quantity, value, name=f"fem.{key}")
+        if reason:
+            raise InputFileError(f"{origin}: field 'fem': {reason if reason.startswith('fem.') else f'{key} {reason}'}")
+    if record.get("piezo") not in PIEZO_MODELS:
+        raise InputFileError(f"{origin}: field 'fem': piezo must be one of {', '.join(PIEZO_MODELS)}, got "
+                             f"{record.get('piezo')!r}")
+    return dict(record)
+
+
+def _check_predictions(surrogate: PlateSurrogate, samples: np.ndarray, where: str) -> None:
+    """Refuse a surrogate that predicts, at some posterior sample, a resonance outside the plausible frequencies
+    or a deflection that is not a finite positive length (damaged coefficients)."""
+    with np.errstate(over="ignore"):
+        frequency, deflection = surrogate.frequency(samples), surrogate.deflection(samples)
+    low, high = LIMITS["frequency_hz"]
+    bad = ~((frequency >= low) & (frequency <= high))
+    if bad.any():
+        raise InputFileError(f"{where}: its surrogate predicts f_r = {frequency[bad][0]:g} Hz at a posterior sample, "
+                             f"outside the plausible {low:g} to {high:g} Hz")
+    if not np.all(np.isfinite(deflection) & (deflection > 0)):
+        raise InputFileError(f"{where}: its surrogate predicts a deflection that is not a finite length")
+
+
+def _checked_samples(values, settings: CalibrationSettings, origin: str) -> np.ndarray:
+    """The posterior samples: a finite (n >= 1, n_parameters) table, each column within its parameter's prior."""
+    samples = np.asarray(values, dtype=float)
+    if samples.ndim != 2 or not len(samples) or samples.shape[1] != len(settings.parameters) or not np.all(np.isfinite(samples)):
+        raise InputFileError(f"{origin}: field 'samples' must be a finite table with one column per parameter "
+                             f"({', '.join(settings.names)})")
+    for column, parameter in zip(samples.T, settings.parameters):
+        outside = (column < parameter.low) | (column > parameter.high)
+        if outside.any():
+            value, unit = float(column[outside][0]) / parameter.display_scale, "" if parameter.unit == "-" else f" {parameter.unit}"
+            raise InputFileError(
+                f"{origin}: field 'samples': {parameter.name} = {value:g}{unit}, outside its prior "
+                f"[{parameter.low / parameter.display_scale:g}, {parameter.high / parameter.display_scale:g}]{unit}")
+    return samples
 
 
 def plate_record(plate: Plate) -> dict:

@@ -160,6 +160,11 @@ class ScanShape:
     mirror_scatter: float | None
     source: str
 
+    def __post_init__(self):
+        values = self.x + self.y + self.pattern + (self.noise, 0.0 if self.mirror_scatter is None else self.mirror_scatter)
+        if not (len(self.x) == len(self.y) == len(self.pattern) > 0 and np.all(np.isfinite(values)) and self.noise > 0):
+            raise ValueError("a scan shape needs finite points and pattern values of one length, and a positive noise")
+
     def to_dict(self) -> dict:
         return {"x": list(self.x), "y": list(self.y), "pattern": list(self.pattern), "noise": self.noise,
                 "mirror_scatter": self.mirror_scatter, "source": self.source}

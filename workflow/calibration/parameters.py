@@ -21,6 +21,8 @@ import numpy as np
 from scipy import stats
 
 from workflow.errors import InputFileError
+from workflow.inputfiles import load_toml
+from workflow.models.limits import problem
 from workflow.models.builtplate import scaled_ceramic, scaled_material
 from workflow.models.plate import Plate
 from workflow.units import UM
@@ -38,6 +40,23 @@ LENGTHS = ("glue_um", "resonator_offset_um")
 FACTORS = ("ceramic_modulus_factor", "resonator_modulus_factor", "glue_modulus_factor")
 """Parameters that are dimensionless factors on a modulus."""
 PRIORS = ("normal", "uniform")
+PLAUSIBLE = {"ceramic_modulus_factor": "modulus_factor", "resonator_modulus_factor": "modulus_factor",
+             "glue_modulus_factor": "modulus_factor", "glue_um": "glue_um", "resonator_offset_um": "hi_offset_um"}
+"""Parameter -> its quantity in :data:`~workflow.models.limits.LIMITS`: a prior's support must lie inside."""
+SETTINGS_NUMBERS = {
+    ("likelihood", "measurement_sigma"): ("measurement_sigma", float, 1e-6, 0.5),
+    ("likelihood", "deflection_sigma"): ("deflection_sigma", float, 1e-4, 2.0),
+    ("likelihood", "shape_sigma"): ("shape_sigma", float, 1e-4, 2.0),
+    ("surrogate", "points"): ("surrogate_points", int, 3, 10_000),
+    ("surrogate", "degree"): ("surrogate_degree", int, 1, 2),
+    ("surrogate", "seed"): ("surrogate_seed", int, 0, 2**32 - 1),
+    ("sampler", "walkers"): ("walkers", int, 4, 10_000),
+    ("sampler", "steps"): ("steps", int, 10, 10_000_000),
+    ("sampler", "seed"): ("sampler_seed", int, 0, 2**32 - 1),
+    ("sampler", "kept_samples"): ("kept_samples", int, 10, 100_000),
+}
+"""(TOML table, key) -> (:class:`CalibrationSettings` field, type, lowest, highest accepted value); at most 100 000
+kept samples keep ``calibration.json`` within :data:`~workflow.inputfiles.MAX_CALIBRATION_BYTES`."""
 
 
 @dataclass(frozen=True)
@@ -73,6 +92,28 @@ class Parameter:
     @property
     def unit(self) -> str:
         return "um" if self.name in LENGTHS else "-"
+
+    def check(self, where: str) -> "Parameter":
+        """This parameter, or :class:`InputFileError` naming ``where``: an unknown name or prior, a bound or moment
+        that is not a finite number, low not below high, sigma not positive, or a support outside the quantity's
+        plausible range (:data:`PLAUSIBLE`)."""
+        if self.name not in PLAUSIBLE:
+            raise InputFileError(f"{where}: unknown parameter {self.name!r}; known: {', '.join(FACTORS + LENGTHS)}")
+        if self.prior not in PRIORS:
+            raise InputFileError(f"{where}: prior must be one of {', '.join(PRIORS)}, got {self.prior!r}")
+        for key in ("low", "high", "mean", "sigma"):
+            value = getattr(self, key)
+            if not (isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)):
+                raise InputFileError(f"{where}: {key} must be a number, got {value!r}")
+        if not self.low < self.high:
+            raise InputFileError(f"{where}: low must be below high")
+        if not self.sigma > 0:
+            raise InputFileError(f"{where}: sigma must be positive")
+        for bound in (self.low, self.high):
+            reason = problem(PLAUSIBLE[self.name], bound, si=True, name=f"a bound of {self.name}")
+            if reason:
+                raise InputFileError(f"{where}: {reason}")
+        return self
 
     def log_prior(self, value) -> np.ndarray:
         """Log prior density up to a constant; -inf outside [low, high] (vectorised)."""
@@ -178,12 +219,7 @@ def load_settings(path=None) -> CalibrationSettings:
     """The defaults, overridden by the TOML file ``path`` if given (see :func:`parse_settings`)."""
     if path is None:
         return default_settings()
-    try:
-        user = tomllib.loads(open(path, encoding="utf-8").read())
-    except OSError as error:
-        raise InputFileError(f"{path}: cannot read ({error.strerror or error})") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
-        raise InputFileError(f"{path}: not valid TOML ({error})") from None
+    user = load_toml(path, str(path))
     defaults = tomllib.loads(resources.files(__package__).joinpath(DEFAULTS_FILE).read_text(encoding="utf-8"))
     unknown = sorted(set(user) - set(defaults))
     if unknown:
@@ -201,45 +237,36 @@ def parse_settings(data: dict, origin: str) -> CalibrationSettings:
     parameters = tuple(_parameter(name, record, origin) for name, record in data.get("parameter", {}).items())
     if not parameters:
         raise InputFileError(f"{origin}: no [parameter.NAME] table: nothing to calibrate")
-    numbers = {
-        ("likelihood", "measurement_sigma"): (float, 1e-6, 0.5),
-        ("likelihood", "deflection_sigma"): (float, 1e-4, 2.0),
-        ("likelihood", "shape_sigma"): (float, 1e-4, 2.0),
-        ("surrogate", "points"): (int, 3, 10_000),
-        ("surrogate", "degree"): (int, 1, 2),
-        ("surrogate", "seed"): (int, 0, 2**32 - 1),
-        ("sampler", "walkers"): (int, 4, 10_000),
-        ("sampler", "steps"): (int, 10, 10_000_000),
-        ("sampler", "seed"): (int, 0, 2**32 - 1),
-        ("sampler", "kept_samples"): (int, 10, 1_000_000),
-    }
     values = {}
-    for (section, key), (kind, low, high) in numbers.items():
+    for (section, key), (field, kind, low, high) in SETTINGS_NUMBERS.items():
         table = data.get(section, {})
-        unknown = sorted(set(table) - {k for s, k in numbers if s == section})
+        unknown = sorted(set(table) - {k for s, k in SETTINGS_NUMBERS if s == section})
         if unknown:
             raise InputFileError(f"{origin}: [{section}] has an unknown key {unknown[0]!r}")
-        value = table.get(key)
-        valid = isinstance(value, (int, float)) and not isinstance(value, bool) and (kind is float or isinstance(value, int))
-        if not valid or not (math.isfinite(value) and low <= value <= high):
-            raise InputFileError(f"{origin}: [{section}] {key} must be {'an integer' if kind is int else 'a number'} "
-                                 f"from {low:g} to {high:g}, got {value!r}")
-        values[(section, key)] = kind(value)
-    settings = CalibrationSettings(
-        parameters=parameters,
-        measurement_sigma=values[("likelihood", "measurement_sigma")],
-        deflection_sigma=values[("likelihood", "deflection_sigma")],
-        shape_sigma=values[("likelihood", "shape_sigma")],
-        surrogate_points=values[("surrogate", "points")],
-        surrogate_degree=values[("surrogate", "degree")],
-        surrogate_seed=values[("surrogate", "seed")],
-        walkers=values[("sampler", "walkers")],
-        steps=values[("sampler", "steps")],
-        sampler_seed=values[("sampler", "seed")],
-        kept_samples=values[("sampler", "kept_samples")],
-    )
-    if settings.walkers < 2 * len(parameters):
-        raise InputFileError(f"{origin}: [sampler] walkers must be at least twice the {len(parameters)} parameters")
+        values[field] = _setting(table.get(key), kind, low, high, f"{origin}: [{section}] {key}")
+    return checked_settings(CalibrationSettings(parameters=parameters, **values), origin)
+
+
+def _setting(value, kind, low, high, where: str):
+    """``value`` as ``kind`` if it is a number of that kind in [low, high], else :class:`InputFileError` naming ``where``."""
+    valid = isinstance(value, (int, float)) and not isinstance(value, bool) and (kind is float or isinstance(value, int))
+    if not valid or not (math.isfinite(value) and low <= value <= high):
+        raise InputFileError(f"{where} must be {'an integer' if kind is int else 'a number'} from {low:g} to {high:g}, "
+                             f"got {value!r}")
+    return kind(value)
+
+
+def checked_settings(settings: CalibrationSettings, origin: str) -> CalibrationSettings:
+    """``settings`` with every parameter checked (:meth:`Parameter.check`), at least one of them, each number in its
+    range (:data:`SETTINGS_NUMBERS`) and enough walkers; else :class:`InputFileError` naming ``origin``."""
+    if not settings.parameters:
+        raise InputFileError(f"{origin}: no parameter to calibrate")
+    for parameter in settings.parameters:
+        parameter.check(f"{origin}: parameter {parameter.name}")
+    for field, kind, low, high in SETTINGS_NUMBERS.values():
+        _setting(getattr(settings, field), kind, low, high, f"{origin}: {field}")
+    if settings.walkers < 2 * len(settings.parameters):
+        raise InputFileError(f"{origin}: [sampler] walkers must be at least twice the {len(settings.parameters)} parameters")
     return settings
 
 
@@ -259,14 +286,8 @@ def _parameter(name: str, record, origin: str) -> Parameter:
             raise InputFileError(f"{where}: {key} must be a number, got {value!r}")
     scale = UM if name in LENGTHS else 1.0
     low, high = record["low"] * scale, record["high"] * scale
-    if not low < high:
-        raise InputFileError(f"{where}: low must be below high")
-    if name in FACTORS and low <= 0:
-        raise InputFileError(f"{where}: a modulus factor must stay positive (low > 0)")
     if record["prior"] == "normal":
         mean, sigma = record["mean"] * scale, record["sigma"] * scale
-        if not sigma > 0:
-            raise InputFileError(f"{where}: sigma must be positive")
     else:
         mean, sigma = (low + high) / 2, (high - low) / math.sqrt(12)
-    return Parameter(name, record["prior"], low, high, mean, sigma, str(record.get("description", "")))
+    return Parameter(name, record["prior"], low, high, mean, sigma, str(record.get("description", ""))).check(where)

@@ -46,6 +46,12 @@ class ShapeSurrogate:
     y: tuple
     surfaces: tuple
 
+    def __post_init__(self):
+        if not (len(self.x) == len(self.y) == len(self.surfaces) > 0 and np.all(np.isfinite(self.x + self.y))):
+            raise ValueError("a shape surrogate needs one finite point (x, y) per surface")
+        if len({(s.bounds, s.degree) for s in self.surfaces}) != 1:
+            raise ValueError("a shape surrogate's surfaces must share one box and degree")
+
     @cached_property
     def _coefficients(self) -> np.ndarray:
         """The points' coefficients side by side, shape (n_coefficients, n_points)."""
@@ -97,6 +103,14 @@ class PlateSurrogate:
     evaluations: int
     log_point_deflection: ResponseSurface | None = None
     shape: ShapeSurrogate | None = None
+
+    def __post_init__(self):
+        surfaces = [self.log_frequency, self.log_deflection, self.log_point_deflection]
+        surfaces += [] if self.shape is None else [self.shape.surfaces[0]]
+        if any(len(surface.bounds) != len(self.names) for surface in surfaces if surface is not None):
+            raise ValueError(f"a plate surrogate's surfaces must take its {len(self.names)} parameters")
+        if not (np.isfinite(self.fem_error) and self.fem_error >= 0 and self.evaluations >= 0):
+            raise ValueError("a plate surrogate's fem_error and evaluations must be finite and >= 0")
 
     @property
     def frequency_sigma(self) -> float:

@@ -12,6 +12,7 @@ Likelihood (docs/calibration.md), each term only for the plates whose logs have 
 Priors from :class:`~workflow.calibration.parameters.CalibrationSettings`.  Samples are SI values.
 """
 
+import math
 import time
 from dataclasses import dataclass
 from typing import Sequence
@@ -123,6 +124,14 @@ class ChainDiagnostics:
     burn_in: int
     acceptance: float
     seconds: float
+
+    def __post_init__(self):
+        counts = (self.n_steps, self.n_walkers, self.burn_in)
+        if not (self.tau and all(math.isfinite(t) and t > 0 for t in self.tau)):
+            raise ValueError(f"chain diagnostics: tau must be positive finite times, got {self.tau!r}")
+        if not (all(isinstance(n, int) and n >= 0 for n in counts) and 0 <= self.acceptance <= 1
+                and math.isfinite(self.seconds) and self.seconds >= 0):
+            raise ValueError("chain diagnostics: steps, walkers and burn-in must be counts, acceptance in [0, 1]")
 
     @property
     def steps_per_tau(self) -> float:

@@ -65,6 +65,19 @@ class ResponseSurface:
     loo_rms: float
     max_residual: float
 
+    def __post_init__(self):
+        bounds = np.asarray(self.bounds, dtype=float)
+        if bounds.ndim != 2 or bounds.shape[1] != 2 or not len(bounds) or not np.all(bounds[:, 0] < bounds[:, 1]):
+            raise ValueError(f"a response surface's bounds must be (low, high) pairs with low < high, got {self.bounds!r}")
+        if self.degree not in (1, 2):
+            raise ValueError(f"a response surface's degree must be 1 or 2, got {self.degree!r}")
+        if len(self.coefficients) != n_coefficients(len(bounds), self.degree):
+            raise ValueError(f"a degree-{self.degree} surface over {len(bounds)} parameters has "
+                             f"{n_coefficients(len(bounds), self.degree)} coefficients, not {len(self.coefficients)}")
+        if not (np.all(np.isfinite(self.coefficients)) and self.loo_rms >= 0 and self.max_residual >= 0
+                and np.isfinite([self.loo_rms, self.max_residual]).all()):
+            raise ValueError("a response surface's coefficients and errors must be finite (errors >= 0)")
+
     def __call__(self, points) -> np.ndarray:
         """Values at ``points`` (..., n_dim) [input units]."""
         return self.basis(points) @ np.asarray(self.coefficients)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 from workflow.calibration.calibration import calibrate
 from workflow.calibration.parameters import load_settings
-from workflow.cli.options import add_fem_options, add_force_option, add_json_flag, fem_accuracy
+from workflow.cli.options import add_fem_options, add_force_option, add_json_flag, add_mixed_plates_option, fem_accuracy
 from workflow.models import materials
 from workflow.pipeline.calibration_files import CALIBRATION_OUTPUTS, calibration_summary, measured_plates, write_calibration
 from workflow.pipeline.outputs import output_folder
@@ -29,6 +29,7 @@ def register(subparsers) -> None:
                         help="calibrate on the resonance frequencies (and scans) only, without the deflection per volt")
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
     add_force_option(parser)
+    add_mixed_plates_option(parser)
     parser.add_argument("--config", metavar="FILE",
                         help="TOML overriding the priors, likelihood, surrogate and sampler settings (docs/calibration.md)")
     add_fem_options(parser, build=False)
@@ -43,7 +44,10 @@ def run(args) -> dict:
 
     started = time.perf_counter()
     settings = load_settings(args.config)
-    plates = measured_plates(args.logs, settings, use_deflection=not args.no_deflection)
+    warnings = []
+    plates = measured_plates(args.logs, settings, not args.no_deflection, args.mixed_plates, warnings)
+    for warning in warnings:
+        print(f"tactile calibrate: warning: {warning}", file=sys.stderr)
     fem = {"q": materials.PLATE_Q, "voltage_v": materials.DESIGN_VOLTAGE, "accuracy": args.accuracy, "piezo": args.piezo}
     model = FemModel(q=fem["q"], voltage=fem["voltage_v"], settings=fem_accuracy(args), cache=EvaluationCache(),
                      scheduler="synchronous", progress=True)

@@ -4,13 +4,13 @@ import sys
 from functools import partial
 from pathlib import Path
 
-from workflow.cli.options import add_force_option, add_json_flag, bounded, limit_text, seed_option
+from workflow.cli.options import add_force_option, add_json_flag, add_mixed_plates_option, bounded, limit_text, seed_option
 from workflow.damping.fit import fit_damping, fit_summary
 from workflow.damping.laws import SAMPLED_LAWS
 from workflow.damping.likelihood import ForwardModel
 from workflow.damping.logs import drop_short_sweeps, read_logs
 from workflow.execution.parallel import map_evaluations
-from workflow.pipeline.config import LIMITS
+from workflow.models.limits import LIMITS
 from workflow.pipeline.damping_files import FIT_OUTPUTS, stated_noise, write_fit
 from workflow.pipeline.outputs import output_folder
 
@@ -30,6 +30,7 @@ def register(subparsers) -> None:
                         help="interferometer log(s): sweep logs and/or ring-down logs, fitted jointly (docs/log-format.md)")
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
     add_force_option(parser)
+    add_mixed_plates_option(parser)
     parser.add_argument(
         "--law",
         choices=SAMPLED_LAWS + ("all",),
@@ -50,7 +51,7 @@ def register(subparsers) -> None:
 
 
 def run(args) -> dict:
-    log = drop_short_sweeps(read_logs(args.logs))
+    log = drop_short_sweeps(read_logs(args.logs, args.mixed_plates))
     for warning in log.warnings:
         print(f"tactile fit-damping: warning: {warning}", file=sys.stderr)
     input_paths = {Path(p).resolve() for p in args.logs}

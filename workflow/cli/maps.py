@@ -34,7 +34,7 @@ from workflow.optimise.damped import damped_fem_optimum, damped_maps, damped_opt
 from workflow.optimise.fem_optimum import optimise_fem
 from workflow.optimise.maps import design_map, width_sweep
 from workflow.optimise.problem import analytical_model, optimise_analytical
-from workflow.pipeline.config import LIMITS
+from workflow.models.limits import LIMITS
 from workflow.pipeline.outputs import output_folder
 from workflow.pipeline.records import damped_optimum_record, fem_damping_record
 from workflow.units import KHZ, MM, UM

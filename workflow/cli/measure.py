@@ -7,8 +7,10 @@ the generator is left with its output off at its lowest amplitude (docs/safety.m
 """
 
 import argparse
+import glob
 import math
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 
 from instruments.drivers.amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT, DEFAULT_GAIN
@@ -17,14 +19,18 @@ from workflow.cli.options import (
     Stopped,
     StopSignals,
     add_bench_arguments,
+    add_force_option,
     add_built_plate_arguments,
     add_json_flag,
     bench_settings,
     bounded,
+    limit_text,
     built_plate_from_args,
     built_plate_model,
 )
 from workflow.errors import TactileError
+from workflow.models.limits import LIMITS, point_problem
+from workflow.pipeline.outputs import output_folder
 from workflow.units import MM
 
 DEFAULT_DATA_DIR = Path("measurements")
@@ -32,14 +38,16 @@ DEFAULT_DATA_DIR = Path("measurements")
 PROCEDURES = ("resonance", "campaign", "voltage-sweep", "scan", "ringdown")
 
 
+VOLTAGE = bounded(float, *LIMITS["campaign.voltages_v"], "V")
+"""argparse type of a drive voltage [V peak across the ceramics]."""
+
+
 def _voltages(text: str) -> tuple:
+    """Comma-separated drive voltages, each in the range of :data:`VOLTAGE`."""
     try:
-        values = tuple(float(item) for item in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated volts, e.g. 2.5,5,7.5; got {text!r}") from None
-    if not values or any(not v > 0 for v in values):
-        raise argparse.ArgumentTypeError(f"voltages must be positive, got {text!r}")
-    return values
+        return tuple(VOLTAGE(item) for item in text.split(","))
+    except argparse.ArgumentTypeError as error:
+        raise argparse.ArgumentTypeError(f"expected comma-separated volts, e.g. 2.5,5,7.5: {error}") from None
 
 
 def register(subparsers) -> None:
@@ -65,12 +73,15 @@ def register(subparsers) -> None:
                        help="reply timeout [s], 0.001 to 3600 (default 1)")
     ports.add_argument("--retries", type=bounded(int, 0, 100), default=3,
                        help="retries of a point after a timeout or garbled reply, 0 to 100 (default 3)")
-    ports.add_argument("--amplifier-gain", type=float, default=DEFAULT_GAIN,
-                       help=f"power amplifier voltage gain (default {DEFAULT_GAIN:g})")
-    ports.add_argument("--max-voltage", type=float, default=DEFAULT_CERAMIC_VOLTAGE_LIMIT, metavar="VOLTS",
-                       help=f"safety limit, peak volts across the ceramics (default {DEFAULT_CERAMIC_VOLTAGE_LIMIT:g})")
+    ports.add_argument("--amplifier-gain", type=bounded(float, *LIMITS["amplifier_gain"]), default=DEFAULT_GAIN,
+                       help=f"power amplifier voltage gain, {limit_text('amplifier_gain')} (default {DEFAULT_GAIN:g})")
+    ports.add_argument("--max-voltage", type=bounded(float, *LIMITS["simulator.ceramic_voltage_limit_v"], "V"),
+                       default=DEFAULT_CERAMIC_VOLTAGE_LIMIT, metavar="VOLTS",
+                       help=f"safety limit, peak volts across the ceramics, {limit_text('simulator.ceramic_voltage_limit_v', 'V')} "
+                       f"(default {DEFAULT_CERAMIC_VOLTAGE_LIMIT:g})")
     ports.add_argument("--out", type=Path, help=f"log file (default: {DEFAULT_DATA_DIR}/<procedure>.csv in the working "
                        "directory, a folder git ignores; the path is printed at the end)")
+    add_force_option(ports, "a scan's figure (--figure)")
     ports.add_argument("--restart", action="store_true", help="overwrite an existing log tactile wrote instead of resuming it (any other file is never overwritten nor appended to: the command refuses it)")
     add_bench_arguments(common)
     add_built_plate_arguments(common)
@@ -79,7 +90,7 @@ def register(subparsers) -> None:
     resonance = procedures.add_parser("resonance", parents=[common], help="coarse then fine sweep to find f_r",
                                       description="Find the resonance: a coarse sweep then a fine one around its peak.")
     _add_search_flags(resonance, 25e3, 61)
-    resonance.add_argument("--voltage", type=float, default=2.0, help="drive, peak volts across the ceramics (default 2)")
+    resonance.add_argument("--voltage", type=VOLTAGE, default=2.0, help="drive, peak volts across the ceramics (default 2)")
 
     campaign = procedures.add_parser("campaign", parents=[common], help="Q(v) campaign: sweeps at several voltages",
                                      description="Frequency sweeps around the resonance at several drive voltages "
@@ -88,7 +99,8 @@ def register(subparsers) -> None:
     campaign.add_argument("--voltages", type=_voltages, default=(2.5, 5.0, 7.5, 10.0, 12.5, 15.0),
                           help="peak volts across the ceramics, comma-separated (default 2.5,5,7.5,10,12.5,15)")
     campaign.add_argument("--points", type=int, default=51, help="frequency points per sweep, 3 to 10000; at most 100000 points in all (default 51)")
-    campaign.add_argument("--span-hz", type=float, default=1600.0, help="sweep width [Hz] (default 1600)")
+    campaign.add_argument("--span-hz", type=bounded(float, *LIMITS["campaign.span_hz"], "Hz"), default=1600.0,
+                          help=f"sweep width [Hz], {limit_text('campaign.span_hz', 'Hz')} (default 1600)")
     campaign.add_argument("--center-hz", type=float, help="sweep centre [Hz] (default: see above)")
 
     sweep = procedures.add_parser("voltage-sweep", parents=[common], help="deflection versus voltage at resonance",
@@ -125,7 +137,7 @@ def register(subparsers) -> None:
     scan.add_argument("--points", type=_points, help="explicit points instead of --grid: 'x:y,x:y,...' [mm from the centre]")
     scan.add_argument("--margin-mm", type=float, default=DEFAULT_MARGIN / MM,
                       help=f"distance of the outer grid points from the edges [mm] (default {DEFAULT_MARGIN / MM:g})")
-    scan.add_argument("--voltage", type=float, default=DEFAULT_VOLTAGE,
+    scan.add_argument("--voltage", type=VOLTAGE, default=DEFAULT_VOLTAGE,
                       help=f"drive, peak volts across the ceramics (default {DEFAULT_VOLTAGE:g})")
     scan.add_argument("--frequency-hz", type=float, help="drive frequency [Hz] (default: see above)")
     _add_search_flags(scan, 15e3, 101)
@@ -162,11 +174,6 @@ def _open_station(args):
     from instruments.procedures.sweeps import open_station
     from instruments.simulator import register_url_handler
 
-    if not (math.isfinite(args.max_voltage) and args.max_voltage > 0):
-        raise TactileError(f"--max-voltage must be a finite number of volts > 0 (peak across the ceramics; default "
-                           f"{DEFAULT_CERAMIC_VOLTAGE_LIMIT:g}), got {args.max_voltage:g}")
-    if not (math.isfinite(args.amplifier_gain) and args.amplifier_gain > 0):
-        raise TactileError(f"--amplifier-gain must be a finite number > 0 [V/V], got {args.amplifier_gain:g}")
     options = {"retries": args.retries}
     if args.simulate:
         if args.generator or args.vibrometer:
@@ -196,6 +203,8 @@ def _centre(args, station, metadata, out: Path, key: str) -> float:
 
     plan = ResonancePlan(args.start_hz, args.stop_hz, args.coarse_points, args.fine_points) if args.procedure == "scan" else ResonancePlan()
     frequency, search = working_frequency(station, out, key, metadata, args.restart, plan)
+    for warning in () if search is None else search.warnings:
+        print(f"tactile measure: warning: {warning}", file=sys.stderr)
     if search is not None and not args.json:
         print(f"resonance search: {frequency:.1f} Hz; log: {search.path}")
     return frequency
@@ -213,8 +222,13 @@ def _check_plan_flags(args) -> None:
         sweeps = {"--coarse-points": args.coarse_points, "--fine-points": args.fine_points}
         check_sizes(sweeps, sum(sweeps.values()), "--coarse-points + --fine-points")
     if args.procedure == "scan":
-        if built_plate_from_args(args) is None:
+        built = built_plate_from_args(args)
+        if built is None:
             raise TactileError("a scan needs the plate: give --lambda-mm, --hi-mm and --hp-mm (and --b-mm)")
+        for x, y in args.points or ():
+            off = point_problem(built.plate(), x, y)
+            if off:
+                raise TactileError(f"--points: {off}")
         if args.points is None and min(args.grid) < 1:
             raise TactileError(f"--grid needs at least 1 point along each axis, got {args.grid[0]} {args.grid[1]}")
         check_sizes({}, len(args.points) if args.points else args.grid[0] * args.grid[1], "scan points")
@@ -233,16 +247,19 @@ def run(args):
 
     _check_plan_flags(args)
     out = args.out or DEFAULT_DATA_DIR / f"{args.procedure}.csv"
-    with exclusive(out), StopSignals() as signals:
-        station, metadata = _open_station(args)
-        try:
-            result = _measure(args, station, metadata, out)
-        except BaseException as error:
-            problem = _shut_down(station, signals)
-            if isinstance(error, Stopped):
-                error.outcome = problem or "generator output off (OUTP 0, lowest amplitude)"
-            raise
-        _shut_down(station, signals)
+    with exclusive(out), _figure_output(args, out) as figure:
+        with StopSignals() as signals:
+            station, metadata = _open_station(args)
+            try:
+                result = _measure(args, station, metadata, out)
+            except BaseException as error:
+                problem = _shut_down(station, signals)
+                if isinstance(error, Stopped):
+                    error.outcome = problem or "generator output off (OUTP 0, lowest amplitude)"
+                raise
+            _shut_down(station, signals)
+        if figure is not None:
+            scan = _scan_figure(args, result.path, figure)
     summary = {
         "log": str(result.path),
         "procedure": result.procedure,
@@ -250,10 +267,13 @@ def run(args):
         "measured": result.measured,
         "resumed": result.resumed,
         "truncated_bytes": result.truncated_bytes,
+        "warnings": list(result.warnings),
         **result.summary,
     }
-    if result.procedure == "scan":
-        summary.update(_scan_figure(args, result.path))
+    for warning in result.warnings:
+        print(f"tactile measure: warning: {warning}", file=sys.stderr)
+    if figure is not None:
+        summary.update(scan)
     if not args.json:
         print(f"{result.procedure}: {result.measured} points measured, {result.resumed} already logged "
               f"({result.planned} planned); log: {result.path}")
@@ -299,20 +319,51 @@ def _scan(args, station, metadata: dict, out: Path):
     return deflection_scan(station, out, ScanPlan(frequency, args.voltage, points), metadata, args.restart)
 
 
-def _scan_figure(args, log: Path) -> dict:
-    """Compare a scan with the FEM's map of the nominal plate: write the figure; its path, the MAC and the FEM's f_r."""
+@contextmanager
+def _figure_output(args, log: Path):
+    """Context manager: the scan's figure path (None for the other procedures), checked before any measurement.
+
+    The figure may replace only a file tactile wrote there (the folder's record of its outputs,
+    :mod:`workflow.pipeline.outputs`) unless ``--force``; it may be neither the log, nor its resonance log.
+    """
+    if args.procedure != "scan":
+        yield None
+        return
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    from instruments.procedures.sweeps import resonance_log_path
+
+    figure, option = args.figure or log.with_suffix(".png"), "--figure"
+    if figure.is_dir():
+        raise TactileError(f"{option} {figure}: is a folder; give the figure's file name")
+    formats = FigureCanvasBase.get_supported_filetypes()
+    if figure.suffix.lower().lstrip(".") not in formats:
+        raise TactileError(f"{option} {figure}: the figure needs a file name ending in one of "
+                           f"{', '.join('.' + name for name in sorted(formats))}")
+    if figure.resolve() in {log.resolve(), resonance_log_path(log).resolve()}:
+        raise TactileError(f"{option} {figure}: the figure would replace the scan's log; give another {option}")
+    with output_folder(figure.parent, [glob.escape(figure.name)], force=args.force, option=option) as folder:
+        yield folder / figure.name
+
+
+def _scan_figure(args, log: Path, path: Path) -> dict:
+    """Compare a scan with the FEM's map of the nominal plate: write the figure at ``path``; its path, the MAC and
+    the FEM's f_r."""
+    import matplotlib.pyplot as plt
+
     from workflow.pipeline.builtplate import read_scan, scan_mac
     from workflow.pipeline.figures.scan import scan_figure
 
     scan = read_scan(log)
     nominal = built_plate_model(args, scan.plate)
     mac = scan_mac(scan, nominal)
-    path = args.figure or log.with_suffix(".png")
     figure = scan_figure(scan, nominal, mac)
     try:
         figure.savefig(path, dpi=120)
     except OSError as error:
         raise TactileError(f"cannot write the figure {path}: {error.strerror or error}") from None
+    finally:
+        plt.close(figure)
     return {"mac": mac, "figure": str(path), "nominal_fem_frequency_hz": nominal.resonance_frequency}
 
 

@@ -7,21 +7,18 @@ import argparse
 import math
 import signal
 from contextlib import contextmanager
-from pathlib import Path
 
 from instruments.simulator.builtplate import SIMULATION_ACCURACY
 from workflow.damping.posterior import load_posterior
 from workflow.errors import GeometryError, TactileError
 from workflow.models import materials
+from workflow.models.analytical import resonance_frequency
 from workflow.models.fem.accuracy import ACCURACY_RANGE, DEFAULT_ACCURACY, FemAccuracy
 from workflow.models.fem.settings import PIEZO_MODELS
+from workflow.models.limits import LIMITS, point_problem, problem, unit
 from workflow.models.plate import ORIGINAL_PLATE, Plate, check_design_space
 from workflow.optimise.problem import DesignProblem
-from workflow.pipeline.config import LIMITS
 from workflow.units import MM, UM
-
-GLUE_RANGE_UM = (0.0, 500.0)
-"""Accepted bond thickness of --glue-um [um]."""
 
 MODELS = ("analytical", "fem")
 
@@ -80,13 +77,25 @@ def seed_option(parser, default: int, help: str) -> None:
                         help=f"{help}, {limit_text('campaign.seed')} (default {default})")
 
 
-def add_force_option(parser: argparse.ArgumentParser) -> None:
-    """``--force``: overwrite files in --out that tactile did not write (docs/cli.md, "Output folders")."""
+def add_force_option(parser, what: str = "files in --out") -> None:
+    """``--force``: overwrite ``what`` even where tactile did not write it (docs/cli.md, "Output folders")."""
     parser.add_argument(
         "--force",
         action="store_true",
-        help="overwrite files in --out that tactile did not write (or that changed since); without it the "
+        help=f"overwrite {what} that tactile did not write (or that changed since); without it the "
         "command refuses them before any work",
+    )
+
+
+def add_mixed_plates_option(parser: argparse.ArgumentParser, default: str | None = "refuse") -> None:
+    """``--mixed-plates refuse|warn``: logs that are not of one plate (their metadata or their resonances)."""
+    from workflow.damping.logs import MIXED_PLATES, SAME_PLATE_TOLERANCE
+
+    kept = "the configuration's [damping] mixed_plates" if default is None else default
+    parser.add_argument(
+        "--mixed-plates", choices=MIXED_PLATES, default=default,
+        help="logs that name different plates in their metadata, or whose resonances are more than "
+        f"{SAME_PLATE_TOLERANCE * 100:g} %% apart: refuse them, or go on with a warning (default: {kept})",
     )
 
 
@@ -191,7 +200,7 @@ def add_build_options(parser: argparse.ArgumentParser, overrides: bool = False) 
         default=None if overrides else materials.PAPER,
         help="resonator material record" + kept.format("paper: the paper's CuBe"),
     )
-    low, high = GLUE_RANGE_UM
+    low, high = LIMITS["glue_um"]
     parser.add_argument(
         "--glue-um",
         type=bounded(float, low, high, "um"),
@@ -244,13 +253,14 @@ def add_fem_options(
 
 
 def override_config(config: dict, args) -> dict:
-    """The run's configuration with the FEM and build options given on the command line."""
+    """The run's configuration with the FEM, build and --mixed-plates options given on the command line."""
     for section, key, option in (
         ("fem", "accuracy", "accuracy"),
         ("fem", "piezo", "piezo"),
         ("design", "ceramic", "ceramic"),
         ("design", "resonator", "resonator"),
         ("design", "glue_um", "glue_um"),
+        ("damping", "mixed_plates", "mixed_plates"),
     ):
         if getattr(args, option) is not None:
             config[section][key] = getattr(args, option)
@@ -323,13 +333,16 @@ def add_bench_arguments(parser) -> None:
     group.add_argument("--garble-rate", type=float, default=0.0, help="probability of a garbled reply (default 0)")
     group.add_argument("--disconnect-at", type=int, default=None, metavar="N",
                        help="cut the line at the N-th command (once; default never)")
-    group.add_argument("--bench-limit", type=float, default=None, metavar="VOLTS",
-                       help="the simulated generator's own limit, peak volts across the ceramics (default 30)")
-    group.add_argument("--softening", type=bounded(float, 0.0, 100.0, "s^2/m^2"), default=0.0, metavar="KAPPA",
-                       help="amplitude softening of the simulated resonance, f_r (1 - KAPPA v^2) with v the antinode "
-                       "velocity, 0 to 100 s^2/m^2 (default 0: none)")
+    group.add_argument("--bench-limit", type=bounded(float, *LIMITS["simulator.ceramic_voltage_limit_v"], "V"),
+                       default=None, metavar="VOLTS",
+                       help="the simulated generator's own limit, peak volts across the ceramics, "
+                       f"{limit_text('simulator.ceramic_voltage_limit_v', 'V')} (default 30)")
+    group.add_argument("--softening", type=bounded(float, *LIMITS["softening_s2_m2"], "s^2/m^2"), default=0.0,
+                       metavar="KAPPA", help="amplitude softening of the simulated resonance, f_r (1 - KAPPA v^2) with v "
+                       f"the antinode velocity, {limit_text('softening_s2_m2', 's^2/m^2')} (default 0: none)")
     group.add_argument("--point-mm", type=_point, default=(0.0, 0.0), metavar="X,Y",
-                       help="where the simulated vibrometer points, from the plate's centre [mm] (default 0,0: an antinode)")
+                       help="where the simulated vibrometer points on the paper's plate, from its centre [mm] (default "
+                       "0,0: an antinode; a built plate's spot is moved by its scanner instead)")
 
 
 def _point(text: str) -> tuple:
@@ -353,25 +366,27 @@ def add_built_plate_arguments(parser) -> None:
         "docs/log-format.md); with --simulate the simulator plays it as built, with hidden deviations (the "
         "FEM of the deviated plate; docs/instruments.md)",
     )
-    group.add_argument("--lambda-mm", type=positive_float, help="nominal wavelength lambda [mm] (with --hi-mm, --hp-mm)")
-    group.add_argument("--hi-mm", type=positive_float, help="nominal resonator thickness h_i [mm]")
-    group.add_argument("--hp-mm", type=positive_float, help="nominal ceramic thickness h_p [mm]")
-    group.add_argument("--b-mm", type=positive_float, help=f"width b [mm] (default {ORIGINAL_PLATE.width / MM:g})")
+    for flag, key, text in (("--lambda-mm", "lambda_mm", "nominal wavelength lambda [mm] (with --hi-mm, --hp-mm)"),
+                            ("--hi-mm", "h_i_mm", "nominal resonator thickness h_i [mm]"),
+                            ("--hp-mm", "h_p_mm", "nominal ceramic thickness h_p [mm]"),
+                            ("--b-mm", "b_mm", f"width b [mm] (default {ORIGINAL_PLATE.width / MM:g})")):
+        group.add_argument(flag, type=bounded(float, *LIMITS[key], "mm"), help=f"{text}, {limit_text(key, 'mm')}")
     group.add_argument("--ceramic", choices=materials.ceramic_names(), help="ceramic record (default: the paper's)")
     group.add_argument("--resonator", choices=materials.resonator_names(), help="resonator record (default: the paper's)")
-    group.add_argument("--glue-um", type=bounded(float, *GLUE_RANGE_UM, "um"), metavar="T",
+    group.add_argument("--glue-um", type=bounded(float, *LIMITS["glue_um"], "um"), metavar="T",
                        help="nominal bond thickness [um] (default: not stated; the model then has no bond)")
     group.add_argument("--deviations", choices=("demo", "none"), default="demo",
                        help="simulator: the built plate's hidden deviations, the documented demonstration set or "
                        "none (default demo); the --dev-* flags override single values")
-    for flag, value, text in (
-        ("--dev-glue-um", demo.glue_thickness / UM, "bond thickness [um]"),
-        ("--dev-ceramic-factor", demo.ceramic_modulus_factor, "ceramic stiffness factor [-]"),
-        ("--dev-resonator-factor", demo.resonator_modulus_factor, "resonator Young's modulus factor [-]"),
-        ("--dev-hi-offset-um", demo.resonator_thickness_offset / UM, "resonator thickness offset [um]"),
-        ("--dev-ceramic-offset-mm", demo.ceramic_offset / MM, "offset of the ceramics along x [mm]"),
+    for flag, value, key, text in (
+        ("--dev-glue-um", demo.glue_thickness / UM, "glue_um", "bond thickness [um]"),
+        ("--dev-ceramic-factor", demo.ceramic_modulus_factor, "modulus_factor", "ceramic stiffness factor [-]"),
+        ("--dev-resonator-factor", demo.resonator_modulus_factor, "modulus_factor", "resonator Young's modulus factor [-]"),
+        ("--dev-hi-offset-um", demo.resonator_thickness_offset / UM, "hi_offset_um", "resonator thickness offset [um]"),
+        ("--dev-ceramic-offset-mm", demo.ceramic_offset / MM, "ceramic_offset_mm", "offset of the ceramics along x [mm]"),
     ):
-        group.add_argument(flag, type=finite_float, help=f"simulator: {text} (demo {value:g})")
+        group.add_argument(flag, type=bounded(float, *LIMITS[key], unit(key)),
+                           help=f"simulator: {text}, {limit_text(key, unit(key))} (demo {value:g})")
     default = SIMULATION_ACCURACY.target
     group.add_argument("--sim-accuracy", type=bounded(float, *ACCURACY_RANGE), default=default, metavar="REL",
                        help="FEM accuracy of the simulated built plate and of the nominal map a scan is compared "
@@ -379,7 +394,14 @@ def add_built_plate_arguments(parser) -> None:
 
 
 def built_plate_from_args(args):
-    """The :class:`~workflow.models.builtplate.BuiltPlate` of --lambda-mm, --hi-mm, --hp-mm, ..., or None if not given."""
+    """The :class:`~workflow.models.builtplate.BuiltPlate` of --lambda-mm, --hi-mm, --hp-mm, ..., or None if not given.
+
+    Raises
+    ------
+    TactileError
+        Only some of the three given; a geometry :class:`~workflow.models.plate.Plate` refuses; a beam-model
+        resonance outside the plausible frequencies (:data:`~workflow.models.limits.LIMITS`).
+    """
     from workflow.models.builtplate import BuiltPlate
 
     geometry = {flag: getattr(args, flag.lstrip("-").replace("-", "_"), None) for flag in ("--lambda-mm", "--hi-mm", "--hp-mm")}
@@ -392,12 +414,15 @@ def built_plate_from_args(args):
     width = args.b_mm if args.b_mm is not None else ORIGINAL_PLATE.width / MM
     glue = None if args.glue_um is None else args.glue_um * UM
     built = BuiltPlate(args.lambda_mm * MM, args.hi_mm * MM, args.hp_mm * MM, width * MM, args.ceramic, args.resonator, glue)
-    built.plate()  # checks the geometry (GeometryError)
+    implausible = problem("frequency_hz", float(resonance_frequency(built.plate())), name="its beam-model resonance")
+    if implausible:
+        raise TactileError(f"the built plate of --lambda-mm, --hi-mm, --hp-mm, --b-mm is no tactile plate: {implausible}")
     return built
 
 
 def deviations_from_args(args):
-    """The simulated built plate's :class:`~workflow.models.builtplate.PlateDeviations` of --deviations and --dev-*."""
+    """The simulated built plate's :class:`~workflow.models.builtplate.PlateDeviations` of --deviations and --dev-*
+    (each within its plausible range: the options' types)."""
     from dataclasses import replace
 
     from workflow.models.builtplate import DEMONSTRATION_DEVIATIONS, PlateDeviations
@@ -414,10 +439,7 @@ def deviations_from_args(args):
         )
         if getattr(args, option) is not None
     }
-    try:
-        return replace(base, **changes)
-    except ValueError as error:
-        raise TactileError(f"bad --dev-* flag: {error}") from None
+    return replace(base, **changes)
 
 
 def built_plate_model(args, built, deviations=None):
@@ -442,14 +464,18 @@ def bench_settings(args):
     except ValueError as error:
         raise TactileError(f"bad fault flag: {error}") from None
     limit = DEFAULT_CERAMIC_VOLTAGE_LIMIT if args.bench_limit is None else args.bench_limit
-    if not (math.isfinite(limit) and limit > 0):
-        raise TactileError(f"--bench-limit must be a finite number of volts > 0, got {limit:g}")
     gain = getattr(args, "amplifier_gain", DEFAULT_GAIN)
     fields = dict(seed=args.seed, faults=faults, ceramic_voltage_limit=limit, amplifier_gain=gain)
     built = built_plate_from_args(args) if hasattr(args, "deviations") else None
     if built is not None:
+        if args.point_mm != (0.0, 0.0):
+            raise TactileError("--point-mm points the paper's plate; a built plate's spot is moved by its scanner "
+                               "('tactile measure scan --points')")
         return built_bench_settings(built_plate_model(args, built, deviations_from_args(args)), **fields)
     point = tuple(value * MM for value in args.point_mm)
+    off = point_problem(ORIGINAL_PLATE, *point)
+    if off:
+        raise TactileError(f"--point-mm {args.point_mm[0]:g},{args.point_mm[1]:g}: {off}")
     try:
         settings = default_bench_settings(**fields, softening=args.softening, measurement_point=point)
         settings.mode_factor()

@@ -8,6 +8,7 @@ from workflow.cli.options import (
     add_fem_options,
     add_force_option,
     add_json_flag,
+    add_mixed_plates_option,
     load_calibration_option,
     override_config,
 )
@@ -34,6 +35,7 @@ def register(subparsers) -> None:
     parser.add_argument("--scheduler", help="tcp://host:port of a Dask scheduler (default: local cores)")
     parser.add_argument("--print-config", action="store_true", help="print the effective configuration and exit")
     add_fem_options(parser, overrides=True)
+    add_mixed_plates_option(parser, default=None)
     add_calibration_option(parser)
     add_json_flag(parser)
     parser.set_defaults(handler=run)

@@ -21,6 +21,10 @@ import numpy as np
 from workflow import logformat
 from workflow.damping.mode_shape import BeamMode, measurement_factor
 from workflow.errors import InputFileError
+from workflow.inputfiles import MAX_LOG_BYTES, open_input
+from workflow.models import materials
+from workflow.models.builtplate import BuiltPlate
+from workflow.models.limits import LIMITS, problem
 from workflow.units import MM
 
 _QUANTITY_STEMS = {
@@ -32,15 +36,10 @@ _QUANTITY_STEMS = {
 
 _MISSING = {"", "nan", "NaN", "NAN"}
 
-MAX_LINE_LENGTH = 10_000
-"""Longest accepted line [characters]; a data row is under 200."""
-_MAX_LINE_BYTES = 4 * MAX_LINE_LENGTH + 8
-"""Bytes read at most for one line: any line of :data:`MAX_LINE_LENGTH` UTF-8 characters and its line end."""
+_MAX_LINE_BYTES = 4 * logformat.MAX_LINE_LENGTH + 8
+"""Bytes read at most for one line: any line of :data:`~workflow.logformat.MAX_LINE_LENGTH` UTF-8 characters and its line end."""
 MAX_ROWS = 1_000_000
 """Most data rows accepted in one log (a campaign is a few hundred; 200 000 are read in 2.4 to 5 s)."""
-MAX_VELOCITY = 10.0
-"""Largest accepted velocity amplitude [m/s]: above any vibrometer decoder's range and any plate
-(10 m/s is 64 µm at 25 kHz); a larger value is a unit or transcription error."""
 MIN_PEAK_VELOCITY = 1e-6
 """Smallest accepted peak velocity of a sweep [m/s]: a sweep whose every velocity is below this
 (all zeros, or "tiny" values such as a velocity in km/s) holds no resonance to fit."""
@@ -124,6 +123,8 @@ class RingdownLog:
     temperature : numpy.ndarray
         Plate temperature [deg C]; NaN where not reported.
     sources : tuple of str
+    warnings : tuple of str
+        One line per tolerated problem.
     """
 
     frequency: np.ndarray
@@ -134,6 +135,7 @@ class RingdownLog:
     mode_factor: np.ndarray
     temperature: np.ndarray
     sources: Tuple[str, ...]
+    warnings: Tuple[str, ...] = ()
 
     @property
     def n_bursts(self) -> int:
@@ -171,20 +173,32 @@ def drop_short_sweeps(log: CampaignLog, min_points: int = MIN_POINTS_PER_SWEEP) 
     return log.subset(keep, renumbered, log.warnings + (warning,))
 
 
-def read_logs(paths: Sequence) -> CampaignLog:
+MIXED_PLATES = ("refuse", "warn")
+"""What to do with logs of different plates given together: refuse them, or fit them with a warning."""
+SAME_PLATE_TOLERANCE = 0.02
+"""Largest relative spread of the logs' resonances still taken for one plate [-]: drift, temperature and
+softening move a plate's resonance by well under 1 %; the paper's two built plates are 3.4 % apart."""
+
+
+def read_logs(paths: Sequence, mixed_plates: str = "refuse") -> CampaignLog:
     """Read and concatenate several logs; sweeps (and bursts) are renumbered so they never collide.
 
     Ring-down logs (a ``decay_time_s`` column) are gathered in :attr:`CampaignLog.ringdown`;
-    with ring-down logs alone the sweeps are empty.
+    with ring-down logs alone the sweeps are empty.  Logs that are not of one plate
+    (:func:`plate_mismatch`) are refused, or with ``mixed_plates="warn"`` read with a warning.
 
     Raises
     ------
     InputFileError
-        On the first malformed file, naming it.
+        On the first malformed file, naming it; logs of different plates unless ``mixed_plates="warn"``.
     """
     if not paths:
         raise InputFileError("no log file given")
     read = [read_log(path) for path in paths]
+    mismatch = plate_mismatch(paths, read)
+    if mismatch and mixed_plates == "refuse":
+        raise InputFileError(f"{mismatch}; logs of different plates are not fitted together (--mixed-plates warn "
+                             "fits them anyway)")
     logs = [log for log in read if isinstance(log, CampaignLog)]
     decays = [log for log in read if isinstance(log, RingdownLog)]
     offsets = np.cumsum([0] + [log.n_sweeps for log in logs[:-1]])
@@ -196,11 +210,43 @@ def read_logs(paths: Sequence) -> CampaignLog:
         velocity=np.concatenate([log.velocity for log in logs] + [np.zeros(0)]),
         sweep=np.concatenate([log.sweep + offset for log, offset in zip(logs, offsets)] + [np.zeros(0, dtype=int)]),
         sources=tuple(source for log in logs for source in log.sources),
-        warnings=tuple(warning for log in read for warning in getattr(log, "warnings", ())),
+        warnings=tuple(warning for log in read for warning in log.warnings) + ((mismatch,) if mismatch else ()),
         timestamp=np.concatenate(timestamps) if logs and all(t is not None for t in timestamps) else None,
         mode_factor=None if all(m is None for m in factors) else np.concatenate([log.measurement_factor() for log in logs]),
         ringdown=_concatenate_ringdowns(decays) if decays else None,
     )
+
+
+def log_resonance(log) -> float:
+    """The resonance a log measured [Hz]: the median of its sweeps' peak frequencies, or of its bursts' frequency."""
+    if isinstance(log, RingdownLog):
+        return float(np.median(log.frequency))
+    return float(np.median([log.frequency[log.sweep == k][np.argmax(log.velocity[log.sweep == k])]
+                            for k in range(log.n_sweeps)]))
+
+
+def plate_mismatch(paths: Sequence, logs: Sequence) -> str | None:
+    """Why the logs (read from ``paths``) are not of one plate, or None: two name different built plates in
+    their metadata (:class:`~workflow.models.builtplate.BuiltPlate`), or their resonances (:func:`log_resonance`)
+    spread by more than :data:`SAME_PLATE_TOLERANCE`."""
+    named = [(path, logformat.read_metadata(path)) for path in paths]
+    plates = [(path, BuiltPlate.from_metadata(metadata, str(path))) for path, metadata in named
+              if all(key in metadata for key in logformat.BUILT_PLATE_KEYS)]
+    for path, plate in plates[1:]:
+        if plate != plates[0][1]:
+            return (f"{plates[0][0]} and {path} name different plates in their metadata ({_described(plates[0][1])}; "
+                    f"{_described(plate)})")
+    resonances = [log_resonance(log) for log in logs]
+    low, high = int(np.argmin(resonances)), int(np.argmax(resonances))
+    if resonances[high] > (1 + SAME_PLATE_TOLERANCE) * resonances[low]:
+        return (f"{paths[low]} (resonance {resonances[low]:.0f} Hz) and {paths[high]} ({resonances[high]:.0f} Hz) are "
+                f"{(resonances[high] / resonances[low] - 1) * 100:.1f} % apart, more than the "
+                f"{SAME_PLATE_TOLERANCE * 100:g} % of one plate")
+    return None
+
+
+def _described(plate: BuiltPlate) -> str:
+    return ", ".join(f"{key} {value}" for key, value in plate.metadata().items())
 
 
 def _concatenate_ringdowns(logs: Sequence[RingdownLog]) -> RingdownLog:
@@ -210,54 +256,81 @@ def _concatenate_ringdowns(logs: Sequence[RingdownLog]) -> RingdownLog:
         **{name: np.concatenate([getattr(log, name) for log in logs]) for name in columns},
         burst=np.concatenate([log.burst + offset for log, offset in zip(logs, offsets)]),
         sources=tuple(source for log in logs for source in log.sources),
+        warnings=tuple(warning for log in logs for warning in log.warnings),
     )
 
 
-def read_log(path):
-    """Read one interferometer log, line by line (memory: the rows' numbers, about 50 bytes a row).
+@dataclass(frozen=True)
+class LogTable:
+    """The numeric columns of one log, as read by :func:`read_table`.
 
-    Without a ``sweep`` column, a new sweep starts wherever the drive voltage changes
-    between consecutive rows.  A log with a ``decay_time_s`` column is a ring-down log and
-    reads as a :class:`RingdownLog` (``sweep`` is the burst id); any other as a
-    :class:`CampaignLog`.  The measurement point (``x_mm``, ``y_mm`` columns or metadata)
-    needs the plate's ``lambda_mm`` metadata to be mapped onto the beam mode.
+    Attributes
+    ----------
+    arrays : dict
+        Column name -> values (one per kept row) [the column's unit].
+    line_numbers : numpy.ndarray
+        Line of each kept row in the file [-].
+    metadata : dict
+        key -> (value text, line number) of the ``# key: value`` lines before the header.
+    warnings : list of str
+        Tolerated problems (dropped dropouts, an ignored partial last line).
+    """
+
+    arrays: dict
+    line_numbers: np.ndarray
+    metadata: dict
+    warnings: list
+
+
+def read_table(path, required: tuple = logformat.REQUIRED_COLUMNS, phase: bool = False) -> LogTable:
+    """The known columns of a log, read line by line (memory: the rows' numbers, about 50 bytes a row).
+
+    Rows without a velocity reading (empty or ``nan``: vibrometer dropouts) are dropped with a warning.
+    Every value is checked against its plausible range (:data:`~workflow.models.limits.LIMITS`).
+
+    Parameters
+    ----------
+    path : path-like
+    required : tuple of str
+        Columns the log must have (default: those of every log).
+    phase : bool
+        Read the ``phase_deg`` column too (a scan's; a sweep's phase is not used).
 
     Raises
     ------
     InputFileError
-        Unreadable, empty, binary or non-UTF-8 file; no header or no data rows; more than
-        :data:`MAX_ROWS` data rows or a line over :data:`MAX_LINE_LENGTH`; a required column
-        missing, duplicated or given in an unknown unit; a row with the wrong number of
-        fields; a non-numeric or non-physical value.
+        Unreadable, oversized, empty, binary or non-UTF-8 file, or not a regular file; no header or no
+        data rows; more than :data:`MAX_ROWS` data rows or a line over :data:`~workflow.logformat.MAX_LINE_LENGTH`;
+        a required column missing, duplicated or given in an unknown unit; a row with the wrong number
+        of fields; a non-numeric or implausible value.
     """
     path = Path(path)
     warnings, metadata = [], {}
-    try:
-        stream = open(path, "rb")
-    except OSError as error:
-        raise InputFileError(f"{path}: cannot read ({error.strerror or error})") from None
-    with stream:
+    with open_input(path, str(path), MAX_LOG_BYTES) as stream:
         lines = _content_lines(path, stream, warnings, metadata)
-        header_number, header_line = next(lines, (None, None))
+        header_number, header_line, _ = next(lines, (None, None, True))
         if header_line is None:
-            raise InputFileError(f"{path}: no header row (expected columns {', '.join(logformat.REQUIRED_COLUMNS)})")
+            raise InputFileError(f"{path}: no header row (expected columns {', '.join(required)})")
         header = [name.strip() for name in _fields(path, header_number, header_line)]
         separator = next((mark for mark in ";\t" if len(header) == 1 and mark in header[0]), None)
         if separator:
             raise InputFileError(
                 f"{path}, line {header_number}: fields separated by {separator!r}; a log separates them by ','"
             )
-        columns = _column_indices(path, header_number, header)
+        columns = _column_indices(path, header_number, header, required, phase)
         table = {name: array("d") for name in columns}
         line_numbers, rows, dropouts = array("q"), 0, 0
-        for number, line in lines:
-            rows += 1
-            if rows > MAX_ROWS:
+        for number, line, complete in lines:
+            if rows == MAX_ROWS:
                 raise InputFileError(f"{path}, line {number}: more than the {MAX_ROWS} data rows accepted in one log")
-            cells = _fields(path, number, line)
-            if len(cells) != len(header):
-                raise InputFileError(f"{path}, line {number}: expected {len(header)} fields, got {len(cells)}")
-            values = {name: _number(path, number, name, cells[index]) for name, index in columns.items()}
+            try:
+                values = _values(path, number, line, header, columns)
+            except InputFileError:
+                if complete:
+                    raise
+                warnings.append(f"{path}, line {number}: ignored an incomplete last line (no newline; interrupted writer?)")
+                break
+            rows += 1
             if math.isnan(values[logformat.VELOCITY]):
                 dropouts += 1
                 continue
@@ -273,8 +346,46 @@ def read_log(path):
     arrays = {name: np.frombuffer(values, dtype=float) for name, values in table.items()}
     line_numbers = np.frombuffer(line_numbers, dtype=np.int64)
     _check_physical(path, arrays, line_numbers)
+    return LogTable(arrays, line_numbers, metadata, warnings)
+
+
+def header_columns(path) -> list:
+    """The column names of a log's header row (empty when it has none), reading no further."""
+    path = Path(path)
+    with open_input(path, str(path), MAX_LOG_BYTES) as stream:
+        number, line, _ = next(_content_lines(path, stream, [], {}), (None, None, True))
+        return [] if line is None else [name.strip() for name in _fields(path, number, line)]
+
+
+def read_log(path):
+    """Read one interferometer log (:func:`read_table`) as sweeps or ring-downs.
+
+    Without a ``sweep`` column, a new sweep starts wherever the drive voltage changes
+    between consecutive rows.  A log with a ``decay_time_s`` column is a ring-down log and
+    reads as a :class:`RingdownLog` (``sweep`` is the burst id; a burst also ends where the decay
+    time falls back: a decay recorded again); any other as a :class:`CampaignLog`.  The measurement
+    point (``x_mm``, ``y_mm`` columns or metadata) needs the plate's ``lambda_mm`` metadata to be mapped
+    onto the beam mode.
+
+    A ring-down sample that repeats the one before it (same burst, decay time and velocity: a row
+    pasted twice) is dropped with a warning.
+
+    Raises
+    ------
+    InputFileError
+        Those of :func:`read_table`; a sweep (or burst) whose velocities all lie below
+        :data:`MIN_PEAK_VELOCITY`; a measurement point off the plate or near a node; two samples of a
+        burst at one decay time with different velocities.
+    """
+    path = Path(path)
+    table = read_table(path)
+    arrays, warnings, line_numbers = table.arrays, table.warnings, table.line_numbers
     sweep = _sweep_index(path, arrays)
-    factor = _mode_factor(path, arrays, metadata, warnings)
+    if logformat.DECAY_TIME in arrays:
+        keep = _unrepeated_samples(path, arrays, sweep, line_numbers, warnings)
+        arrays, sweep, line_numbers = {name: values[keep] for name, values in arrays.items()}, sweep[keep], line_numbers[keep]
+    factor = _mode_factor(path, arrays, table.metadata, warnings)
+    _check_peaks(path, arrays[logformat.VELOCITY], sweep, line_numbers)
     if logformat.DECAY_TIME in arrays:
         return RingdownLog(
             frequency=arrays[logformat.FREQUENCY],
@@ -285,8 +396,8 @@ def read_log(path):
             mode_factor=np.ones_like(arrays[logformat.VELOCITY]) if factor is None else factor,
             temperature=arrays.get(logformat.TEMPERATURE, np.full_like(arrays[logformat.VELOCITY], np.nan)),
             sources=(str(path),),
+            warnings=tuple(warnings),
         )
-    _check_peaks(path, arrays[logformat.VELOCITY], sweep, line_numbers)
     return CampaignLog(
         frequency=arrays[logformat.FREQUENCY],
         drive_voltage=arrays[logformat.DRIVE_VOLTAGE],
@@ -299,9 +410,32 @@ def read_log(path):
     )
 
 
+def _unrepeated_samples(path: Path, arrays: dict, burst: np.ndarray, line_numbers: np.ndarray, warnings: list) -> np.ndarray:
+    """Mask of the ring-down rows to keep: all but exact repeats of the row before (a warning counts them).
+
+    Raises
+    ------
+    InputFileError
+        A sample at the decay time of the one before it in its burst with another velocity (a decay is
+        sampled at increasing times).
+    """
+    time, velocity = arrays[logformat.DECAY_TIME], arrays[logformat.VELOCITY]
+    repeat = np.r_[False, (burst[1:] == burst[:-1]) & (time[1:] == time[:-1])]
+    conflict = repeat & np.r_[False, velocity[1:] != velocity[:-1]]
+    if conflict.any():
+        index = int(np.argmax(conflict))
+        raise InputFileError(f"{path}, line {line_numbers[index]}: decay time {time[index]:g} s again, with another "
+                             f"velocity than line {line_numbers[index - 1]}; a decay's samples come at increasing times")
+    if repeat.any():
+        warnings.append(f"{path}: dropped {int(repeat.sum())} ring-down row(s) repeating the row before them "
+                        f"(first: line {line_numbers[int(np.argmax(repeat))]})")
+    return ~repeat
+
+
 def _mode_factor(path: Path, arrays: dict, metadata: dict, warnings: list):
     """|phi| at each row's measurement point (columns, else metadata), or None when the log names no point
-    (or no wavelength to map it with: a warning is appended to ``warnings``)."""
+    (or no wavelength to map it with: a warning is appended to ``warnings``); a point off the plate (its length
+    from the wavelength, its width from ``b_mm`` when named) is refused."""
     n = len(arrays[logformat.VELOCITY])
     position = {}
     for name in logformat.POSITION_COLUMNS:
@@ -315,7 +449,18 @@ def _mode_factor(path: Path, arrays: dict, metadata: dict, warnings: list):
         warnings.append(f"{path}: a measurement point ({', '.join(position)}) without the plate's "
                         f"'# {logformat.LAMBDA_MM}: ...' metadata cannot be mapped onto the mode; read as an antinode")
         return None
-    mode = BeamMode(logformat.metadata_number(metadata, logformat.LAMBDA_MM, path) * MM)
+    wavelength = logformat.metadata_number(metadata, logformat.LAMBDA_MM, path)
+    reason = problem(logformat.LAMBDA_MM, wavelength)
+    if reason:
+        raise InputFileError(f"{path}, line {metadata[logformat.LAMBDA_MM][1]}: {reason}")
+    half = {logformat.X_POSITION: (2 * materials.N_CERAMICS + 1) * wavelength / 8}
+    if logformat.B_MM in metadata:
+        half[logformat.Y_POSITION] = logformat.metadata_number(metadata, logformat.B_MM, path) / 2
+    for name, values in position.items():
+        if name in half and np.any(np.abs(values) > half[name] * (1 + 1e-9)):
+            raise InputFileError(f"{path}: measurement point {name} = {values[np.argmax(np.abs(values))]:g} is off the "
+                                 f"plate (within +-{half[name]:g} mm of its centre)")
+    mode = BeamMode(wavelength * MM)
     zeros = np.zeros(n)
     try:
         return measurement_factor(mode, position.get(logformat.X_POSITION, zeros) * MM,
@@ -325,10 +470,10 @@ def _mode_factor(path: Path, arrays: dict, metadata: dict, warnings: list):
 
 
 def _content_lines(path: Path, stream, warnings: list, metadata: dict):
-    """(line number, text) of the header and data lines of a UTF-8 file read from ``stream``, one line
-    in memory at a time: comments and blank lines skipped (``# key: value`` lines before the header
-    collected into ``metadata`` as key -> (value, line number)), an incomplete last data line dropped
-    (with a warning appended to ``warnings``)."""
+    """(line number, text, whether it ends with a newline) of the header and data lines of a UTF-8 file read
+    from ``stream``, one line in memory at a time: comments and blank lines skipped (``# key: value`` lines
+    before the header collected into ``metadata`` as key -> (value, line number)).  Only the last line can
+    lack its newline (a row whose writing was cut short, or a file saved without a final line end)."""
     head = stream.peek(_MAX_LINE_BYTES)  # the file's first block: a binary file is named so even if its first line is not UTF-8
     if head.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
         raise InputFileError(f"{path}: UTF-16 text, not UTF-8 (save the log as UTF-8)")
@@ -344,7 +489,7 @@ def _content_lines(path: Path, stream, warnings: list, metadata: dict):
             raise InputFileError(f"{path}, line {number}: binary data (NUL bytes), not a CSV log")
         complete = raw.endswith(b"\n")
         if not complete and len(raw) == _MAX_LINE_BYTES:
-            raise InputFileError(f"{path}, line {number}: longer than the {MAX_LINE_LENGTH} characters accepted per line")
+            raise InputFileError(f"{path}, line {number}: longer than the {logformat.MAX_LINE_LENGTH} characters accepted per line")
         try:
             line = raw.decode("utf-8-sig" if number == 1 else "utf-8")
         except UnicodeDecodeError as error:
@@ -353,9 +498,9 @@ def _content_lines(path: Path, stream, warnings: list, metadata: dict):
             ) from None
         offset += len(raw)
         line = line[:-1] if complete else line
-        if len(line) > MAX_LINE_LENGTH:
+        if len(line) > logformat.MAX_LINE_LENGTH:
             raise InputFileError(f"{path}, line {number}: {len(line)} characters, longer than the "
-                                 f"{MAX_LINE_LENGTH} accepted per line")
+                                 f"{logformat.MAX_LINE_LENGTH} accepted per line")
         seen_text = seen_text or bool(line.strip())
         line = line.rstrip("\r")
         if not line.strip() or line.lstrip().startswith("#"):
@@ -363,13 +508,18 @@ def _content_lines(path: Path, stream, warnings: list, metadata: dict):
             if separator and not header_seen:
                 metadata.setdefault(key.strip(), (value.strip(), number))
             continue
-        if not complete and header_seen:  # the last line, cut short
-            warnings.append(f"{path}, line {number}: ignored an incomplete last line (no newline; interrupted writer?)")
-            return
         header_seen = True
-        yield number, line
+        yield number, line, complete
     if not seen_text:
         raise InputFileError(f"{path}: empty file")
+
+
+def _values(path: Path, number: int, line: str, header: list, columns: dict) -> dict:
+    """Column name -> value of the data line ``number`` (:func:`_number`), checked against the header's width."""
+    cells = _fields(path, number, line)
+    if len(cells) != len(header):
+        raise InputFileError(f"{path}, line {number}: expected {len(header)} fields, got {len(cells)}")
+    return {name: _number(path, number, name, cells[index]) for name, index in columns.items()}
 
 
 def _fields(path: Path, number: int, line: str) -> list:
@@ -384,8 +534,8 @@ def _fields(path: Path, number: int, line: str) -> list:
         raise InputFileError(f"{path}, line {number}: not a CSV row ({error})") from None
 
 
-def _column_indices(path: Path, line: int, header) -> dict:
-    """Required and known optional column name -> index in the header."""
+def _column_indices(path: Path, line: int, header, required: tuple, phase: bool) -> dict:
+    """Required and known optional column name -> index in the header (``phase_deg`` only with ``phase``)."""
     indices = {}
     for name in logformat.READ_COLUMNS:
         positions = [i for i, column in enumerate(header) if column == name]
@@ -393,10 +543,10 @@ def _column_indices(path: Path, line: int, header) -> dict:
             raise InputFileError(f"{path}, line {line}: column '{name}' appears {len(positions)} times (ambiguous)")
         if positions:
             indices[name] = positions[0]
-    for name in logformat.REQUIRED_COLUMNS:
+    for name in required:
         if name in indices:
             continue
-        lookalikes = [c for c in header if c.lower().replace(" ", "_").startswith(_QUANTITY_STEMS[name])]
+        lookalikes = [c for c in header if c.lower().replace(" ", "_").startswith(_QUANTITY_STEMS.get(name, (name,)))]
         if lookalikes:
             raise InputFileError(
                 f"{path}, line {line}: column {lookalikes[0]!r} has an unknown unit or name; expected '{name}'"
@@ -406,7 +556,7 @@ def _column_indices(path: Path, line: int, header) -> dict:
             f"{path}, line {line}: missing required column '{name}' "
             f"(header: {(shown if shown.isprintable() else repr(shown)) or 'empty'})"
         )
-    return {name: index for name, index in indices.items() if name != logformat.PHASE}
+    return {name: index for name, index in indices.items() if phase or name != logformat.PHASE}
 
 
 def _number(path: Path, line: int, column: str, cell: str) -> float:
@@ -425,42 +575,45 @@ def _number(path: Path, line: int, column: str, cell: str) -> float:
     return value
 
 
+PLAUSIBLE_COLUMNS = (logformat.FREQUENCY, logformat.DRIVE_VOLTAGE, logformat.VELOCITY, logformat.DECAY_TIME,
+                     logformat.TEMPERATURE)
+"""Columns checked against :data:`~workflow.models.limits.LIMITS` (a missing temperature is allowed)."""
+
+
 def _check_physical(path: Path, arrays: dict, line_numbers: np.ndarray) -> None:
-    """Refuse non-positive frequencies, negative voltages, and velocities outside 0 to :data:`MAX_VELOCITY`."""
-    velocity = arrays[logformat.VELOCITY]
-    checks = (
-        (logformat.FREQUENCY, arrays[logformat.FREQUENCY] <= 0, "a frequency must be positive"),
-        (logformat.DRIVE_VOLTAGE, arrays[logformat.DRIVE_VOLTAGE] < 0, "a peak voltage must be >= 0"),
-        (logformat.VELOCITY, (velocity < 0) | (velocity > MAX_VELOCITY),
-         f"a velocity amplitude must be in 0 to {MAX_VELOCITY:g} m/s"),
-    )
-    for column, bad, reason in checks:
+    """Refuse the first value of a :data:`PLAUSIBLE_COLUMNS` column outside its plausible range, naming its line."""
+    for column in (name for name in PLAUSIBLE_COLUMNS if name in arrays):
+        low, high = LIMITS[column]
+        values = arrays[column]
+        bad = (values < low) | (values > high)
         if bad.any():
-            value = arrays[column][bad][0]
-            line = line_numbers[np.argmax(bad)]
-            raise InputFileError(f"{path}, line {line}: {column} = {value:g}: {reason}")
+            index = int(np.argmax(bad))
+            raise InputFileError(f"{path}, line {line_numbers[index]}: {problem(column, values[index])}")
 
 
 def _check_peaks(path: Path, velocity: np.ndarray, sweep: np.ndarray, line_numbers: np.ndarray) -> None:
-    """Refuse a sweep whose peak velocity is below :data:`MIN_PEAK_VELOCITY`, naming its first line."""
+    """Refuse a sweep (or burst) whose peak velocity is below :data:`MIN_PEAK_VELOCITY`, naming its first line."""
     peaks = np.zeros(int(sweep.max()) + 1)
     np.maximum.at(peaks, sweep, velocity)
     low = np.nonzero(peaks < MIN_PEAK_VELOCITY)[0]
     if low.size:
         line = line_numbers[np.argmax(sweep == low[0])]
         raise InputFileError(
-            f"{path}, line {line}: the sweep starting here peaks at {peaks[low[0]]:g} m/s, below the "
+            f"{path}, line {line}: the sweep (or burst) starting here peaks at {peaks[low[0]]:g} m/s, below the "
             f"{MIN_PEAK_VELOCITY:g} m/s accepted (all-zero velocities, or a velocity not in m/s?)"
         )
 
 
 def _sweep_index(path: Path, arrays: dict) -> np.ndarray:
-    """0-based sweep index per row, from the ``sweep`` column or from voltage changes."""
+    """0-based sweep (or burst) index per row, from the ``sweep`` column or from voltage changes; a burst also
+    ends where its decay time falls back (the burst recorded again after a record cut short)."""
     if logformat.SWEEP in arrays:
         ids = arrays[logformat.SWEEP]
         if not np.all(ids == np.round(ids)):
             raise InputFileError(f"{path}: column '{logformat.SWEEP}' must hold integer sweep ids")
         starts = np.r_[True, ids[1:] != ids[:-1]]
+        if logformat.DECAY_TIME in arrays:
+            starts |= np.r_[False, np.diff(arrays[logformat.DECAY_TIME]) < 0]
     else:
         voltage = arrays[logformat.DRIVE_VOLTAGE]
         starts = np.r_[True, ~np.isclose(voltage[1:], voltage[:-1], rtol=1e-6, atol=1e-9)]

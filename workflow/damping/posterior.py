@@ -18,6 +18,7 @@ import numpy as np
 from workflow.damping.laws import LAWS, POSTERIOR_LAWS, STACKED_COMPONENTS, StackedLaws, parameter_names
 from workflow.damping.likelihood import Q0_RANGE
 from workflow.errors import InputFileError
+from workflow.inputfiles import MAX_POSTERIOR_BYTES, open_input
 
 POSTERIOR_FILE = "posterior.npz"
 """File name of the posterior in a fit's output folder."""
@@ -128,13 +129,21 @@ def load_posterior(path) -> DampingPosterior:
     path = Path(path)
     if path.is_dir():
         path = path / POSTERIOR_FILE
+    if not path.exists():
+        raise InputFileError(f"{path}: no such posterior file (write one with 'tactile fit-damping ... --out DIR')")
     try:
-        with np.load(path, allow_pickle=False) as content:
+        with open_input(path, str(path), MAX_POSTERIOR_BYTES) as stream:
+            content = np.load(stream, allow_pickle=False)
+            if not isinstance(content, np.lib.npyio.NpzFile):
+                raise ValueError("a single array, not an archive")
+            unpacked = sum(info.file_size for info in content.zip.infolist())
+            if unpacked > MAX_POSTERIOR_BYTES:
+                raise InputFileError(f"{path}: unpacks to {unpacked} bytes, more than the {MAX_POSTERIOR_BYTES} accepted")
             law_name = str(content["law"])
             names = [str(name) for name in content["parameter_names"]]
             samples = np.asarray(content["parameter_samples"], dtype=float)
-    except FileNotFoundError:
-        raise InputFileError(f"{path}: no such posterior file (write one with 'tactile fit-damping ... --out DIR')") from None
+    except InputFileError:
+        raise
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error):
         raise InputFileError(
             f"{path}: empty, truncated or not a posterior written by 'tactile fit-damping' "

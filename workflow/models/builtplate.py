@@ -8,7 +8,6 @@ plays a built plate.  :class:`BuiltPlate` is the nominal geometry a built-plate 
 metadata (docs/log-format.md), parsed and checked here, written back by :meth:`BuiltPlate.metadata`.
 """
 
-import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -16,6 +15,7 @@ import numpy as np
 from workflow import logformat
 from workflow.errors import InputFileError
 from workflow.models import materials
+from workflow.models.limits import problem
 from workflow.models.materials import Material, PiezoMaterial
 from workflow.models.plate import Plate
 from workflow.units import MM, UM
@@ -69,15 +69,10 @@ class PlateDeviations:
     ceramic_offset: float = 0.0
 
     def __post_init__(self):
-        for name in ("ceramic_modulus_factor", "resonator_modulus_factor"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and 0.5 <= value <= 1.5):
-                raise ValueError(f"{name} must be from 0.5 to 1.5, got {value!r}")
-        for name in ("glue_thickness", "resonator_thickness_offset", "ceramic_offset"):
-            if not math.isfinite(getattr(self, name)):
-                raise ValueError(f"{name} must be finite, got {getattr(self, name)!r}")
-        if self.glue_thickness < 0:
-            raise ValueError(f"glue_thickness must be >= 0, got {self.glue_thickness!r}")
+        for name, key in DEVIATION_LIMITS.items():
+            reason = problem(key, getattr(self, name), si=True, name=name)
+            if reason:
+                raise ValueError(reason)
 
     def drive_factor(self, wavelength: float) -> float:
         """cos(2 pi delta / lambda) [-]: the modal drive of ceramics shifted by delta along a mode of wavelength lambda [m].
@@ -96,6 +91,16 @@ class PlateDeviations:
             "deviation_hi_offset_um": self.resonator_thickness_offset / UM,
             "deviation_ceramic_offset_mm": self.ceramic_offset / MM,
         }
+
+
+DEVIATION_LIMITS = {
+    "glue_thickness": "glue_um",
+    "ceramic_modulus_factor": "modulus_factor",
+    "resonator_modulus_factor": "modulus_factor",
+    "resonator_thickness_offset": "hi_offset_um",
+    "ceramic_offset": "ceramic_offset_mm",
+}
+""":class:`PlateDeviations` field -> its key in :data:`~workflow.models.limits.LIMITS`."""
 
 
 DEMONSTRATION_DEVIATIONS = PlateDeviations(
@@ -194,14 +199,14 @@ class BuiltPlate:
         Raises
         ------
         InputFileError
-            A geometry key missing (naming the keys that are), a value that is not a positive
-            finite number (naming its line), or an unknown material name.
+            A geometry key missing (naming the keys that are), a value that is not a finite number
+            within its plausible range (naming its line), or an unknown material name.
         """
         missing = [key for key in logformat.BUILT_PLATE_KEYS if key not in metadata]
         if missing:
             raise InputFileError(f"{source}: not a built-plate log: no '# {missing[0]}: ...' metadata line "
                                  f"(a built-plate log names {', '.join(logformat.BUILT_PLATE_KEYS)})")
-        lengths = {key: _positive(metadata, key, source) for key in logformat.BUILT_PLATE_KEYS}
+        lengths = {key: _plausible(metadata, key, source) for key in logformat.BUILT_PLATE_KEYS}
         names = {}
         for key, known in ((logformat.CERAMIC, materials.ceramic_names()), (logformat.RESONATOR, materials.resonator_names())):
             if key in metadata:
@@ -210,13 +215,7 @@ class BuiltPlate:
                     raise InputFileError(f"{source}, line {line}: {key} {value!r} is not a material record; "
                                          f"known: {', '.join(known)}")
                 names[key] = value
-        glue = None
-        if logformat.GLUE_UM in metadata:
-            glue = logformat.metadata_number(metadata, logformat.GLUE_UM, source)
-            if glue < 0:
-                raise InputFileError(f"{source}, line {metadata[logformat.GLUE_UM][1]}: {logformat.GLUE_UM} must be "
-                                     f">= 0, got {metadata[logformat.GLUE_UM][0]!r}")
-            glue *= UM
+        glue = _plausible(metadata, logformat.GLUE_UM, source) * UM if logformat.GLUE_UM in metadata else None
         return cls(
             wavelength=lengths[logformat.LAMBDA_MM] * MM,
             resonator_thickness=lengths[logformat.HI_MM] * MM,
@@ -228,8 +227,10 @@ class BuiltPlate:
         )
 
 
-def _positive(metadata: dict, key: str, source: str) -> float:
+def _plausible(metadata: dict, key: str, source: str) -> float:
+    """The number of metadata item ``key``, within its plausible range (:data:`~workflow.models.limits.LIMITS`)."""
     value = logformat.metadata_number(metadata, key, source)
-    if value <= 0:
-        raise InputFileError(f"{source}, line {metadata[key][1]}: {key} must be positive, got {metadata[key][0]!r}")
+    reason = problem(key, value)
+    if reason:
+        raise InputFileError(f"{source}, line {metadata[key][1]}: {reason}")
     return value

@@ -11,7 +11,6 @@ Files are only read, never modified; a problem is an :class:`~workflow.errors.In
 naming the file and line.
 """
 
-import csv
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,6 +19,7 @@ import numpy as np
 from instruments import simulator
 from instruments.simulator import builtplate as simulated
 from workflow import logformat
+from workflow.damping.logs import MIN_PEAK_VELOCITY, header_columns, read_table
 from workflow.errors import InputFileError
 from workflow.execution.cache import EvaluationCache, content_key, package_directory, source_version
 from workflow.logformat import read_metadata
@@ -28,21 +28,14 @@ from workflow.models.builtplate import BuiltPlate, PlateDeviations
 from workflow.models.fem.accuracy import FemAccuracy
 from workflow.models.fem.settings import FemSettings
 from workflow.models.fem.surface import modal_assurance_criterion
+from workflow.models.limits import point_problem
 from workflow.models.materials import PLATE_Q
 from workflow.models.plate import Plate
 from workflow.units import MM
 
 def is_scan_log(path) -> bool:
     """Whether the log's column header names the scan's ``x_mm`` and ``y_mm`` columns (docs/log-format.md)."""
-    try:
-        with open(path, encoding="utf-8-sig", newline="") as stream:
-            for line in stream:
-                if line.strip() and not line.lstrip().startswith("#"):
-                    fields = {field.strip() for field in next(csv.reader([line]))}
-                    return {logformat.X_POSITION, logformat.Y_POSITION} <= fields
-    except (OSError, UnicodeDecodeError) as error:
-        raise InputFileError(f"{path}: cannot read ({getattr(error, 'strerror', None) or error})") from None
-    return False
+    return {logformat.X_POSITION, logformat.Y_POSITION} <= set(header_columns(path))
 
 
 def read_built_plate(path) -> BuiltPlate:
@@ -98,45 +91,27 @@ def read_scan(path) -> ScanLog:
     ------
     InputFileError
         No built-plate metadata, a needed column missing, a row of the wrong length, a
-        non-finite number, a point off the named plate.
+        non-finite or implausible number (:func:`~workflow.damping.logs.read_table`), a missing
+        velocity, a point off the named plate, no velocity above the reader's floor.
     """
     path = Path(path)
     plate = read_built_plate(path)
-    columns = {name: [] for name in SCAN_NEEDS}
-    header = None
-    with open(path, encoding="utf-8-sig", newline="") as stream:
-        for number, line in enumerate(stream, start=1):
-            if not line.strip() or line.lstrip().startswith("#"):
-                continue
-            fields = [field.strip() for field in next(csv.reader([line]))]
-            if header is None:
-                missing = [name for name in SCAN_NEEDS if name not in fields]
-                if missing:
-                    raise InputFileError(f"{path}, line {number}: not a scan: no {', '.join(missing)} column(s)")
-                header = {name: fields.index(name) for name in SCAN_NEEDS}
-                width = len(fields)
-                continue
-            if len(fields) != width:
-                raise InputFileError(f"{path}, line {number}: expected {width} fields, got {len(fields)}")
-            for name, index in header.items():
-                try:
-                    value = float(fields[index])
-                except ValueError:
-                    value = np.nan
-                if not np.isfinite(value):
-                    raise InputFileError(f"{path}, line {number}: {name} must be a finite number, got {fields[index]!r}")
-                columns[name].append(value)
-    if not columns[logformat.VELOCITY]:
-        raise InputFileError(f"{path}: no scan rows")
-    x, y = np.array(columns[logformat.X_POSITION]) * MM, np.array(columns[logformat.Y_POSITION]) * MM
+    table = read_table(path, required=SCAN_NEEDS, phase=True)
+    if table.warnings:
+        raise InputFileError(f"{table.warnings[0]}; a scan needs every point")
+    columns = table.arrays
+    x, y = columns[logformat.X_POSITION] * MM, columns[logformat.Y_POSITION] * MM
     nominal = plate.plate()
-    off = (np.abs(x) > float(nominal.length) / 2 + 1e-9) | (np.abs(y) > plate.width / 2 + 1e-9)
-    if off.any():
-        i = int(np.argmax(off))
-        raise InputFileError(f"{path}: point ({x[i] / MM:g}, {y[i] / MM:g}) mm is off the named plate "
-                             f"({float(nominal.length) / MM:g} x {plate.width / MM:g} mm)")
-    return ScanLog(x, y, np.array(columns[logformat.FREQUENCY]), np.array(columns[logformat.DRIVE_VOLTAGE]),
-                   np.array(columns[logformat.VELOCITY]), np.array(columns[logformat.PHASE]), plate, str(path))
+    for index, (x_i, y_i) in enumerate(zip(x, y)):
+        reason = point_problem(nominal, x_i, y_i)
+        if reason:
+            raise InputFileError(f"{path}, line {table.line_numbers[index]}: {reason}")
+    velocity = columns[logformat.VELOCITY]
+    if velocity.max() < MIN_PEAK_VELOCITY:
+        raise InputFileError(f"{path}: every velocity of the scan is below {MIN_PEAK_VELOCITY:g} m/s "
+                             "(all zero, or not in m/s?): no mode shape to compare")
+    return ScanLog(x, y, columns[logformat.FREQUENCY], columns[logformat.DRIVE_VOLTAGE], velocity,
+                   columns[logformat.PHASE], plate, str(path))
 
 
 def built_plate_model(nominal: Plate, deviations: PlateDeviations = PlateDeviations(),

@@ -10,10 +10,12 @@ from workflow.calibration.calibration import Calibration, MeasuredPlate, measure
 from workflow.calibration.logs import read_built_plate
 from workflow.calibration.measurements import scan_shape
 from workflow.calibration.parameters import CalibrationSettings
+from workflow.damping.logs import SAME_PLATE_TOLERANCE
 from workflow.errors import InputFileError
+from workflow.inputfiles import MAX_CALIBRATION_BYTES, load_json
 from workflow.models.fem.surface import modal_assurance_criterion
-from workflow.pipeline.builtplate import is_scan_log, read_scan
 from workflow.optimise.robust import RobustDesign
+from workflow.pipeline.builtplate import is_scan_log, read_scan
 from workflow.pipeline.records import geometry_record
 from workflow.units import KHZ, NM, UM
 
@@ -23,13 +25,18 @@ CALIBRATION_OUTPUTS = (CALIBRATION_FILE, PAIRS_FIGURE)
 """Files ``tactile calibrate`` writes into its folder (:mod:`workflow.pipeline.outputs`)."""
 
 
-def measured_plates(paths, settings: CalibrationSettings, use_deflection: bool = True) -> list[MeasuredPlate]:
+def measured_plates(paths, settings: CalibrationSettings, use_deflection: bool = True, mixed_plates: str = "refuse",
+                    warnings: list | None = None) -> list[MeasuredPlate]:
     """What the logs measured, one entry per resonance log; a scan log joins the resonance log naming the same plate.
+
+    A scan driven more than :data:`~workflow.damping.logs.SAME_PLATE_TOLERANCE` away from the resonance its
+    resonance log measured is of another plate: refused, or with ``mixed_plates="warn"`` appended to ``warnings``.
 
     Raises
     ------
     InputFileError
-        A scan log whose plate no resonance log names, or two scans of one plate, naming the file.
+        A scan log whose plate no resonance log names, or two scans of one plate, naming the file; a scan of
+        another plate (see above).
     """
     is_scan = [is_scan_log(path) for path in paths]
     scans = [read_scan(path) for path, scan in zip(paths, is_scan) if scan]
@@ -45,6 +52,13 @@ def measured_plates(paths, settings: CalibrationSettings, use_deflection: bool =
                                  f"(lambda {nominal.wavelength * 1e3:g} mm, h_i {nominal.resonator_thickness * 1e3:g} mm)")
         if same[0] in matched:
             raise InputFileError(f"{scan.source}: a second scan of the plate of {logs[same[0]].source}; give one")
+        driven, resonance = float(np.median(scan.frequency)), logs[same[0]].frequency
+        if abs(driven / resonance - 1) > SAME_PLATE_TOLERANCE:
+            mismatch = (f"{scan.source} was driven at {driven:.0f} Hz, {abs(driven / resonance - 1) * 100:.1f} % from the "
+                        f"resonance {resonance:.0f} Hz of {logs[same[0]].source}: a scan of another plate of this design?")
+            if mixed_plates == "refuse":
+                raise InputFileError(f"{mismatch} (--mixed-plates warn calibrates with it anyway)")
+            warnings.append(mismatch)
         matched[same[0]] = scan_shape(scan.x, scan.y, scan.phasors, settings.shape_sigma, scan.source)
     return [measured_plate(log, matched.get(k), use_deflection) for k, log in enumerate(logs)]
 
@@ -79,17 +93,13 @@ def load_calibration(path) -> Calibration:
     Raises
     ------
     InputFileError
-        Missing, unreadable, not JSON, or not a calibration file, naming the path.
+        Missing, unreadable, oversized, too deeply nested (:func:`~workflow.inputfiles.load_json`), not JSON,
+        or not a calibration file (:meth:`Calibration.from_dict`), naming the path.
     """
     path = Path(path)
     if path.is_dir():
         path = path / CALIBRATION_FILE
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as error:
-        raise InputFileError(f"--calibration {path}: cannot read ({error.strerror or error})") from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise InputFileError(f"--calibration {path}: not a JSON calibration file ({error})") from None
+    data = load_json(path, f"--calibration {path}", MAX_CALIBRATION_BYTES)
     return Calibration.from_dict(data, f"--calibration {path}")
 
 

@@ -9,12 +9,13 @@ import math
 import sys
 from dataclasses import MISSING, fields
 from importlib import resources
-from pathlib import Path
 
-from instruments.simulator.vibrometer import RECORD_INTERVAL_US_RANGE, RECORD_SAMPLES_RANGE
 from workflow.damping.laws import SAMPLED_LAWS
+from workflow.damping.logs import MIXED_PLATES
 from workflow.errors import InputFileError
+from workflow.inputfiles import load_toml
 from workflow.models import materials
+from workflow.models.limits import LIMITS, mm_range
 from workflow.models.plate import ORIGINAL_PLATE
 from workflow.units import KHZ, MM, UM
 
@@ -23,75 +24,17 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-def _mm(bounds) -> tuple:
-    """A range in metres as millimetres, rounded as the configuration writes them."""
-    return tuple(round(x / MM, 9) for x in bounds)
-
-
-LIMITS = {
-    "campaign.ringdown_samples": RECORD_SAMPLES_RANGE,  # the vibrometer's envelope record
-    "campaign.ringdown_interval_us": RECORD_INTERVAL_US_RANGE,
-    "design.voltage_v": (1e-3, 1000.0),
-    "design.q": (1.0, 1e5),
-    "design.wavelength_min_mm": _mm(materials.WAVELENGTH_RANGE),
-    "design.wavelength_max_mm": _mm(materials.WAVELENGTH_RANGE),
-    "design.hi_min_mm": _mm(materials.RESONATOR_THICKNESS_RANGE),
-    "design.hi_max_mm": _mm(materials.RESONATOR_THICKNESS_RANGE),
-    "design.width_mm": _mm(materials.WIDTH_RANGE),
-    "design.min_frequency_khz": (1.0, 1000.0),
-    "design.target_deflection_um": (1e-3, 1000.0),
-    "campaign.voltages_v": (1e-3, 1000.0),
-    "campaign.ringdown_voltages_v": (1e-3, 1000.0),
-    "simulator.softening_s2_m2": (0.0, 100.0),
-    "campaign.span_hz": (1e-3, 1e6),
-    "simulator.low_velocity_q": (1.0, 1e5),
-    "simulator.working_q": (1.0, 1e5),
-    "simulator.amplifier_gain": (0.1, 1000.0),
-    "simulator.ceramic_voltage_limit_v": (1e-3, 1000.0),
-    "simulator.relative_noise": (0.0, 1.0),
-    "simulator.floor_fraction": (0.0, 1.0),
-    "simulator.phase_noise_deg": (0.0, 180.0),
-    "simulator.built_glue_um": (0.0, 500.0),
-    "simulator.built_ceramic_factor": (0.5, 1.5),
-    "simulator.built_resonator_factor": (0.5, 1.5),
-    "simulator.built_hi_offset_um": (-1000.0, 1000.0),
-    "simulator.built_ceramic_offset_mm": (-10.0, 10.0),
-    "fem.width_min_mm": _mm(materials.WIDTH_RANGE),
-    "fem.width_max_mm": _mm(materials.WIDTH_RANGE),
-    "fem.fine_width_min_mm": _mm(materials.WIDTH_RANGE),
-    "fem.fine_width_max_mm": _mm(materials.WIDTH_RANGE),
-    "maps.grid": (2, 400),
-    "maps.fem_grid": (2, 400),
-    "campaign.seed": (0, 2**32 - 1),
-    "damping.seed": (0, 2**32 - 1),
-    "damping.max_steps": (1, 1_000_000),
-    "damping.walkers": (0, 10_000),
-    "damping.posterior_draws": (1, 10_000),
-    "fem.width_points": (2, 1000),
-    "design.glue_um": (0.0, 500.0),
-    "fem.accuracy": (0.0, 0.05),
-    "loop.scan_grid": (1, 100),
-    "loop.reliability": (0.5, 0.999),
-    "loop.stock_hi_mm": _mm(materials.RESONATOR_THICKNESS_RANGE),
-    "loop.search_start_khz": (1.0, 39.0),
-    "fem.survey_accuracy": (0.0, 0.05),
-}
-"""Accepted range of numeric keys, shared with the command-line options of the same quantity: drive
-amplitude [V peak across the ceramics], quality factor [-], map points per axis, random seeds, chain length
-(a million steps is about an hour per law), emcee walkers (0: max(32, 2 D + 2) for each law's D parameters;
-otherwise at least twice the parameters sampled: checked when the logs are read,
-:func:`~workflow.damping.fit.minimum_walkers`), posterior draws propagated,
-widths of the FEM sweep, FEM accuracy targets (relative frequency error; 0 means the fixed mesh of the
-[fem] mesh keys); the design space of Table 1 [mm], frequency [kHz], deflection [um], the
-campaign's drive [V] and span [Hz], the simulated bench.  Every other number must be finite."""
-
 CHOICES = {
     "damping.laws": SAMPLED_LAWS,
-    "design.ceramic_thicknesses_mm": _mm(materials.CERAMIC_THICKNESSES),
-    "maps.fem_ceramic_thicknesses_mm": _mm(materials.CERAMIC_THICKNESSES),
-    "loop.hp_mm": _mm(materials.CERAMIC_THICKNESSES),
+    "damping.mixed_plates": MIXED_PLATES,
+    "design.ceramic_thicknesses_mm": mm_range(materials.CERAMIC_THICKNESSES),
+    "maps.fem_ceramic_thicknesses_mm": mm_range(materials.CERAMIC_THICKNESSES),
+    "loop.hp_mm": mm_range(materials.CERAMIC_THICKNESSES),
 }
 """Accepted values of the items of list keys."""
+
+LIST_ITEMS = {"campaign.logs": ""}
+"""An item of each list key whose default is empty, for its type (the logs' paths are strings)."""
 
 NOT_EMPTY = ("damping.laws", "design.ceramic_thicknesses_mm", "campaign.voltages_v", "loop.stock_hi_mm")
 """List keys that need at least one item."""
@@ -216,25 +159,13 @@ def load_config(path=None) -> dict:
     Raises
     ------
     InputFileError
-        Unreadable or malformed file, unknown section or key, or a value of the wrong type,
-        naming the file and the key.
+        Unreadable, oversized or malformed file (:func:`~workflow.inputfiles.load_toml`), unknown section
+        or key, or a value of the wrong type or outside its range, naming the file and the key.
     """
     config = default_config()
     if path is None:
         return config
-    path = Path(path)
-    try:
-        user = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputFileError(f"{path}: no such configuration file") from None
-    except IsADirectoryError:
-        raise InputFileError(f"{path}: is a folder, not a TOML configuration file") from None
-    except OSError as error:
-        raise InputFileError(f"{path}: cannot read the configuration file ({error.strerror or error})") from None
-    except UnicodeDecodeError:
-        raise InputFileError(f"{path}: not a UTF-8 text file") from None
-    except tomllib.TOMLDecodeError as error:
-        raise InputFileError(f"{path}: not valid TOML: {error}") from None
+    user = load_toml(path, str(path))
     return merge(config, user, source=str(path))
 
 
@@ -286,22 +217,29 @@ def _check_range(value, name: str, source: str) -> None:
 
 
 def _check_consistency(config: dict, source: str) -> None:
-    """Refuse a low bound not below its high bound (:data:`ORDERED`), FEM mesh keys the FEM refuses and
-    material records that do not exist."""
+    """Refuse a low bound not below its high bound (:data:`ORDERED`), FEM mesh keys the FEM refuses (or whose mesh
+    of the original plate exceeds the memory budget) and material records that do not exist."""
     from workflow.errors import TactileError
     from workflow.models.fem import FemSettings
+    from workflow.models.fem.mesh import check_memory
 
     for low, high in ORDERED:
         (section, low_key), (_, high_key) = low.split("."), high.split(".")
         if not config[section][low_key] < config[section][high_key]:
             raise InputFileError(f"{source}: '{low}' = {config[section][low_key]!r} must be below "
                                  f"'{high}' = {config[section][high_key]!r}")
+    fem = config["fem"]
+    fine = int((fem["fine_width_max_mm"] - fem["fine_width_min_mm"]) / fem["fine_width_step_mm"] + 1e-9) + 1
+    if fine > LIMITS["fem.width_points"][1]:
+        raise InputFileError(f"{source}: 'fem.fine_width_step_mm' = {fem['fine_width_step_mm']!r} gives {fine} widths from "
+                             f"{fem['fine_width_min_mm']:g} to {fem['fine_width_max_mm']:g} mm, more than the "
+                             f"{LIMITS['fem.width_points'][1]} of a width sweep")
     if len(config["loop"]["scan_grid"]) != 2:
         raise InputFileError(f"{source}: 'loop.scan_grid' must be [points along x, points across], "
                              f"got {config['loop']['scan_grid']!r}")
     mesh = {name: config["fem"][name] for name in FemSettings().as_dict()}
     try:
-        FemSettings(**mesh)
+        check_memory(ORIGINAL_PLATE, FemSettings(**mesh))
     except TactileError as error:
         raise InputFileError(f"{source}: [fem] {error}") from None
     for kind, lookup in (("ceramic", materials.ceramic), ("resonator", materials.resonator)):
@@ -318,9 +256,8 @@ def _checked(value, default, name: str, source: str):
     if isinstance(default, list):
         if not isinstance(value, list):
             raise InputFileError(f"{source}: '{name}' must be a list, got {type(value).__name__} {value!r}")
-        if default:
-            return [_checked(item, default[0], f"{name}[{i}]", source) for i, item in enumerate(value)]
-        return value
+        item = default[0] if default else LIST_ITEMS[name]
+        return [_checked(entry, item, f"{name}[{i}]", source) for i, entry in enumerate(value)]
     if type(value) is not expected:
         raise InputFileError(f"{source}: '{name}' must be {_type_name(expected)}, got {type(value).__name__} {value!r}")
     return value
@@ -340,11 +277,16 @@ def to_toml(config: dict) -> str:
     return "\n".join(lines)
 
 
+_TOML_ESCAPES = {'"': '\\"', "\\": "\\\\", "\b": "\\b", "\t": "\\t", "\n": "\\n", "\f": "\\f", "\r": "\\r"}
+"""Characters a TOML basic string escapes by name; the other control characters are written \\uXXXX."""
+
+
 def _toml_value(value) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, str):
-        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+        return '"' + "".join(_TOML_ESCAPES.get(c) or (f"\\u{ord(c):04X}" if ord(c) < 0x20 or ord(c) == 0x7F else c)
+                             for c in value) + '"'
     if isinstance(value, list):
         return "[" + ", ".join(_toml_value(v) for v in value) + "]"
     return repr(value)

@@ -8,6 +8,7 @@ from workflow.damping.fit import fit_summary
 from workflow.damping.inference_data import save_inference_data
 from workflow.damping.posterior import POSTERIOR_FILE, save_posterior
 from workflow.errors import InputFileError
+from workflow.models.limits import problem
 from workflow.pipeline.outputs import writable_folder
 from workflow.serialise import jsonable
 
@@ -27,16 +28,13 @@ def stated_noise(paths):
     """
     values = []
     for path in paths:
-        with open(path, encoding="utf-8", errors="replace") as stream:
-            for line in stream:
-                if not line.startswith(logformat.METADATA_PREFIX):
-                    break
-                key, _, value = line[len(logformat.METADATA_PREFIX) :].partition(":")
-                if key.strip() in STATED_NOISE_KEYS:
-                    try:
-                        values.append(float(value))
-                    except ValueError:
-                        raise InputFileError(f"{path}: metadata {key.strip()}: expected a number, got {value.strip()!r}") from None
+        metadata = logformat.read_metadata(path)
+        for key in (key for key in STATED_NOISE_KEYS if key in metadata):
+            value = logformat.metadata_number(metadata, key, path)
+            reason = problem("simulator.relative_noise", value, name=key)
+            if reason:
+                raise InputFileError(f"{path}, line {metadata[key][1]}: {reason}")
+            values.append(value)
     return max(values) if values else None
 
 

@@ -17,6 +17,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from workflow.errors import InputFileError
+from workflow.inputfiles import MAX_CONFIG_BYTES, load_json
 
 RECORD = ".tactile-outputs.json"
 """File name of the record of what tactile wrote in a folder."""
@@ -92,7 +93,7 @@ def _read_record(folder: Path) -> dict:
     if not path.exists():
         return {}
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
+        data = load_json(path, str(path), MAX_CONFIG_BYTES)
         files = data["files"]
         if data.get("version") != RECORD_VERSION or not all(
             isinstance(name, str) and isinstance(entry["size"], int) and isinstance(entry["sha256"], str)

@@ -17,6 +17,7 @@ import instruments
 import workflow
 from workflow.errors import TactileError
 from workflow.execution.cache import EvaluationCache, content_key, package_directory, source_version
+from workflow.inputfiles import MAX_LOG_BYTES, read_input
 from workflow.progress import format_duration
 
 
@@ -81,7 +82,7 @@ class Step:
 
 def _step_key(context: RunContext, step: Step) -> str:
     """Content key of a step's result: step, configuration, logs' bytes, code."""
-    logs = [hashlib.sha256(Path(path).read_bytes()).hexdigest() for path in context.results.get("logs", [])]
+    logs = [hashlib.sha256(read_input(path, str(path), MAX_LOG_BYTES)).hexdigest() for path in context.results.get("logs", [])]
     return content_key(
         {
             "step": step.key,

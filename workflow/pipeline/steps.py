@@ -127,10 +127,10 @@ def damping_fit(context: RunContext):
     from workflow.damping.fit import fit_damping, minimum_walkers
     from workflow.damping.logs import drop_short_sweeps, read_logs
     from workflow.execution.parallel import map_evaluations
-    from workflow.pipeline.config import LIMITS
+    from workflow.models.limits import LIMITS
 
     damping = context.config["damping"]
-    log = drop_short_sweeps(read_logs(context.results["logs"]))
+    log = drop_short_sweeps(read_logs(context.results["logs"], damping["mixed_plates"]))
     for warning in log.warnings:
         print(f"warning: {warning}", file=sys.stderr)
     forward = run_forward_model(damping, log)

@@ -26,7 +26,9 @@ import numpy as np
 from scipy.optimize import brentq
 
 from workflow.errors import TactileError
+from workflow.models.fem.mesh import MeshTooLargeError, check_memory
 from workflow.models.fem.settings import PIEZO_MODELS, FemSettings
+from workflow.models.limits import LIMITS
 from workflow.models.plate import Plate
 
 LEVELS = (2, 3, 4, 5, 6)
@@ -45,8 +47,8 @@ RICHARDSON_RATE = 2.0
 DEFAULT_ACCURACY = 2e-3
 """Default target relative frequency error of an FEM evaluation [-] (0.2 %)."""
 SURVEY_ACCURACY = 5e-3
-"""Default target of maps, width sweeps and calibration surrogates' surveys (many geometries) [-] (0.5 %)."""
-ACCURACY_RANGE = (1e-4, 0.05)
+"""Default target of maps and width sweeps (many geometries) [-] (0.5 %)."""
+ACCURACY_RANGE = LIMITS["fem_accuracy"]
 """Accepted targets [-]."""
 
 
@@ -240,15 +242,32 @@ def evaluate_to_accuracy(plate: Plate, accuracy: FemAccuracy, evaluate_mesh: Cal
     Returns
     -------
     FemResult
-        The finest evaluation, with ``error`` set.
+        The finest evaluation, with ``error`` set; the finest level is the coarser of ``accuracy.max_level``
+        and the finest within the memory budget (:data:`~workflow.models.fem.mesh.MEMORY_BUDGET`).
+
+    Raises
+    ------
+    MeshTooLargeError
+        If not even the two coarsest levels fit the budget.
     """
-    level = accuracy.start_level
+    fitting = [n for n in LEVELS if n <= accuracy.max_level and _fits(plate, n, accuracy)]
+    max_level = fitting[-1] if len(fitting) >= 2 else accuracy.max_level
+    level = min(accuracy.start_level, max_level)
     coarse_level = LEVELS[LEVELS.index(level) - 1]
     coarse = evaluate_mesh(mesh_for_level(plate, coarse_level, accuracy.n_modes, accuracy.piezo), None)
     while True:
         fine = evaluate_mesh(mesh_for_level(plate, level, accuracy.n_modes, accuracy.piezo), coarse.solution)
         estimate = estimate_error(fine, coarse, level, coarse_level, accuracy.target)
-        if estimate.met or level >= accuracy.max_level:
+        if estimate.met or level >= max_level:
             return replace(fine, error=estimate, solution=fine.solution if keep_solution else None)
         coarse, coarse_level = fine, level
-        level = next_level(level, estimate.frequency, accuracy.target, accuracy.max_level)
+        level = next_level(level, estimate.frequency, accuracy.target, max_level)
+
+
+def _fits(plate: Plate, level: int, accuracy: FemAccuracy) -> bool:
+    """Whether the mesh of ``level`` fits the memory budget (:func:`~workflow.models.fem.mesh.check_memory`)."""
+    try:
+        check_memory(plate, mesh_for_level(plate, level, accuracy.n_modes, accuracy.piezo))
+    except MeshTooLargeError:
+        return False
+    return True

@@ -7,10 +7,12 @@ plate's ``glue_thickness`` (when > 0) sits between ceramic and resonator, under 
 only; the top face of the resonator is at :func:`top_face`.
 """
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from workflow.errors import TactileError
 from workflow.models.fem.elements import ReferenceBrick, brick
 from workflow.models.fem.settings import FemSettings
 from workflow.models.plate import Plate
@@ -19,6 +21,42 @@ RESONATOR, CERAMIC, GLUE = 0, 1, 2
 """Material ids of the elements."""
 GLUE_ELEMENTS = 1
 """Elements through the glue layer's thickness (tens of um: one quadratic element) [-]."""
+MEMORY_BUDGET = 8 * 2**30
+"""Most memory one FEM evaluation may take [bytes] (8 GiB): a mesh estimated above it is refused before
+anything is allocated (:func:`check_memory`), and accuracy control stops refining below it."""
+BYTES_PER_DOF = 20 * 2**10
+"""Peak memory of an evaluation per degree of freedom of quadratic elements [bytes]: measured 15-20 KiB (sparse
+factorisation and assembly; 1.1 GiB for 74 000 degrees of freedom, 2.6 GiB for 169 000, 11.8 GiB for 620 000),
+rounded up; elements of degree p take p / 2 times as much (:func:`mesh_memory`)."""
+
+
+class MeshTooLargeError(TactileError):
+    """A mesh whose evaluation would take more than :data:`MEMORY_BUDGET`."""
+
+
+def mesh_memory(plate: Plate, settings: FemSettings) -> tuple[int, int]:
+    """(degrees of freedom, estimated peak memory [bytes]) of the evaluation of ``plate`` on ``settings``, from
+    the element counts and degrees alone (an upper bound: the full tensor grid of nodes, gaps included, with the
+    electric potential as a fourth unknown at every node of the coupled model; the memory per unknown grows with
+    the degree, as the couplings per row do)."""
+    _, _, counts = _x_counts(plate, settings)
+    layers = 2 * settings.elements_per_layer + (GLUE_ELEMENTS if float(plate.glue_thickness) > 0 else 0)
+    grid = (int(counts.sum()), settings.elements_across_half_width, layers)
+    degrees = brick(settings.element).degrees
+    dofs = (4 if settings.piezo == "coupled" else 3) * math.prod(p * n + 1 for p, n in zip(degrees, grid))
+    return dofs, int(dofs * BYTES_PER_DOF * max(degrees) / 2)
+
+
+def check_memory(plate: Plate, settings: FemSettings) -> None:
+    """Raise :class:`MeshTooLargeError` if the evaluation of ``plate`` on ``settings`` would exceed :data:`MEMORY_BUDGET`."""
+    dofs, memory = mesh_memory(plate, settings)
+    if memory > MEMORY_BUDGET:
+        raise MeshTooLargeError(
+            f"the FEM mesh of this plate ({settings.elements_per_ceramic} {settings.element} elements per ceramic, "
+            f"{settings.elements_across_half_width} across the half width: about {dofs} degrees of freedom) would take "
+            f"about {memory / 2**30:.1f} GiB, more than the {MEMORY_BUDGET / 2**30:g} GiB budget of one evaluation; "
+            "ask for a coarser accuracy, or check the geometry (a very wide or short-wavelength plate)"
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -124,8 +162,8 @@ def x_segments(plate: Plate):
     return np.array(breakpoints), np.array(ceramic_index)
 
 
-def quarter_plate_mesh(plate: Plate, settings: FemSettings) -> BrickMesh:
-    """The structured mesh of the quarter plate for ``settings``."""
+def _x_counts(plate: Plate, settings: FemSettings):
+    """(breakpoints, ceramic index, element count) of the segments along x (:func:`x_segments`)."""
     breakpoints, ceramic_index = x_segments(plate)
     lengths = np.diff(breakpoints)
     element_length = float(plate.ceramic_length) / settings.elements_per_ceramic
@@ -134,8 +172,21 @@ def quarter_plate_mesh(plate: Plate, settings: FemSettings) -> BrickMesh:
         np.maximum(1, np.round(lengths / element_length)),
         settings.elements_per_gap,
     ).astype(int)
-    free_end = len(lengths) - 1
-    counts[free_end] = max(1, int(np.ceil(lengths[free_end] / element_length - 0.25)))
+    counts[-1] = max(1, int(np.ceil(lengths[-1] / element_length - 0.25)))
+    return breakpoints, ceramic_index, counts
+
+
+def quarter_plate_mesh(plate: Plate, settings: FemSettings) -> BrickMesh:
+    """The structured mesh of the quarter plate for ``settings``.
+
+    Raises
+    ------
+    MeshTooLargeError
+        If its evaluation would exceed :data:`MEMORY_BUDGET` (checked before anything is allocated).
+    """
+    check_memory(plate, settings)
+    breakpoints, ceramic_index, counts = _x_counts(plate, settings)
+    free_end = len(counts) - 1
     grade = settings.grading
     is_ceramic = ceramic_index >= 0
     grading = [
