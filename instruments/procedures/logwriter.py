@@ -39,6 +39,9 @@ _FORMATS = {
     logformat.TEMPERATURE: "{:.3f}",
     logformat.X_POSITION: "{:.4f}",
     logformat.Y_POSITION: "{:.4f}",
+    logformat.RENDER_TIME: "{:.9g}",
+    logformat.WANTED_VELOCITY: "{:.7g}",
+    logformat.PREDICTED_VELOCITY: "{:.7g}",
 }
 KEY_COLUMNS = (logformat.SWEEP, logformat.FREQUENCY, logformat.DRIVE_VOLTAGE, logformat.X_POSITION, logformat.Y_POSITION)
 """The columns that identify a planned point (those a log has)."""
