@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from workflow.cli import main
-from workflow.damping.laws import QuadraticLoss
 from workflow.damping.posterior import DampingPosterior, save_posterior
 from workflow.rendering import synthesis
 
@@ -33,7 +32,6 @@ def test_render_on_the_embedded_defaults_writes_the_drive_for_the_generator(tmp_
     assert script[0] == "OUTP 0" and "AM:INT:FUNC ARB" in script and script[-1] == "OUTP 1"
     table = np.genfromtxt(tmp_path / "drive.csv", delimiter=",", names=True)
     assert len(table) == result["points"] and np.all(table["drive_v"] <= 30.0)
-    assert main(["render", "--out", str(tmp_path), "--json"]) == 0  # a rerun overwrites its own files
 
 
 def test_render_with_a_fitted_posterior_uses_its_law_and_measured_plate(tmp_path, capsys):
@@ -44,12 +42,12 @@ def test_render_with_a_fitted_posterior_uses_its_law_and_measured_plate(tmp_path
     save_posterior(posterior, fit / "posterior.npz", np.zeros((samples, 2)), ["q0", "alpha"])
     parameters = {"gain": {"median": 1.3e-9}, "f_r_0": {"median": 32050.0}, "kappa": {"median": 0.08}}
     (fit / "fit.json").write_text(json.dumps({"parameters": parameters}))
-    assert main(["render", "--damping", str(fit), "--period-mm", "4", "--speed-mm-s", "50", "--out",
+    assert main(["render", "--damping", str(fit), "--period-mm", "4", "--speed-mm-s", "50", "--points", "64", "--out",
                  str(tmp_path / "out"), "--json"]) == 0
     model = _json(capsys)["model"]
     assert model["law"] == "quadratic" and model["law_parameters"] == {"q0": 140.0, "alpha": pytest.approx(0.3)}
     assert (model["resonance_frequency_hz"], model["gain_m_v"], model["softening_s2_m2"]) == (32050.0, 1.3e-9, 0.08)
-    assert QuadraticLoss(140.0, 0.3).name in model["source"] or "posterior-median" in model["source"]
+    assert "posterior-median" in model["source"] and "fit's measured plate" in model["source"]
 
 
 def _write(path, text: str) -> str:
@@ -110,3 +108,16 @@ def test_measure_render_on_the_simulator_plays_both_drives_and_compares(tmp_path
     assert main(["measure", "render", "--simulate", "--out", str(out), "--frequency-hz", "32126", "--settle-s", "0.1",
                  "--json"]) == 0
     assert _json(capsys)["resumed"] == 512  # a rerun resumes the complete log
+
+
+def test_a_friction_profile_under_a_recorded_trace_renders(tmp_path, capsys):
+    curve = _write(tmp_path / "curve.csv", "# measured on our plate\namplitude_um,friction\n0,1\n0.5,0.8\n1.0,0.6\n1.5,0.5\n")
+    profile = _write(tmp_path / "profile.csv", "position_mm,friction,note\n0,0.9,a\n5,0.55,b\n10,0.9,c\n")
+    trace = _write(tmp_path / "trace.csv", "time_s,position_mm\n0,0\n0.05,6\n0.1,10\n")
+    assert main(["render", "--profile", profile, "--friction-curve", curve, "--trace", trace, "--points", "64",
+                 "--out", str(tmp_path / "out"), "--json"]) == 0
+    result = _json(capsys)
+    assert result["texture_kind"] == "profile" and result["texture_finger"] == "trace"
+    assert result["loop_s"] == pytest.approx(0.1) and result["texture_speed_mm_s"] == pytest.approx(100)
+    low, high = result["texture_levels_um"]
+    assert 0.2 < low < 0.3 and 1.2 < high < 1.3  # friction 0.9 and 0.55 through the curve

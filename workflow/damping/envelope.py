@@ -31,6 +31,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from workflow.damping.harmonic import response_amplitude, self_consistent_amplitude, softened_resonance
+from workflow.errors import TactileError
 
 REACHABLE_GRID = 4001
 """Velocities at which :meth:`EnvelopeModel.reachable_velocity` checks the steady drive [-]."""
@@ -53,6 +54,10 @@ LIMITED_RISE = 1
 """Flag of a sample where the drive sits at the voltage limit and the envelope still rises too slowly."""
 LIMITED_FALL = 2
 """Flag of a sample where even the drive switched off lets the envelope fall too slowly (the free decay)."""
+
+
+class EnvelopeSolveError(TactileError):
+    """A looping drive whose envelope did not settle into a periodic state."""
 
 
 @dataclass(frozen=True)
@@ -238,6 +243,11 @@ def _periodic(period, shape, scale):
     (a 2 x 2 Jacobian from finite differences, evaluated in the same batched call) converges in
     a few periods where plain repetition needs ~10 time constants of the slowest decay; a Newton
     step that does not lower the residual falls back to one repetition.
+
+    Raises
+    ------
+    EnvelopeSolveError
+        Not settled within :data:`MAX_PERIODS` periods.
     """
     start = np.zeros(shape, dtype=complex)
     delta = 1e-6 * np.maximum(np.asarray(scale, dtype=float), 1e-12)
@@ -257,7 +267,8 @@ def _periodic(period, shape, scale):
         improving = np.isfinite(newton) & (size < best)
         start = np.where(improving, newton, ends[0])
         best = np.minimum(best, size)
-    return start, results
+    raise EnvelopeSolveError(f"the looping drive's envelope did not settle within {MAX_PERIODS} periods (largest "
+                             f"change over a period {float(np.max(best)):.3g} m/s); is the model's Q(v) positive?")
 
 
 def periodic_play(model: EnvelopeModel, voltage, interval, max_step: float = MAX_STEP) -> np.ndarray:

@@ -1,6 +1,7 @@
 """Figures of texture rendering: a rendered drive with its predicted envelopes, and a render log's playbacks side by side."""
 
 import matplotlib
+import matplotlib.ticker
 
 matplotlib.use("Agg")
 
@@ -90,7 +91,11 @@ def period_error_figure(renderings: dict, target: float = ERROR_TARGET):
     axis.axhline(target * 100, color="k", lw=0.8, label=f"{target * 100:g} %")
     low, high = next(iter(renderings.values())).levels
     axis.set_xlabel("grating period in time [ms] (spatial period = finger speed x this)")
-    axis.set_ylabel("envelope error, RMS over the swing [%] (dotted: settled edges, 1/sqrt(period))")
-    axis.set_title(f"gratings {low / UM:g} to {high / UM:g} µm, 50 % duty, within the voltage limit", fontsize=9)
+    axis.set_ylabel("envelope error, RMS over the swing [%]")
+    for ticks, minor in ((axis.xaxis, matplotlib.ticker.NullFormatter()), (axis.yaxis, matplotlib.ticker.FormatStrFormatter("%g"))):
+        ticks.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+        ticks.set_minor_formatter(minor)
+    axis.set_title(f"gratings {low / UM:g} to {high / UM:g} µm, 50 % duty, within the voltage limit\n(dotted: beyond the "
+                   "periods evaluated, the error falls as 1/sqrt(period))", fontsize=9)
     axis.legend(fontsize=7)
     return figure
