@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from instruments.drivers.amplifier import PowerAmplifier
-from instruments.drivers.arbitrary import MAX_POINTS
+from instruments.drivers.arbitrary import MAX_POINTS, drive_of_codes
 from instruments.procedures.logwriter import read_log
 from instruments.procedures.render import Playback, RenderPlan, render_playback
 from workflow import logformat
@@ -67,6 +67,10 @@ class PlaybackRecord:
         Drive envelope [V]; antinode velocity amplitude measured, wanted, predicted [m/s].
     carrier : float
         [Hz]
+    waveform : numpy.ndarray
+        The drive envelope of each sample of the loop as played [V] (from the plan's codes).
+    sample_rate : float
+        Of ``waveform`` [Sa/s].
     """
 
     name: str
@@ -76,10 +80,17 @@ class PlaybackRecord:
     wanted: np.ndarray
     predicted: np.ndarray
     carrier: float
+    waveform: np.ndarray
+    sample_rate: float
 
     def deflection(self, velocity):
         """Deflection amplitude of a velocity amplitude at the carrier [m]."""
         return np.asarray(velocity) / (2 * np.pi * self.carrier)
+
+    def played(self) -> tuple:
+        """(start times [s], drive [V]) of every sample of the waveform over the capture's span."""
+        loops = int(np.ceil(self.time[-1] * self.sample_rate / len(self.waveform))) + 1
+        return np.arange(loops * len(self.waveform)) / self.sample_rate, np.tile(self.waveform, loops)
 
 
 def read_render_log(path) -> tuple:
@@ -98,9 +109,13 @@ def read_render_log(path) -> tuple:
         if not mine:
             continue
         column = {key: np.array([float(row[key]) for row in mine]) for key in logformat.RENDER_COLUMNS[2:]}
+        full_scale = PowerAmplifier(float(metadata["amplifier_gain"])).ceramic_voltage(
+            float(metadata[f"plan_{name}_amplitude_vpp"]))
+        codes = np.array([int(code) for code in metadata[f"plan_{name}_codes"].split(",")])
         playbacks.append(PlaybackRecord(name, column[logformat.RENDER_TIME], column[logformat.DRIVE_VOLTAGE],
                                         column[logformat.VELOCITY] / factor, column[logformat.WANTED_VELOCITY],
-                                        column[logformat.PREDICTED_VELOCITY], float(column[logformat.FREQUENCY][0])))
+                                        column[logformat.PREDICTED_VELOCITY], float(column[logformat.FREQUENCY][0]),
+                                        drive_of_codes(codes, full_scale), float(metadata[f"plan_{name}_sample_rate"])))
     return metadata, playbacks
 
 

@@ -70,7 +70,9 @@ def comparison_figure(playbacks, comparisons: dict, title: str):
         top.set_title(f"{playback.name.replace('precompensated', 'pre-compensated')}: measured - predicted "
                       f"{result['model_error']:.1%} of the swing", fontsize=9)
         top.legend(fontsize=7)
-        bottom.step(time, playback.drive, where="post", color="C0")
+        start, drive = playback.played()
+        bottom.step(start / MS, drive, where="post", color="C0", lw=1)
+        bottom.set_xlim(time[0], time[-1])
         bottom.set_xlabel("time from the start of a loop [ms]")
     axes[0, 0].set_ylabel("antinode deflection amplitude [µm]")
     axes[1, 0].set_ylabel("drive amplitude across the ceramics [V]")
