@@ -180,3 +180,30 @@ def test_an_interrupted_render_log_resumes_with_the_playback_cut_short(measured,
     assert (result.resumed, result.measured) == (256, 256)
     _, playbacks = read_render_log(cut)
     assert [len(p.time) for p in playbacks] == [256, 256]
+
+
+@pytest.mark.slow
+def test_measure_fit_render_play_on_the_design_renders_the_2mm_grating_within_its_prediction(design_bench, tmp_path):
+    """The chain a user runs: a campaign on the simulated h_p = 1 mm design, the Q(v) fit and softening, then the
+    2 mm grating at 100 mm/s rendered with the fit (not the truth) and played: pre-compensation beats plain
+    switching and the plate follows the prediction."""
+    from instruments.procedures.simulated import simulate_campaign
+    from workflow.damping.fit import fit_damping, parameter_summary
+    from workflow.damping.likelihood import ForwardModel
+    from workflow.damping.logs import read_logs
+
+    settings, _ = design_bench
+    simulate_campaign(tmp_path / "campaign.csv", settings)
+    fit = fit_damping(read_logs([tmp_path / "campaign.csv"]), laws=("quadratic",), seed=1, max_steps=4000,
+                      forward=ForwardModel(softening=True))
+    summary = parameter_summary(fit.best)
+    fitted = EnvelopeModel(summary["f_r_0"]["median"], summary["gain"]["median"], fit.answer.median_law(),
+                           summary["kappa"]["median"])
+    station, _ = simulated_station(settings, settle_time=0.0)
+    result = measure_rendering(station, tmp_path / "render.csv", Grating(2 * MM, 0.5, 0.3 * UM, 1.15 * UM),
+                               ConstantSpeed(0.1), PlateEnvelope(fitted, "fit"), settings.response.resonance_frequency,
+                               loops=2, settle=0.2, metadata={"texture_loop_s": 0.02})
+    _, _, comparison = compare_log(result.path)
+    plain, pre = comparison["plain"], comparison["precompensated"]
+    assert pre["error"] < 0.7 * plain["error"]
+    assert pre["model_error"] < 0.03 and plain["model_error"] < 0.03
