@@ -207,3 +207,27 @@ def test_measure_fit_render_play_on_the_design_renders_the_2mm_grating_within_it
     plain, pre = comparison["plain"], comparison["precompensated"]
     assert pre["error"] < 0.7 * plain["error"]
     assert pre["model_error"] < 0.03 and plain["model_error"] < 0.03
+
+
+@pytest.mark.hardware
+def test_a_real_33500_takes_the_modulated_drive():
+    """Opt-in (``pytest -m hardware``): the command forms on a real 33500-series generator on
+    $TACTILE_GENERATOR_PORT, its output kept off: the waveform loaded and selected, AM by it at 100 %."""
+    import os
+
+    import serial
+
+    from instruments.drivers.generator import FunctionGenerator
+
+    port = os.environ.get("TACTILE_GENERATOR_PORT")
+    if not port:
+        pytest.skip("set TACTILE_GENERATOR_PORT to a real 33500-series generator")
+    generator = FunctionGenerator(serial.Serial(port, timeout=2), 0.5)
+    try:
+        generator.output = False
+        generator.play_modulated(ModulatedDrive(tuple(dac_codes(np.linspace(0.0, 1.0, 16), 1.0)), 1e4, 25e3, 0.01))
+        generator.check_errors("loading a modulated drive")
+        assert generator.am_state and generator.am_function == "ARB" and not generator.output
+        assert generator.arb_sample_rate == pytest.approx(1e4) and generator.am_depth == pytest.approx(100.0)
+    finally:
+        generator.switch_off()

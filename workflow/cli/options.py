@@ -611,10 +611,12 @@ def add_texture_arguments(parser) -> None:
 
 def add_rendering_arguments(parser) -> None:
     """The plate's envelope model for rendering: ``--damping`` or a constant ``--q``, and the carrier."""
-    add_damping_option(parser)
     group = parser.add_argument_group("envelope model", "the plate's envelope dynamics (docs/rendering.md): the "
                                       "posterior-median Q(v) of --damping, with the gain, resonance and softening of "
                                       "its fit.json, or the beam model of the plate with a constant Q")
+    group.add_argument("--damping", metavar="POSTERIOR",
+                       help="posterior.npz (or its folder) from 'tactile fit-damping': its posterior-median Q(v), and the "
+                       "gain, resonance and softening of the fit.json beside it (a fit describes the plate it measured)")
     group.add_argument("--q", type=bounded(float, *LIMITS["design.q"]), default=materials.PLATE_Q,
                        help=f"constant quality factor without --damping, {limit_text('design.q')} "
                        f"(default {materials.PLATE_Q:g})")
