@@ -58,7 +58,7 @@ def register(subparsers) -> None:
                        help=f"most samples of the arbitrary waveform, {MIN_POINTS} to {MAX_POINTS} (the longest that "
                        f"one command line carries; default {MAX_POINTS})")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, metavar="DIR",
-                        help=f"output folder (default: {DEFAULT_OUT} in the working directory)")
+                        help=f"output folder (default: {DEFAULT_OUT} in the working directory, a folder git ignores)")
     add_force_option(parser)
     add_json_flag(parser)
     parser.set_defaults(handler=run)

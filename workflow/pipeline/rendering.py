@@ -100,8 +100,8 @@ def modulated_drive(drive, interval: float, carrier: float, amplifier: PowerAmpl
 
 def render_summary(rendering, search, speed: float, target: float, envelope: PlateEnvelope) -> dict:
     """``tactile render``'s JSON: the drive, its predicted error and reach, the smallest period at ``speed``."""
-    to_velocity = rendering.velocity(1.0)
-    (low, high), model = (float(np.min(rendering.wanted)), float(np.max(rendering.wanted))), rendering.model
+    model, to_velocity = rendering.model, rendering.velocity(1.0)
+    low, high = float(np.min(rendering.wanted)), float(np.max(rendering.wanted))
     periods = {}
     for name, plain in (("precompensated", False), ("plain", True)):
         period, how = search.smallest_period(speed, target, plain)
