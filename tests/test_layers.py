@@ -1,7 +1,7 @@
 """The folder tree is the architecture: imports point one way, and this test keeps them so.
 
 workflow: base <- models <- damping <- calibration <- optimise <- pipeline <- cli, with execution (pool, Dask,
-cache) beside the models and below optimise.  instruments: drivers <- simulator <- procedures
+cache) beside the models and below optimise, and rendering (textures, drive synthesis) on damping.  instruments: drivers <- simulator <- procedures
 <- (pipeline, cli).  Command modules import no other command module, only ``cli.options``.
 """
 
@@ -23,6 +23,7 @@ LAYER_PREFIXES = {
     "damping": "workflow.damping",
     "calibration": "workflow.calibration",
     "optimise": "workflow.optimise",
+    "rendering": "workflow.rendering",
     "pipeline": "workflow.pipeline",
     "cli": "workflow.cli",
     "drivers": "instruments.drivers",
@@ -36,13 +37,14 @@ ALLOWED = {
     "damping": {"base", "models", "damping"},
     "calibration": {"base", "models", "damping", "calibration"},
     "optimise": {"base", "models", "execution", "damping", "calibration", "optimise"},
+    "rendering": {"base", "models", "damping", "rendering"},
     "drivers": {"base", "drivers"},
     "simulator": {"base", "models", "damping", "drivers", "simulator"},
     "procedures": {"base", "drivers", "simulator", "procedures"},
     "pipeline": set(LAYER_PREFIXES) - {"cli"} | {"base"},
     "cli": set(LAYER_PREFIXES) | {"base"},
 }
-PURE_LAYERS = ("models", "execution", "damping", "calibration", "optimise")
+PURE_LAYERS = ("models", "execution", "damping", "calibration", "optimise", "rendering")
 """Layers that never draw, parse arguments or print figures."""
 FORBIDDEN_IN_PURE = ("matplotlib", "argparse")
 

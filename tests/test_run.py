@@ -171,3 +171,16 @@ def test_the_run_fits_sweeps_and_ringdowns_jointly_and_reports_them(tiny_run):
     assert "**Ring-downs** (2 bursts, 80 samples" in report
     assert "Agreement of the two measurements of Q" in report and "amplitude softening" in report
     assert "damping/ringdown.png" in report and (out / "damping" / "ringdown.png").is_file()
+
+
+def test_the_report_states_what_each_design_renders_and_what_it_draws(tiny_run):
+    _, out, _, _ = tiny_run
+    section = (out / "report.md").read_text(encoding="utf-8").split("## Texture rendering and the amplifier")[1]
+    section = section.split("\n## ")[0]
+    rows = [line for line in section.splitlines() if line.startswith("| 1 |")]
+    assert len(rows) == 2  # the h_p = 1 mm design: its gratings, then its electrical load
+    periods = [float(text.strip(" ~≤")) for text in rows[0].split("|")[4].split("/")]
+    assert periods[0] < periods[1] < periods[2]  # a faster finger needs a longer period
+    current, power, apparent, peak = (float(cell) for cell in rows[1].split("|")[6:10])
+    assert 0 < power <= apparent and current < peak
+    assert (out / "rendering_periods.png").is_file()

@@ -50,6 +50,14 @@ RINGDOWN_COLUMNS = (SWEEP, TIMESTAMP, DECAY_TIME, FREQUENCY, DRIVE_VOLTAGE, VELO
 """The columns of a ring-down log (``sweep`` is the burst id), in the order our writer emits them."""
 READ_COLUMNS = COLUMNS + POSITION_COLUMNS + (DECAY_TIME, TEMPERATURE)
 """Every column the reader knows."""
+RENDER_TIME = "render_time_s"
+"""Render logs: time since the start of the looped drive's period [s]; its presence makes a log a render log."""
+WANTED_VELOCITY = "wanted_velocity_m_s"
+"""Render logs: the antinode velocity amplitude the texture asks for at that time [m/s]."""
+PREDICTED_VELOCITY = "predicted_velocity_m_s"
+"""Render logs: the antinode velocity amplitude the envelope model predicts for the drive [m/s]."""
+RENDER_COLUMNS = (SWEEP, TIMESTAMP, RENDER_TIME, FREQUENCY, DRIVE_VOLTAGE, VELOCITY, WANTED_VELOCITY, PREDICTED_VELOCITY)
+"""The columns of a render log (``sweep`` is the playback id; ``drive_voltage_v`` the drive envelope then)."""
 
 LAMBDA_MM = "lambda_mm"
 """Metadata: the built plate's nominal wavelength [mm]."""

@@ -9,6 +9,8 @@ import serial
 from instruments.drivers.errors import ConnectionLost, GarbledReply, ReplyTimeout
 
 TERMINATOR = b"\n"
+MAX_LINE_BYTES = 4096
+"""Longest command line the bench's instruments take, without its newline [bytes] (longer ones are discarded)."""
 _PRINTABLE = set(range(0x20, 0x7F))
 
 

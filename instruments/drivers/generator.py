@@ -14,11 +14,16 @@ high-impedance input the terminals carry (R_load + 50 ohm) / R_load times that, 
 the load are set only through ``amplitude_vpp``, ``offset`` and ``load_ohm``:
 :meth:`FunctionGenerator.write` (under ``set`` and ``query``) refuses any other command that
 sets a level or the load, and ``write`` refuses queries (an unread reply would answer the next query).
+An amplitude-modulation depth above 100 % would raise the output's peak above the carrier's
+amplitude: ``AM:DEPT`` is a level command too, set through ``am_depth`` (at most 100 %), and
+:meth:`FunctionGenerator.play_modulated` loads and starts an arbitrary-waveform modulation
+(:mod:`.arbitrary`) after checking its carrier amplitude against the limit.
 """
 
 import math
 import re
 
+from instruments.drivers.arbitrary import ModulatedDrive
 from instruments.drivers.base import LineInstrument, control, measurement, parse_with
 from instruments.drivers.errors import InstrumentError, SafetyLimitError
 
@@ -27,9 +32,11 @@ LOWEST_AMPLITUDE_VPP = 1e-3
 """The 33500 series' smallest amplitude [V peak-to-peak]: the safe state left at the end of a run."""
 AMPLITUDE_QUERY = "VOLT:UNIT VPP;:VOLT?"
 """The amplitude in V peak-to-peak whatever unit the instrument was left in."""
-_LEVEL_NODE = re.compile(r"VOLT|OFFS|AMPL|APPL|HIGH|LOW|LEV|LOAD", re.IGNORECASE)
-"""Header nodes that set an output level, or the load the level is stated into, when given an
-argument (``VOLT:UNIT`` only renames it)."""
+_LEVEL_NODE = re.compile(r"VOLT|OFFS|AMPL|APPL|HIGH|LOW|LEV|LOAD|DEPT|AM$", re.IGNORECASE)
+"""Header nodes that set an output level, the load the level is stated into, or the modulation depth
+(``AM <depth>`` is ``AM:DEPT``'s short form) when given an argument (``VOLT:UNIT`` only renames it)."""
+MAX_AM_DEPTH = 100.0
+"""Largest amplitude-modulation depth the driver sets [%]: the output's peak stays the carrier's amplitude."""
 SOURCE_IMPEDANCE_OHM = 50.0
 """The 33500 series' output impedance [ohm]."""
 HIGH_Z_THRESHOLD_OHM = 1e37
@@ -70,6 +77,19 @@ def _sets_level(line: str) -> bool:
 def _open_circuit_gain(load_ohm: float) -> float:
     """(R_load + 50 ohm) / R_load, 1 for High Z [-]."""
     return 1.0 if math.isinf(load_ohm) else (load_ohm + SOURCE_IMPEDANCE_OHM) / load_ohm
+
+
+def amplitude_command(vpp: float) -> str:
+    """The line that sets the amplitude to ``vpp`` [V peak-to-peak] whatever unit the instrument was left in."""
+    return f"VOLT:UNIT VPP;:VOLT {_number(vpp)}"
+
+
+def modulation_script(drive: ModulatedDrive) -> list:
+    """Every line that plays ``drive`` on a 33500 from any state: output off and High Z load (the amplifier's
+    input), no offset, the modulation setup, the carrier amplitude, output on (what ``tactile render`` writes
+    for a user's own client; the procedures send the same through :meth:`FunctionGenerator.play_modulated`)."""
+    return ["OUTP 0", "OUTP:LOAD INF", "VOLT:OFFS 0", *drive.setup_commands(), amplitude_command(drive.amplitude_vpp),
+            "OUTP 1"]
 
 
 def check_voltage_limit(limit: float) -> float:
@@ -115,7 +135,7 @@ class FunctionGenerator(LineInstrument):
     @amplitude_vpp.setter
     def amplitude_vpp(self, vpp: float) -> None:
         self.check_peak_voltage(vpp, self.offset)
-        self._send(f"VOLT:UNIT VPP;:VOLT {_number(vpp)}")
+        self._send(amplitude_command(vpp))
 
     @property
     def output(self) -> bool:
@@ -178,8 +198,11 @@ class FunctionGenerator(LineInstrument):
     def _check_command(self, command: str) -> None:
         """Refuse (nothing sent) a line that sets a level, or is not one line of printable ASCII."""
         if _sets_level(command):
-            raise SafetyLimitError(f"{self._where()}: refusing {command!r}: levels are set through amplitude_vpp and "
-                                   "offset, which check the limit")
+            raise SafetyLimitError(f"{self._where()}: refusing {command!r}: levels are set through amplitude_vpp, "
+                                   "offset and am_depth, which check the limit")
+        self._check_printable(command)
+
+    def _check_printable(self, command: str) -> None:
         if not (command.isascii() and command.isprintable()):
             raise InstrumentError(f"{self._where()}: refusing {command!r}: not one line of printable ASCII")
 
@@ -188,7 +211,8 @@ class FunctionGenerator(LineInstrument):
         self.write(command)
 
     def switch_off(self) -> None:
-        """The safe state: output off, then the lowest amplitude, no offset and burst mode off (each only lowers the peak).
+        """The safe state: output off, then the lowest amplitude, no offset, burst mode and modulation off (each only
+        lowers the peak or keeps it).
 
         Starts with an empty line, which ends a command a signal may have cut short, and drops
         any stale reply.
@@ -197,7 +221,7 @@ class FunctionGenerator(LineInstrument):
         self.discard_input()
         self._send("OUTP 0")
         self._send(f"VOLT:UNIT VPP;:VOLT {_number(LOWEST_AMPLITUDE_VPP)}")
-        self._send("VOLT:OFFS 0;:BURS:STAT 0")
+        self._send("VOLT:OFFS 0;:BURS:STAT 0;:AM:STAT 0")
 
     def check_peak_voltage(self, vpp: float, offset: float, gain: float | None = None) -> None:
         """Raise :class:`SafetyLimitError` if the terminal peak (``vpp``/2 + |``offset``|) x ``gain``
@@ -221,6 +245,36 @@ class FunctionGenerator(LineInstrument):
                            parse=float, format=_number)
     trigger_source = control("TRIG:SOUR?", "TRIG:SOUR {}", "Trigger source, ``IMM``, ``EXT`` or ``BUS`` (str).",
                              parse=str.upper)
+
+    am_state = control("AM:STAT?", "AM:STAT {}", "Amplitude modulation on (bool).", parse=_scpi_bool,
+                       format=lambda on: "1" if on else "0")
+    am_function = control("AM:INT:FUNC?", "AM:INT:FUNC {}", "Internal modulating shape, e.g. ``ARB`` (str).", parse=str.upper)
+    arb_function = control("FUNC:ARB?", "FUNC:ARB {}", "Selected arbitrary waveform's name (str).",
+                           parse=lambda reply: reply.strip().strip('"').upper())
+    arb_sample_rate = control("FUNC:ARB:SRAT?", "FUNC:ARB:SRAT {}", "Arbitrary waveform's sample rate [Sa/s] (float).",
+                              parse=float, format=_number)
+
+    @property
+    def am_depth(self) -> float:
+        """Amplitude-modulation depth [%]; set up to :data:`MAX_AM_DEPTH` (:class:`SafetyLimitError` above, nothing sent)."""
+        return parse_with(float, "AM:DEPT?", self.query("AM:DEPT?"), self._where())
+
+    @am_depth.setter
+    def am_depth(self, percent: float) -> None:
+        if not 0 <= percent <= MAX_AM_DEPTH:
+            raise SafetyLimitError(f"{self._where()}: refusing AM depth {percent:g} %: 0 to {MAX_AM_DEPTH:g} % keeps the "
+                                   "output's peak within the carrier amplitude the limit was checked on")
+        self._send(f"AM:DEPT {_number(percent)}")
+
+    def play_modulated(self, drive: ModulatedDrive) -> None:
+        """Load ``drive``'s waveform and modulate the carrier with it (:meth:`ModulatedDrive.setup_commands`), then
+        set its carrier amplitude; the output is left as it was.  The amplitude is checked against the limit
+        first (:class:`SafetyLimitError`, nothing sent); the depth of its setup is 100 %."""
+        self.check_peak_voltage(drive.amplitude_vpp, self.offset)
+        for command in drive.setup_commands():
+            self._check_printable(command)
+            self._send(command)
+        self.amplitude_vpp = drive.amplitude_vpp
 
     def configure_burst(self, cycles: int) -> None:
         """Triggered bursts of ``cycles`` cycles fired by :meth:`trigger` (bus trigger), burst mode on.

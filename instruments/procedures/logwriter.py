@@ -47,9 +47,12 @@ _FORMATS = {
     logformat.TEMPERATURE: "{:.3f}",
     logformat.X_POSITION: "{:.4f}",
     logformat.Y_POSITION: "{:.4f}",
+    logformat.RENDER_TIME: "{:.9g}",
+    logformat.WANTED_VELOCITY: "{:.7g}",
+    logformat.PREDICTED_VELOCITY: "{:.7g}",
 }
 KEY_COLUMNS = (logformat.SWEEP, logformat.FREQUENCY, logformat.DRIVE_VOLTAGE, logformat.X_POSITION, logformat.Y_POSITION,
-               logformat.DECAY_TIME)
+               logformat.DECAY_TIME, logformat.RENDER_TIME)
 """The columns that identify a planned point (those a log has)."""
 REQUIRED = (logformat.SWEEP, logformat.FREQUENCY, logformat.DRIVE_VOLTAGE, logformat.VELOCITY) + KEY_COLUMNS[3:]
 """Columns every row of ours fills (the others may be empty)."""

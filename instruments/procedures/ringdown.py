@@ -4,11 +4,12 @@ For each burst level the generator is put in triggered burst mode (``BURS:MODE T
 ``BURS:NCYC``, ``TRIG:SOUR BUS``, ``BURS:STAT ON``) at the plan's frequency and amplitude,
 fires one burst (``*TRG``), and the vibrometer's envelope record (``Get,Record,0,Envelope``,
 docs/instruments.md) gives the velocity from the burst's end on.  An over-range record steps
-the decoder range up and fires again.  Each burst's samples are appended in one write with
-the plate temperature where the bench reports it (docs/log-format.md, ring-down logs).  A
-resumed log skips the bursts whose every sample it holds (matched by value: burst, frequency,
-level, decay time); a burst cut short is recorded again in full after its rows, which are kept
-(a decay is one record: its missing samples cannot be measured alone).
+the decoder range up and fires again.  :func:`prepare_capture` and :func:`capture_envelope` are the
+one place an envelope is captured (the texture rendering's playback uses them too).  Each burst's
+samples are appended in one write with the plate temperature where the bench reports it
+(docs/log-format.md, ring-down logs).  A resumed log skips the bursts whose every sample it holds
+(matched by value: burst, frequency, level, decay time); a burst cut short is recorded again in full
+after its rows, which are kept (a decay is one record: its missing samples cannot be measured alone).
 """
 
 from dataclasses import dataclass
@@ -89,14 +90,27 @@ def record_ringdown(station: Station, frequency: float, voltage: float, cycles: 
     generator.configure_burst(cycles)
     generator.check_errors(f"configuring a burst of {cycles} cycles at {frequency:.12g} Hz, {voltage:g} V")
     generator.output = True
+    return capture_envelope(station, generator.trigger)
+
+
+def prepare_capture(station: Station, samples: int, interval: float) -> None:
+    """Set the envelope record's ``samples`` and ``interval`` [s] (whole microseconds)."""
+    station.vibrometer.record_samples = samples
+    station.vibrometer.record_interval = interval
+
+
+def capture_envelope(station: Station, arm=None) -> EnvelopeRecord:
+    """The vibrometer's envelope record, ``arm()`` (e.g. firing a burst) before each attempt; over range steps
+    the decoder range up and captures again."""
     while True:
-        generator.trigger()
+        if arm is not None:
+            arm()
         record = station.vibrometer.read_record()
         if not record.over_range:
             return record
         larger = [r for r in station.vibrometer.ranges if r > station.vibrometer.decoder_range]
         if not larger:
-            raise InstrumentError("vibrometer over range on its largest range during a ring-down")
+            raise InstrumentError("vibrometer over range on its largest range during an envelope record")
         station.vibrometer.decoder_range = larger[0]
 
 
@@ -122,7 +136,8 @@ def ringdown(station: Station, path, plan: RingdownPlan, metadata: dict | None =
         todo = [j for j, keys in samples.items() if any(key not in log.keys for key in keys)]
         station.prepare()
         try:
-            station.retry(lambda: _prepare_record(station, plan), "preparing the vibrometer's envelope record")
+            station.retry(lambda: prepare_capture(station, plan.samples, plan.interval),
+                          "preparing the vibrometer's envelope record")
             with Progress(len(todo), "ringdown", unit="bursts", enabled=bool(todo)) as bar:
                 for j in todo:
                     voltage = plan.voltages[j]
@@ -153,7 +168,3 @@ def ringdown(station: Station, path, plan: RingdownPlan, metadata: dict | None =
                   measured=len(todo) * plan.samples, resumed=resumed, truncated_bytes=log.truncated_bytes)
     return ProcedureResult(**counts, summary={"bursts": bursts}, warnings=tuple(log.warnings))
 
-
-def _prepare_record(station: Station, plan: RingdownPlan) -> None:
-    station.vibrometer.record_samples = plan.samples
-    station.vibrometer.record_interval = plan.interval

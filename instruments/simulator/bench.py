@@ -3,6 +3,11 @@
 Time is simulated: each vibrometer readout takes ``measurement_time`` of bench time and
 :meth:`Bench.sleep` advances it, so simulated campaigns run as fast as the CPU allows
 and are reproducible from their seeds.
+
+An amplitude-modulated output (``AM:STAT ON``) drives the plate's envelope through the
+envelope equation (:mod:`workflow.damping.envelope`) from rest at the last change of the
+output; the vibrometer's envelope record then starts at the next start of the modulating
+waveform's period (on a real bench its trigger input on the generator's Sync output).
 """
 
 import itertools
@@ -18,6 +23,7 @@ from instruments.simulator.generator import GeneratorDevice
 from instruments.simulator.physics import PlateResponse, plate_response
 from instruments.simulator.vibrometer import VibrometerDevice
 from workflow import logformat
+from workflow.damping.envelope import envelope_at, periodic_play, play
 from workflow.damping.laws import law_parameters
 from workflow.damping.mode_shape import BeamMode, measurement_factor
 from workflow.models.plate import ORIGINAL_PLATE, Plate
@@ -26,6 +32,8 @@ from workflow.units import MM
 INSTRUMENTS = ("generator", "vibrometer")
 DEFAULT_DRIFT_RATE = -0.02
 """Thermal drift of the simulated resonance [Hz/s] (the plate warms while driven)."""
+SETTLED_TIME_CONSTANTS = 30
+"""A modulated drive playing for this many of the plate's slowest time constants is in its periodic steady state [-]."""
 
 
 class SimulatedDisconnect(Exception):
@@ -131,7 +139,10 @@ class Bench:
         self.settings = settings
         self.time = 0.0
         self.amplifier = PowerAmplifier(settings.amplifier_gain)
-        self.generator = GeneratorDevice(self.amplifier.generator_peak_limit(settings.ceramic_voltage_limit), self._burst)
+        self.generator = GeneratorDevice(self.amplifier.generator_peak_limit(settings.ceramic_voltage_limit), self._burst,
+                                         self._output_changed)
+        self._output_since = 0.0
+        """Bench time of the generator's last change of output [s] (a modulated drive plays from then)."""
         self.vibrometer = VibrometerDevice(
             self._surface_velocity,
             np.random.default_rng(settings.seed),
@@ -192,9 +203,15 @@ class Bench:
         self._deflection = None
         self._last_burst = (self.time, initial)
 
+    def _output_changed(self) -> None:
+        self._output_since = self.time
+
     def _decay_record(self, samples: int, interval: float):
         """The antinode-to-point velocity envelope at ``samples`` times ``interval`` [s] apart from the latest
-        burst's end [m/s], or None when no burst fired since the last record (an IMM trigger fires one now)."""
+        burst's end [m/s], or None when no burst fired since the last record (an IMM trigger fires one now).
+        Under amplitude modulation, the envelope from the next start of the modulating waveform."""
+        if self.generator.modulation() is not None:
+            return self._modulated_record(samples, interval)
         if self.generator.state.trigger_source == "IMM" and self.generator.bursting():
             self._burst()
         if self._last_burst is None:
@@ -204,6 +221,28 @@ class Bench:
         decay_time = interval * np.arange(samples)
         self.time = max(self.time, end + decay_time[-1]) + self.settings.measurement_time
         return self.settings.response.ringdown(initial, decay_time, end) * self._mode_factor
+
+    def _modulated_record(self, samples: int, interval: float) -> np.ndarray:
+        """The envelope at the measurement point [m/s], ``samples`` times ``interval`` [s] apart, from the first
+        start of a modulation period after now; the plate started from rest when the output last changed."""
+        state = self.generator.state
+        waveform, rate = self.generator.modulation()
+        full = float(self.amplifier.ceramic_voltage(state.terminal_amplitude_vpp))
+        drive = full * (1 + state.am_depth / 100 * waveform) / 2
+        period, step = len(waveform) / rate, 1 / rate
+        model = self.settings.response.envelope_model(state.frequency, self.time)
+        start = self._output_since + np.ceil((self.time - self._output_since) / period) * period
+        slowest = float(model.time_constant(0.0))
+        if start - self._output_since >= SETTLED_TIME_CONSTANTS * slowest:
+            envelope = periodic_play(model, drive, step)[0]
+        else:
+            repeats = int(round((start - self._output_since) / period))
+            envelope = play(model, np.tile(drive, repeats), step)[-1] if repeats else 0.0
+        times = interval * np.arange(samples)
+        looped = np.tile(drive, int(np.ceil(times[-1] / period)) + 1)
+        within = envelope_at(model, looped, step, play(model, looped, step, envelope), times)
+        self.time = start + times[-1] + self.settings.measurement_time
+        return np.abs(within) * self._mode_factor
 
     def reset_port(self, instrument: str) -> None:
         """Forget a partial command line and the queued replies (a port was reopened)."""

@@ -6,7 +6,9 @@ Real instruments have finite buffers: a line longer than the input buffer is dis
 the bytes received, however the client behaves.
 """
 
-INPUT_BUFFER_BYTES = 4096
+from instruments.drivers.base import MAX_LINE_BYTES
+
+INPUT_BUFFER_BYTES = MAX_LINE_BYTES
 """Longest command line, without its newline [bytes]."""
 OUTPUT_BUFFER_BYTES = 4096
 """Most reply bytes queued and not yet read by the client [bytes]."""

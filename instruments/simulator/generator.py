@@ -9,12 +9,22 @@ TRIG|GAT``, ``BURS:NCYC``, ``BURS:INT:PER``, ``TRIG:SOUR IMM|EXT|BUS`` and ``*TR
 their queries.  A triggered burst with the output on (``*TRG`` with the BUS source, or the
 next readout with IMM) is reported to the bench through ``on_burst``.  An over-long line (-363) and a reply lost to a full output queue (-430)
 are reported in the error queue too.
+
+Arbitrary waveforms and amplitude modulation (docs/rendering.md#on-the-generator): ``DATA:ARB``
+(values -1 to +1) and ``DATA:ARB:DAC`` (codes -32767 to +32767) into volatile memory,
+``DATA:VOL:CLE``, ``DATA:VOL:CAT?``, ``FUNC:ARB``, ``FUNC:ARB:SRAT``, ``FUNC:ARB:FILT``, and
+``AM:STAT``, ``AM:SOUR INT``, ``AM:INT:FUNC``, ``AM:INT:FREQ``, ``AM:DEPT``.  With AM on, the carrier's
+amplitude is scaled by (1 + d m(t)) / 2, d the depth and m the modulating waveform (-1 to +1);
+a depth above 100 % raises the output's peak above the carrier amplitude, and the peak-voltage
+limit counts it.  Every change of the output (state or waveform data) is reported to the bench
+through ``on_change`` (the modulated plate starts from it).
 """
 
 from dataclasses import dataclass, replace
 
 import numpy as np
 
+from instruments.drivers.arbitrary import DAC_FULL_SCALE, MIN_POINTS, NAME, SAMPLE_RATE_RANGE
 from instruments.simulator.scpi import header_regex, split_program
 
 IDENTITY = "Agilent Technologies,33521A,TACTILE-SIM,1.0-sim"
@@ -41,7 +51,18 @@ BURST_CYCLES_RANGE = (1, 100_000_000)
 """Cycles per burst accepted by ``BURS:NCYC`` [-]."""
 BURST_PERIOD_RANGE = (1e-6, 8000.0)
 """Internal burst period accepted by ``BURS:INT:PER`` [s]."""
-"""Sine: V_rms / V_pp [-]."""
+AM_DEPTH_RANGE = (0.0, 120.0)
+"""``AM:DEPT`` range [%]: above 100 % the output's peak exceeds the carrier amplitude."""
+AM_FREQUENCY_RANGE = (1e-6, 1e6)
+"""``AM:INT:FREQ`` range [Hz]."""
+AM_FUNCTIONS = {"SIN": "SIN", "SINUSOID": "SIN", "SQU": "SQU", "SQUARE": "SQU", "TRI": "TRI", "TRIANGLE": "TRI",
+                "RAMP": "RAMP", "NRAM": "NRAM", "NRAMP": "NRAM", "ARB": "ARB"}
+"""Modulating shapes of ``AM:INT:FUNC`` the simulator plays (NOISe and PRBS are refused)."""
+ARB_POINTS_RANGE = (MIN_POINTS, 1_000_000)
+"""Points of an arbitrary waveform in volatile memory [-]."""
+ARB_FILTERS = {"NORM": "NORM", "NORMAL": "NORM", "STEP": "STEP", "OFF": "OFF"}
+MODULATION_SAMPLES = 256
+"""Samples per period of a standard modulating shape (SIN, SQU, ...) as the simulator plays it [-]."""
 
 
 @dataclass(frozen=True)
@@ -76,6 +97,18 @@ class GeneratorState:
     burst_cycles: int = 1
     burst_period: float = 0.01
     trigger_source: str = "IMM"
+    am: bool = False
+    am_function: str = "SIN"
+    am_frequency: float = 100.0
+    am_depth: float = 100.0
+    arb: str | None = None
+    arb_sample_rate: float = 40e3
+    arb_filter: str = "STEP"
+
+    @property
+    def modulation_peak(self) -> float:
+        """Largest envelope factor (1 + d m) / 2 over m in [-1, 1] with AM on, at least 1 [-]."""
+        return max(1.0, (1 + self.am_depth / 100) / 2) if self.am else 1.0
 
     @property
     def open_circuit_gain(self) -> float:
@@ -86,8 +119,8 @@ class GeneratorState:
     @property
     def peak_voltage(self) -> float:
         """Largest |output voltage| at the terminals into a high-impedance input,
-        (amplitude/2 + |offset|) times :attr:`open_circuit_gain` [V]."""
-        return (self.amplitude_vpp / 2 + abs(self.offset)) * self.open_circuit_gain
+        (amplitude/2 x :attr:`modulation_peak` + |offset|) times :attr:`open_circuit_gain` [V]."""
+        return (self.amplitude_vpp / 2 * self.modulation_peak + abs(self.offset)) * self.open_circuit_gain
 
     @property
     def terminal_amplitude_vpp(self) -> float:
@@ -149,10 +182,13 @@ class GeneratorDevice:
         translated through the amplifier gain.
     """
 
-    def __init__(self, peak_voltage_limit: float, on_burst=None):
+    def __init__(self, peak_voltage_limit: float, on_burst=None, on_change=None):
         self.peak_voltage_limit = peak_voltage_limit
         self.on_burst = on_burst
+        self.on_change = on_change
         self.state = GeneratorState()
+        self.arbs: dict[str, np.ndarray] = {}
+        """Waveforms in volatile memory: name (upper case) -> values in [-1, 1]."""
         self.errors: list[str] = []
         self._commands = [
             (header_regex(pattern), handler, forms)
@@ -176,6 +212,21 @@ class GeneratorDevice:
                 ("[SOURce#:]VOLTage[:LEVel][:IMMediate][:AMPLitude]", self._amplitude, SETTING),
                 ("OUTPut#:LOAD", self._load, SETTING),
                 ("OUTPut#[:STATe]", self._output, SETTING),
+                ("[SOURce#:]FUNCtion:ARBitrary", self._arb_select, SETTING),
+                ("[SOURce#:]FUNCtion:ARBitrary:SRATe", lambda argument: self._number_setting(
+                    argument, "arb_sample_rate", SAMPLE_RATE_RANGE), SETTING),
+                ("[SOURce#:]FUNCtion:ARBitrary:FILTer", lambda argument: self._choice_setting(
+                    argument, "arb_filter", ARB_FILTERS), SETTING),
+                ("[SOURce#:]DATA:ARBitrary#", lambda argument: self._arb_data(argument, dac=False), frozenset({"setting"})),
+                ("[SOURce#:]DATA:ARBitrary#:DAC", lambda argument: self._arb_data(argument, dac=True), frozenset({"setting"})),
+                ("[SOURce#:]DATA:VOLatile:CLEar", self._volatile_clear, EVENT),
+                ("[SOURce#:]DATA:VOLatile:CATalog", self._volatile_catalog, QUERY_ONLY),
+                ("[SOURce#:]AM:STATe", self._am_state, SETTING),
+                ("[SOURce#:]AM:SOURce", self._am_source, SETTING),
+                ("[SOURce#:]AM:INTernal:FUNCtion", self._am_function, SETTING),
+                ("[SOURce#:]AM:INTernal:FREQuency", lambda argument: self._number_setting(
+                    argument, "am_frequency", AM_FREQUENCY_RANGE), SETTING),
+                ("[SOURce#:]AM[:DEPTh]", lambda argument: self._number_setting(argument, "am_depth", AM_DEPTH_RANGE), SETTING),
             )
         ]
 
@@ -225,13 +276,20 @@ class GeneratorDevice:
         candidate = replace(self.state, **changes)
         if candidate.peak_voltage > self.peak_voltage_limit + 1e-12:
             raise CommandError(-222, "Data out of range")
-        self.state = candidate
+        if candidate != self.state:
+            self.state = candidate
+            self._changed()
+
+    def _changed(self) -> None:
+        if self.on_change is not None:
+            self.on_change()
 
     def _identify(self, argument):
         return IDENTITY
 
     def _reset(self, argument):
         self.state = GeneratorState()
+        self._changed()
 
     def _clear(self, argument):
         self.errors.clear()
@@ -351,3 +409,96 @@ class GeneratorDevice:
         if argument.upper() not in sources:
             raise CommandError(-224, "Illegal parameter value")
         self._apply(trigger_source=sources[argument.upper()])
+
+    def modulation(self) -> tuple[np.ndarray, float] | None:
+        """The modulating waveform as played: (values in [-1, 1] held over each sample, sample rate [Sa/s]),
+        or None when the output is not an amplitude-modulated sine."""
+        state = self.state
+        if not (state.output and state.am and state.function == "SIN"):
+            return None
+        if state.am_function == "ARB":
+            return self.arbs[state.arb], state.arb_sample_rate
+        phase = (np.arange(MODULATION_SAMPLES) + 0.5) / MODULATION_SAMPLES
+        shapes = {"SIN": np.sin(2 * np.pi * phase), "SQU": np.where(phase < 0.5, 1.0, -1.0),
+                  "TRI": 1 - 4 * np.abs(np.mod(phase + 0.25, 1.0) - 0.5), "RAMP": 2 * phase - 1, "NRAM": 1 - 2 * phase}
+        return shapes[state.am_function], MODULATION_SAMPLES * state.am_frequency
+
+    def _arb_data(self, argument, dac: bool):
+        name, _, values = argument.partition(",")
+        name = _arb_name(name)
+        if name in self.arbs:
+            raise CommandError(-221, "Settings conflict")
+        try:
+            numbers = np.array([float(item) for item in values.split(",")])
+        except ValueError:
+            raise CommandError(-104, "Data type error") from None
+        scale = DAC_FULL_SCALE if dac else 1.0
+        if dac and not np.all(numbers == np.round(numbers)):
+            raise CommandError(-104, "Data type error")
+        if not (ARB_POINTS_RANGE[0] <= len(numbers) <= ARB_POINTS_RANGE[1] and np.all(np.abs(numbers) <= scale)):
+            raise CommandError(-222, "Data out of range")
+        self.arbs[name] = numbers / scale
+        self._changed()
+
+    def _volatile_clear(self, argument):
+        if self.state.am and self.state.am_function == "ARB":
+            raise CommandError(-221, "Settings conflict")
+        self.arbs.clear()
+        self._apply(arb=None)
+
+    def _volatile_catalog(self, argument):
+        return ",".join(f'"{name}"' for name in self.arbs) or '""'
+
+    def _arb_select(self, argument):
+        if argument is None:
+            return f'"{self.state.arb or ""}"'
+        name = _arb_name(argument)
+        if name not in self.arbs:
+            raise CommandError(-224, "Illegal parameter value")
+        self._apply(arb=name)
+
+    def _am_state(self, argument):
+        if argument is None:
+            return "1" if self.state.am else "0"
+        states = {"1": True, "ON": True, "0": False, "OFF": False}
+        if argument.upper() not in states:
+            raise CommandError(-224, "Illegal parameter value")
+        if states[argument.upper()] and self.state.am_function == "ARB" and self.state.arb is None:
+            raise CommandError(-221, "Settings conflict")
+        self._apply(am=states[argument.upper()])
+
+    def _am_source(self, argument):
+        if argument is None:
+            return "INT"
+        if argument.upper() not in ("INT", "INTERNAL"):
+            raise CommandError(-224, "Illegal parameter value")
+
+    def _am_function(self, argument):
+        if argument is not None and AM_FUNCTIONS.get(argument.upper()) == "ARB" and self.state.am and self.state.arb is None:
+            raise CommandError(-221, "Settings conflict")
+        return self._choice_setting(argument, "am_function", AM_FUNCTIONS)
+
+    def _number_setting(self, argument, field: str, bounds: tuple):
+        """Query a number of the state, or set it within ``bounds`` (-222 outside)."""
+        if argument is None:
+            return _format(getattr(self.state, field))
+        value = _number(argument)
+        if not bounds[0] <= value <= bounds[1]:
+            raise CommandError(-222, "Data out of range")
+        self._apply(**{field: value})
+
+    def _choice_setting(self, argument, field: str, choices: dict):
+        """Query a word of the state, or set it to ``choices[ARGUMENT]`` (-224 for anything else)."""
+        if argument is None:
+            return getattr(self.state, field)
+        if argument.upper() not in choices:
+            raise CommandError(-224, "Illegal parameter value")
+        self._apply(**{field: choices[argument.upper()]})
+
+
+def _arb_name(text: str) -> str:
+    """A waveform name from a command's argument (quotes optional), upper case; -224 if not a valid name."""
+    name = text.strip().strip('"').strip("'")
+    if not NAME.fullmatch(name):
+        raise CommandError(-224, "Illegal parameter value")
+    return name.upper()

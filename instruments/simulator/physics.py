@@ -15,12 +15,17 @@ After a burst of N cycles at f the plate rings down from v0 = v_ss (1 - exp(-pi 
 (v_ss the steady velocity at f; the build-up of a linear mode with the steady state's Q),
 following dv/dt = -pi f_r v / Q(v) (:func:`workflow.damping.ringdown.decay_velocity`).
 The plate's temperature rises with the drift: T = T_0 + (f_r(t) - f_r(0)) / (df_r/dT).
+
+Under an amplitude-modulated drive the envelope follows the driven envelope equation of
+:mod:`workflow.damping.envelope` with this plate's own law, softening and resonance
+(:meth:`PlateResponse.envelope_model`).
 """
 
 from dataclasses import dataclass
 
 import numpy as np
 
+from workflow.damping.envelope import EnvelopeModel
 from workflow.damping.harmonic import self_consistent_amplitude, softened_amplitudes
 from workflow.damping.ringdown import decay_velocity
 from workflow.damping.laws import QuadraticLoss, quadratic_law_through
@@ -110,6 +115,10 @@ class PlateResponse:
         """Antinode velocity at the end of a burst of ``cycles`` cycles [m/s] (build-up of the module docstring)."""
         steady, _ = self.velocity(frequency, ceramic_voltage, time)
         return float(steady * (1 - np.exp(-np.pi * cycles / self.law.quality_factor(steady))))
+
+    def envelope_model(self, frequency: float, time: float) -> EnvelopeModel:
+        """The plate's envelope dynamics under a carrier at ``frequency`` [Hz], with the resonance at ``time`` [s]."""
+        return EnvelopeModel(float(self.resonance_at(time)), self.deflection_per_volt, self.law, self.softening, frequency)
 
     def ringdown(self, initial_velocity, decay_time, time):
         """Antinode velocity envelope ``decay_time`` [s] after a burst that ended at ``time`` [s] with ``initial_velocity`` [m/s]."""

@@ -16,7 +16,7 @@ from workflow.cli.options import Stopped
 from workflow.errors import TactileError
 from workflow.serialise import json_line
 
-COMMANDS = ("evaluate", "optimize", "maps", "fit_damping", "calibrate", "simulate", "measure", "run")
+COMMANDS = ("evaluate", "optimize", "maps", "fit_damping", "calibrate", "simulate", "measure", "render", "run")
 """Modules of :mod:`workflow.cli`, one per command, in the order ``--help`` lists them."""
 
 EXIT_USAGE = 2

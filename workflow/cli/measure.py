@@ -22,11 +22,16 @@ from workflow.cli.options import (
     add_force_option,
     add_built_plate_arguments,
     add_json_flag,
+    add_rendering_arguments,
+    add_texture_arguments,
     bench_settings,
     bounded,
     limit_text,
     built_plate_from_args,
     built_plate_model,
+    describe_texture,
+    rendering_model,
+    texture_and_motion,
 )
 from workflow.errors import TactileError
 from workflow.models.limits import LIMITS, point_problem
@@ -35,7 +40,7 @@ from workflow.units import MM
 
 DEFAULT_DATA_DIR = Path("measurements")
 """Folder of the logs when --out is not given, relative to the working directory."""
-PROCEDURES = ("resonance", "campaign", "voltage-sweep", "scan", "ringdown")
+PROCEDURES = ("resonance", "campaign", "voltage-sweep", "scan", "ringdown", "render")
 
 
 VOLTAGE = bounded(float, *LIMITS["campaign.voltages_v"], "V")
@@ -53,7 +58,7 @@ def _voltages(text: str) -> tuple:
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
         "measure",
-        help="run a bench procedure (resonance, campaign, voltage-sweep, scan, ringdown) and log it",
+        help="run a bench procedure (resonance, campaign, voltage-sweep, scan, ringdown, render) and log it",
         description="Run a measurement procedure against serial ports (--generator/--vibrometer) or the in-process "
         "simulator (--simulate). Each point is appended to a CSV log (docs/log-format.md) at once, by default "
         f"{DEFAULT_DATA_DIR}/<procedure>.csv in the working directory (a folder git ignores); rerunning the "
@@ -142,7 +147,25 @@ def register(subparsers) -> None:
     scan.add_argument("--frequency-hz", type=float, help="drive frequency [Hz] (default: see above)")
     _add_search_flags(scan, 15e3, 101)
     scan.add_argument("--figure", type=Path, help="the map figure (default: <out> with .png)")
-    for sub in (resonance, campaign, sweep, scan, ring):
+    render = procedures.add_parser(
+        "render", parents=[common], help="play a texture's drive, plain and pre-compensated, and record the envelope",
+        description="Render a texture on the bench (docs/rendering.md): its drive computed as by 'tactile render' "
+        "(the envelope model's resonance set to the measured one) is played as the generator's amplitude modulation "
+        "by an arbitrary waveform, first plain switching then pre-compensated, and the velocity envelope is captured "
+        "after each; the log holds the captures with the drive, wanted and predicted envelopes, and the texture, "
+        "model and drives in its metadata. Without --frequency-hz the resonance comes from the log being resumed or "
+        "from a resonance search (the --start-hz ... flags) logged to <out>-resonance.csv. Writes a figure of the "
+        "two playbacks side by side, and prints the envelope errors, rise and fall times and the contrast per period.")
+    add_texture_arguments(render)
+    add_rendering_arguments(render)
+    render.add_argument("--frequency-hz", type=float, help="the plate's small-amplitude resonance [Hz] (default: see above)")
+    _add_search_flags(render, 15e3, 101)
+    render.add_argument("--loops", type=bounded(float, 0.1, 100.0), default=2.0,
+                        help="loops of the drive each capture spans (256 samples), 0.1 to 100 (default 2)")
+    render.add_argument("--settle-s", type=bounded(float, 0.0, 60.0, "s"), default=0.5,
+                        help="time the drive loops before each capture [s], 0 to 60 (default 0.5)")
+    render.add_argument("--figure", type=Path, help="the comparison figure (default: <out> with .png)")
+    for sub in (resonance, campaign, sweep, scan, ring, render):
         sub.set_defaults(handler=run)
 
 
@@ -201,7 +224,7 @@ def _centre(args, station, metadata, out: Path, key: str) -> float:
 
     from instruments.procedures.sweeps import ResonancePlan
 
-    plan = ResonancePlan(args.start_hz, args.stop_hz, args.coarse_points, args.fine_points) if args.procedure == "scan" else ResonancePlan()
+    plan = ResonancePlan(args.start_hz, args.stop_hz, args.coarse_points, args.fine_points) if args.procedure in ("scan", "render") else ResonancePlan()
     frequency, search = working_frequency(station, out, key, metadata, args.restart, plan)
     for warning in () if search is None else search.warnings:
         print(f"tactile measure: warning: {warning}", file=sys.stderr)
@@ -218,7 +241,7 @@ def _check_plan_flags(args) -> None:
     for flag, value in positive.items():
         if value is not None and not value > 0:
             raise TactileError(f"{flag} must be positive, got {value:g}")
-    if args.procedure in ("resonance", "scan"):
+    if args.procedure in ("resonance", "scan", "render"):
         sweeps = {"--coarse-points": args.coarse_points, "--fine-points": args.fine_points}
         check_sizes(sweeps, sum(sweeps.values()), "--coarse-points + --fine-points")
     if args.procedure == "scan":
@@ -238,7 +261,7 @@ def _check_plan_flags(args) -> None:
         check_sizes({}, args.samples * len(args.voltages), "--samples x --voltages")
     elif args.procedure == "voltage-sweep":
         check_sizes({}, len(args.voltages), "--voltages")
-    if args.procedure in ("resonance", "scan") and not args.start_hz < args.stop_hz:
+    if args.procedure in ("resonance", "scan", "render") and not args.start_hz < args.stop_hz:
         raise TactileError(f"--start-hz {args.start_hz:g} must be below --stop-hz {args.stop_hz:g}")
 
 
@@ -259,7 +282,8 @@ def run(args):
                 raise
             _shut_down(station, signals)
         if figure is not None:
-            scan = _scan_figure(args, result.path, figure)
+            compared = (_scan_figure(args, result.path, figure) if result.procedure == "scan"
+                        else _render_comparison(result.path, figure))
     summary = {
         "log": str(result.path),
         "procedure": result.procedure,
@@ -273,7 +297,7 @@ def run(args):
     for warning in result.warnings:
         print(f"tactile measure: warning: {warning}", file=sys.stderr)
     if figure is not None:
-        summary.update(scan)
+        summary.update(compared)
     if not args.json:
         print(f"{result.procedure}: {result.measured} points measured, {result.resumed} already logged "
               f"({result.planned} planned); log: {result.path}")
@@ -295,6 +319,8 @@ def _measure(args, station, metadata: dict, out: Path):
     if args.procedure == "scan":
         return _scan(args, station, metadata, out)
     frequency = args.frequency_hz or _centre(args, station, metadata, out, "frequency")
+    if args.procedure == "render":
+        return _render(args, station, metadata, out, frequency)
     if args.procedure == "ringdown":
         from instruments.procedures.ringdown import RingdownPlan, ringdown
 
@@ -321,12 +347,13 @@ def _scan(args, station, metadata: dict, out: Path):
 
 @contextmanager
 def _figure_output(args, log: Path):
-    """Context manager: the scan's figure path (None for the other procedures), checked before any measurement.
+    """Context manager: the figure path of a scan or a render (None for the other procedures), checked before any
+    measurement.
 
     The figure may replace only a file tactile wrote there (the folder's record of its outputs,
     :mod:`workflow.pipeline.outputs`) unless ``--force``; it may be neither the log, nor its resonance log.
     """
-    if args.procedure != "scan":
+    if args.procedure not in ("scan", "render"):
         yield None
         return
     from matplotlib.backend_bases import FigureCanvasBase
@@ -341,7 +368,7 @@ def _figure_output(args, log: Path):
         raise TactileError(f"{option} {figure}: the figure needs a file name ending in one of "
                            f"{', '.join('.' + name for name in sorted(formats))}")
     if figure.resolve() in {log.resolve(), resonance_log_path(log).resolve()}:
-        raise TactileError(f"{option} {figure}: the figure would replace the scan's log; give another {option}")
+        raise TactileError(f"{option} {figure}: the figure would replace the {args.procedure}'s log; give another {option}")
     with output_folder(figure.parent, [glob.escape(figure.name)], force=args.force, option=option) as folder:
         yield folder / figure.name
 
@@ -365,6 +392,25 @@ def _scan_figure(args, log: Path, path: Path) -> dict:
     finally:
         plt.close(figure)
     return {"mac": mac, "figure": str(path), "nominal_fem_frequency_hz": nominal.resonance_frequency}
+
+
+def _render(args, station, metadata: dict, out: Path, frequency: float):
+    """Play the texture's plain and pre-compensated drives on the plate whose small-amplitude resonance is ``frequency``."""
+    from workflow.models.plate import ORIGINAL_PLATE
+    from workflow.pipeline.render_logs import measure_rendering
+
+    built = built_plate_from_args(args)
+    envelope = rendering_model(args, built.plate() if built else ORIGINAL_PLATE)
+    texture, motion = texture_and_motion(args)
+    return measure_rendering(station, out, texture, motion, envelope, frequency, args.loops, args.settle_s,
+                             {**metadata, **describe_texture(texture, motion)}, args.restart)
+
+
+def _render_comparison(log: Path, path: Path) -> dict:
+    """Compare a render log's captures with the wanted and predicted envelopes; the side-by-side figure at ``path``."""
+    from workflow.pipeline.render_logs import comparison_figure_file
+
+    return comparison_figure_file(log, path)
 
 
 def _shut_down(station, signals: StopSignals) -> str | None:
@@ -395,6 +441,15 @@ def _print_summary(procedure: str, summary: dict) -> None:
             temperature = "" if burst["temperature_c"] is None else f", plate {burst['temperature_c']:.2f} °C"
             print(f"  burst {burst['burst']} at {burst['voltage_v']:g} V: {burst['initial_velocity_m_s']:.4f} m/s "
                   f"at the burst's end{temperature}")
+    elif procedure == "render":
+        for name, c in summary["comparison"].items():
+            times = ", ".join(f"{label} {c[key]:.2f} ms" for label, key in (("rise", "rise_time_ms"), ("fall", "fall_time_ms"))
+                              if c[key] is not None)
+            contrast = f"; contrast per loop {', '.join(f'{x:.3f}' for x in c['contrast'])} (wanted " \
+                       f"{c['wanted_contrast'][0]:.3f})" if c.get("contrast") else ""
+            print(f"  {name}: envelope error {c['error']:.1%} measured, {c['predicted_error']:.1%} predicted; "
+                  f"measured - predicted {c['model_error']:.1%}; {times or 'no step'}{contrast}")
+        print(f"  figure: {summary['figure']}")
     elif procedure == "scan":
         print(f"  {summary['points']} points at {summary['frequency_hz']:.1f} Hz, {summary['voltage_v']:g} V: largest "
               f"deflection {summary['max_deflection_um']:.3f} µm at ({summary['max_x_mm']:g}, {summary['max_y_mm']:g}) mm")

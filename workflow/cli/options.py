@@ -592,3 +592,110 @@ def calibration_line(record: dict) -> str:
         f"{record['f_r_khz_p95']:.3f}), w_dyn {record['w_dyn_um']:.4f} µm (90 %: {record['w_dyn_um_p05']:.4f} to "
         f"{record['w_dyn_um_p95']:.4f}); surrogate error {c['surrogate_error'] * 100:.2f} % from {c['fem_evaluations']} FEM evaluations"
     )
+
+
+def _levels(text: str) -> tuple:
+    """``LOW,HIGH`` -> two finite numbers (order checked by the caller)."""
+    try:
+        values = tuple(float(item) for item in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 2 or not all(map(math.isfinite, values)):
+        raise argparse.ArgumentTypeError(f"expected two numbers LOW,HIGH, got {text!r}")
+    return values
+
+
+def add_texture_arguments(parser) -> None:
+    """The texture (a grating or a profile, in amplitude or in friction) and the finger's motion (docs/rendering.md)."""
+    from workflow.models.materials import MIN_USEFUL_DEFLECTION, TARGET_DEFLECTION
+    from workflow.pipeline.texture_files import FRICTION_COLUMNS, PROFILE_COLUMNS, TRACE_COLUMNS
+    from workflow.rendering.synthesis import ERROR_TARGET
+
+    group = parser.add_argument_group("texture and finger", "a grating (default) or a profile, in deflection amplitude "
+                                      "or, with --friction-curve, in friction ratio; the finger at a constant speed or "
+                                      "along a recorded trace")
+    texture = group.add_mutually_exclusive_group()
+    texture.add_argument("--period-mm", type=positive_float, help="a grating of this spatial period [mm] (default 2)")
+    texture.add_argument("--profile", metavar="CSV", help=f"a profile along the stroke: columns {','.join(PROFILE_COLUMNS)} "
+                         "(or position_mm,friction with --friction-curve), linear between rows")
+    group.add_argument("--duty", type=bounded(float, 0.01, 0.99), default=0.5,
+                       help="grating: share of each period at the high amplitude, 0.01 to 0.99 (default 0.5)")
+    default_levels = f"{MIN_USEFUL_DEFLECTION / UM:g},{TARGET_DEFLECTION / UM:g}"
+    group.add_argument("--levels-um", type=_levels, default=(MIN_USEFUL_DEFLECTION / UM, TARGET_DEFLECTION / UM),
+                       metavar="LOW,HIGH", help=f"grating: the two antinode deflection amplitudes [um], 0 <= LOW < HIGH "
+                       f"(default {default_levels}: the least useful friction reduction and the nominal target)")
+    group.add_argument("--friction-curve", metavar="CSV", help=f"your measured friction ratio against amplitude: columns "
+                       f"{','.join(FRICTION_COLUMNS)}, friction strictly monotonic (interpolated monotonically, PCHIP)")
+    group.add_argument("--levels-friction", type=_levels, metavar="F1,F2",
+                       help="grating: the two friction ratios instead of --levels-um (needs --friction-curve)")
+    finger = group.add_mutually_exclusive_group()
+    finger.add_argument("--speed-mm-s", type=positive_float, help="finger speed [mm/s] (default 100)")
+    finger.add_argument("--trace", metavar="CSV", help=f"recorded finger motion: columns {','.join(TRACE_COLUMNS)}, "
+                        "time strictly increasing")
+    group.add_argument("--error", type=bounded(float, 1e-3, 1.0), default=ERROR_TARGET,
+                       help=f"envelope error (RMS over the texture's swing) within which a grating period counts as "
+                       f"rendered, for the smallest period reported, 0.001 to 1 (default {ERROR_TARGET:g})")
+
+
+def add_rendering_arguments(parser) -> None:
+    """The plate's envelope model for rendering: ``--damping`` or a constant ``--q``, and the carrier."""
+    group = parser.add_argument_group("envelope model", "the plate's envelope dynamics (docs/rendering.md): the "
+                                      "posterior-median Q(v) of --damping, with the gain, resonance and softening of "
+                                      "its fit.json, or the beam model of the plate with a constant Q")
+    group.add_argument("--damping", metavar="POSTERIOR",
+                       help="posterior.npz (or its folder) from 'tactile fit-damping': its posterior-median Q(v), and the "
+                       "gain, resonance and softening of the fit.json beside it (a fit describes the plate it measured)")
+    group.add_argument("--q", type=bounded(float, *LIMITS["design.q"]), default=materials.PLATE_Q,
+                       help=f"constant quality factor without --damping, {limit_text('design.q')} "
+                       f"(default {materials.PLATE_Q:g})")
+    group.add_argument("--carrier-hz", type=positive_float,
+                       help="carrier frequency [Hz] (default: the resonance at the texture's highest amplitude)")
+
+
+def texture_and_motion(args) -> tuple:
+    """The texture and finger motion of :func:`add_texture_arguments`' flags."""
+    from workflow.pipeline.texture_files import grating_from_friction, read_friction_curve, read_profile, read_trace
+    from workflow.rendering.textures import ConstantSpeed, Grating
+
+    curve = read_friction_curve(args.friction_curve) if args.friction_curve else None
+    if args.levels_friction is not None and curve is None:
+        raise TactileError("--levels-friction needs --friction-curve (your measured friction against amplitude)")
+    if args.profile is not None:
+        texture = read_profile(args.profile, curve)
+    else:
+        period = (args.period_mm or 2.0) * MM
+        if args.levels_friction is not None:
+            texture = grating_from_friction(period, args.duty, args.levels_friction, curve)
+        else:
+            low, high = args.levels_um
+            if not 0 <= low < high:
+                raise TactileError(f"--levels-um needs 0 <= LOW < HIGH, got {low:g},{high:g}")
+            texture = Grating(period, args.duty, low * UM, high * UM)
+    motion = read_trace(args.trace) if args.trace else ConstantSpeed((args.speed_mm_s or 100.0) * MM)
+    return texture, motion
+
+
+def describe_texture(texture, motion) -> dict:
+    """The texture and motion as flat ``texture_*`` keys (log metadata, JSON)."""
+    from workflow.rendering.textures import Grating, Trace, loop_duration
+
+    keys = {"texture_loop_s": loop_duration(texture, motion),
+            "texture_levels_um": [level / UM for level in texture.levels]}
+    if isinstance(texture, Grating):
+        keys.update(texture_kind="grating", texture_period_mm=texture.period / MM, texture_duty=texture.duty)
+    else:
+        keys.update(texture_kind="profile", texture_points=len(texture.position))
+    if isinstance(motion, Trace):
+        keys.update(texture_finger="trace", texture_finger_samples=len(motion.time))
+    keys["texture_speed_mm_s"] = motion.typical_speed / MM
+    return keys
+
+
+def rendering_model(args, plate):
+    """The :class:`~workflow.pipeline.rendering.PlateEnvelope` of --damping or --q for ``plate``, with --carrier-hz."""
+    from workflow.pipeline.rendering import plate_envelope
+
+    envelope = plate_envelope(plate, args.q, args.damping)
+    if args.carrier_hz is not None:
+        envelope = type(envelope)(envelope.model.with_carrier(args.carrier_hz), envelope.source)
+    return envelope

@@ -317,6 +317,9 @@ def read_table(path, required: tuple = logformat.REQUIRED_COLUMNS, phase: bool =
             raise InputFileError(
                 f"{path}, line {header_number}: fields separated by {separator!r}; a log separates them by ','"
             )
+        if logformat.RENDER_TIME in header:
+            raise InputFileError(f"{path}: a render log ('tactile measure render': a texture played and its envelope), "
+                                 "not sweeps or ring-downs; it holds no damping campaign")
         columns = _column_indices(path, header_number, header, required, phase)
         table = {name: array("d") for name in columns}
         line_numbers, rows, dropouts = array("q"), 0, 0

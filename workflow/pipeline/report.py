@@ -291,6 +291,57 @@ def _beam_and_fem(designs) -> str:
     )
 
 
+def _texture_rendering(context: RunContext, renderings) -> str:
+    """What each recommended design renders (grating periods within 10 % at 50, 100, 200 mm/s) and draws."""
+    from workflow.pipeline.design_rendering import DESIGN_NOTE_SPEEDS
+    from workflow.rendering.synthesis import ERROR_TARGET
+
+    if not renderings:
+        return ""
+    first = next(iter(renderings.values()))
+    low, high = first.levels
+    speeds = " / ".join(f"{speed / MM:g}" for speed in DESIGN_NOTE_SPEEDS)
+    rows, loads = [], []
+    for hp, rendering in renderings.items():
+        periods = rendering.periods(ERROR_TARGET)
+        slow, fast = rendering.time_constants()
+        cells = [" / ".join(_period_text(periods[speed][name]) for speed in DESIGN_NOTE_SPEEDS)
+                 for name in ("precompensated", "plain")]
+        rows.append((f"{hp / MM:g}", f"{float(rendering.model.carrier) / KHZ:.3f}", f"{slow * 1e3:.2f} / {fast * 1e3:.2f}",
+                     *cells))
+        e = rendering.electrical
+        loads.append((f"{hp / MM:g}", f"{e['frequency_hz'] / KHZ:.3f}", f"{e['voltage_v']:.2f}", f"{e['q']:.1f}",
+                      f"{e['admittance_s'] * 1e3:.1f}", f"{e['current_a']:.3f}", f"{e['power_w']:.2f}",
+                      f"{e['apparent_power_va']:.2f}", f"{e['peak_current_a']:.3f}"))
+    return "\n\n".join([
+        "## Texture rendering and the amplifier",
+        f"A grating switches the deflection between {low / UM:g} µm (the least useful friction reduction) and "
+        f"{high / UM:g} µm (the target) as the finger crosses each period (50 % duty). The plate's envelope follows a "
+        "drive with the time constant Q(v)/(π f_r) (the fitted Q(v), posterior median, and softening): the "
+        "*pre-compensated* drive inverts that envelope equation, overdriving up to the voltage limit "
+        f"{first.voltage_limit:g} V on a rise and switching off on a fall, where *plain switching* steps the drive "
+        "between the two steady-state voltages (docs/rendering.md). Smallest grating period rendered within "
+        f"{ERROR_TARGET * 100:g} % envelope error (RMS over the swing) at finger speeds of {speeds} mm/s; longer periods "
+        "render better. Periods marked ~ are extrapolated beyond the longest period evaluated (the error then falls "
+        "as 1/√period), ≤ means already met at the shortest one.",
+        table(("h_p [mm]", "carrier [kHz]", f"time constant at {low / UM:g} / {high / UM:g} µm [ms]",
+               f"period [mm], pre-compensated, at {speeds} mm/s", f"period [mm], plain switching, at {speeds} mm/s"),
+              rows),
+        figure(context, "rendering_periods.png", "Envelope error of gratings against their period in time, per design"),
+        "**Amplifier** (coupled piezoelectric FEM's admittance Y at its resonance with the fitted Q(v) at the working "
+        f"amplitude, {high / UM:g} µm at the voltage it needs): current amplitude |Y| V, real power Re(Y) V²/2 and "
+        f"apparent power |Y| V²/2; a pre-compensated rise drives up to {first.voltage_limit:g} V, which the peak "
+        "current bounds (blocked capacitance at the limit plus the motional current of the working amplitude).",
+        table(("h_p [mm]", "f_r coupled [kHz]", "V [V peak]", "Q(v)", "admittance magnitude [mS]", "current [A]", "power [W]",
+               "apparent power [VA]", "peak current [A]"), loads),
+    ])
+
+
+def _period_text(found: tuple) -> str:
+    period, how = found
+    return {"at most": "≤ ", "extrapolated": "~"}.get(how, "") + f"{period / MM:.3g}"
+
+
 def _calibrated_designs(context: RunContext, designs) -> str:
     """The recommended designs as the calibration predicts them (nothing without ``--calibration``)."""
     if not designs:
@@ -795,6 +846,7 @@ def _configuration(context: RunContext) -> str:
 
 SECTIONS = [
     ("recommended_design", _recommended_design),
+    ("texture_rendering", _texture_rendering),
     ("calibrated_designs", _calibrated_designs),
     ("loop_second_plate", loop_section),
     ("case_study", case_study_section),

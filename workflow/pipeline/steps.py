@@ -380,6 +380,44 @@ def recommended_design_figures(context: RunContext, recommendation) -> None:
         save_figure(admittance_figure(curves), context.figure_path("admittance.png"))
 
 
+def texture_rendering(context: RunContext) -> dict:
+    """Per recommended design: the grating periods it renders within 10 % at 50, 100 and 200 mm/s and its
+    electrical load at the working amplitude (:func:`workflow.pipeline.rendering.design_rendering`).
+
+    The gratings run between the least useful deflection and the target, within the bench's voltage limit, with
+    the fitted Q(v) (posterior median) and softening; the load comes from the coupled piezoelectric FEM at the
+    design's geometry (the run's accuracy when its FEM is the coupled one, else the survey accuracy).
+    """
+    from dataclasses import replace
+
+    from workflow.damping.fit import parameter_summary
+    from workflow.models.materials import MIN_USEFUL_DEFLECTION
+    from workflow.optimise.fem_model import FemModel
+    from workflow.pipeline.design_rendering import design_rendering
+
+    config = context.config
+    fit = context.results["damping_fit"]
+    law = fit.answer.median_law()
+    softening = parameter_summary(fit.best).get("kappa", {}).get("median", 0.0)
+    accuracy = "accuracy" if config["fem"]["piezo"] == "coupled" else "survey_accuracy"
+    coupled = FemModel(q=config["design"]["q"], voltage=config["design"]["voltage_v"],
+                       settings=replace(fem_settings(config, accuracy), piezo="coupled"), cache=context.cache,
+                       scheduler=context.scheduler, progress=True)
+    designs = context.results["recommended_design"].designs
+    results = coupled.evaluate_plates([design.plate for design in designs.values()])
+    levels = (MIN_USEFUL_DEFLECTION, config["design"]["target_deflection_um"] * UM)
+    limit = config["simulator"]["ceramic_voltage_limit_v"]
+    return {hp: design_rendering(design, law, softening, limit, result, levels)
+            for (hp, design), result in zip(designs.items(), results)}
+
+
+def texture_rendering_figures(context: RunContext, renderings: dict) -> None:
+    """Envelope error of gratings against their period, per design."""
+    from workflow.pipeline.figures.rendering import period_error_figure
+
+    save_figure(period_error_figure(renderings), context.figure_path("rendering_periods.png"))
+
+
 def calibrated_designs(context: RunContext) -> dict:
     """The recommended designs' f_r and w_dyn as the calibration (``--calibration``) predicts them, with 90 %
     intervals (docs/calibration.md); empty without a calibration.  Q and voltage are the run's."""
@@ -486,6 +524,8 @@ STEPS: List[Step] = [
     Step("FEM optimum per h_p (space mapping)", "fem_optima", fem_optima, fem_optima_figures),
     Step("recommended design per h_p", "recommended_design", recommended_design, recommended_design_figures,
          cacheable=False),
+    Step("texture rendering and electrical load per design", "texture_rendering", texture_rendering,
+         texture_rendering_figures, cacheable=False),
     Step("calibrated predictions of the designs (--calibration)", "calibrated_designs", calibrated_designs, cacheable=False),
     Step("loop: plate #1 built and measured on the simulator", "loop_first_plate", loop.first_plate,
          loop.first_plate_figures, cacheable=False),
