@@ -7,6 +7,7 @@ from workflow.errors import TactileError
 from workflow.models.fem import evaluate_fem
 from workflow.models.fem.accuracy import (
     LEVELS,
+    RICHARDSON_RATE,
     FemAccuracy,
     estimate_error,
     evaluate_to_accuracy,
@@ -71,7 +72,7 @@ def small_thin_ladder():
 
 def _check_estimates(ladder, estimated_levels, reference_levels):
     converged, rate = extrapolated_limit([ladder[k].frequency for k in reference_levels], reference_levels)
-    assert rate >= 2.0, "the estimate's assumed rate must not exceed the observed one"
+    assert rate >= RICHARDSON_RATE, "the estimate's assumed rate must not exceed the observed one"
     for level in estimated_levels:
         estimate = estimate_error(ladder[level], ladder[level - 1], level, level - 1)
         true = ladder[level].frequency / converged - 1

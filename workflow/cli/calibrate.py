@@ -50,7 +50,7 @@ def run(args) -> dict:
         print(f"tactile calibrate: warning: {warning}", file=sys.stderr)
     fem = {"q": materials.PLATE_Q, "voltage_v": materials.DESIGN_VOLTAGE, "accuracy": args.accuracy, "piezo": args.piezo}
     model = FemModel(q=fem["q"], voltage=fem["voltage_v"], settings=fem_accuracy(args), cache=EvaluationCache(),
-                     scheduler="synchronous", progress=True)
+                     progress=True)
     input_paths = {Path(p).resolve() for p in args.logs}
     with output_folder(args.out, CALIBRATION_OUTPUTS, force=args.force) as out:
         nominal = [r.frequency for r in model.evaluate_plates([plate.plate for plate in plates])]

@@ -108,7 +108,7 @@ def calibration_model(context: RunContext):
     fem = {"q": design["q"], "voltage_v": design["voltage_v"], "accuracy": accuracy,
            "piezo": context.config["fem"]["piezo"]}
     model = FemModel(q=fem["q"], voltage=fem["voltage_v"], settings=FemAccuracy(target=fem["accuracy"], piezo=fem["piezo"]),
-                     cache=context.cache, scheduler="synchronous", progress=True)
+                     cache=context.cache, scheduler=context.scheduler, progress=True)
     return model, fem
 
 

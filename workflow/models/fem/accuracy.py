@@ -10,8 +10,8 @@ A mesh *level* k is the polynomial degree of its spectral elements, along x, y a
   a short wavelength gets more of them and a transverse mode near the working one is resolved.
 
 Raising the degree on a fixed mesh converges algebraically, as a power of the degree (the bimaterial
-corners at the ceramic ends are singular: observed rate 2.4 on a thin one-ceramic plate, faster on the
-designs).  A result's error is estimated from the same geometry at a lower level by Richardson
+corners at the ceramic ends are singular: observed rates 2.15-2.5 on a thin one-ceramic plate, 3 and
+more on the designs).  A result's error is estimated from the same geometry at a lower level by Richardson
 extrapolation in the degree with the conservative rate :data:`RICHARDSON_RATE`:
 e = (v_coarse - v_k) / ((k / k_coarse)^p - 1), the estimated v_k - v_converged (validated against
 converged solutions in tests/test_fem_accuracy.py and docs/fem.md).  :func:`evaluate_to_accuracy`
@@ -43,7 +43,9 @@ GRADING = 0.85
 WIDTH_ELEMENT_RATIO = 2.5
 """Element length across the width over the mean element length along a ceramic [-]."""
 RICHARDSON_RATE = 2.0
-"""Assumed convergence rate p of the frequency and deflection in the degree [-] (observed 2.4 and more)."""
+"""Assumed convergence rate p of the frequency and deflection in the degree [-]: below the lowest observed, 2.15 on a
+thin one-ceramic plate at degrees 4-6 (2.5 at degrees 3-5, 3 and more on the designs; tests/test_fem_accuracy.py
+checks it)."""
 DEFAULT_ACCURACY = 2e-3
 """Default target relative frequency error of an FEM evaluation [-] (0.2 %)."""
 SURVEY_ACCURACY = 5e-3
