@@ -37,7 +37,7 @@ def pytest_report_header(config):
 
 
 def pytest_sessionstart(session):
-    if os.environ.get("TACTILE_REQUIRE_INSTALLED") == "1" and _package_folder().is_relative_to(CHECKOUT):
+    if os.environ.get("TACTILE_REQUIRE_INSTALLED") == "1" and _package_folder() == CHECKOUT / "workflow":
         raise pytest.UsageError(f"workflow was imported from the checkout ({_package_folder()}), not from an "
                                 "installed package: run the installed environment's pytest, not python -m pytest")
 
