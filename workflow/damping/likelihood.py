@@ -111,9 +111,9 @@ class ParameterLayout:
         """The law's sampled parameter names (``q0``, ``alpha``, ...)."""
         return tuple(name for name in parameter_names(LAWS[self.law_name]) if name in SAMPLED_LAW_PARAMETERS)
 
-    @property
+    @cached_property
     def names(self) -> Tuple[str, ...]:
-        """All sampled coordinates, in order."""
+        """All sampled coordinates, in order (computed once)."""
         law = tuple(SAMPLED_LAW_PARAMETERS[name] for name in self.law_parameters)
         sweeps = ("ln_gain",) + tuple(f"f_r_{k}" for k in range(self.n_sweeps)) if self.n_sweeps else ()
         effects = ("kappa",) * self.forward.softening + ("drift_rate",) * self.forward.drift
