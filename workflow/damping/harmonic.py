@@ -130,9 +130,10 @@ def self_consistent_roots(deflection_at_q, quality_factor, angular_frequency, rt
                           slope=None):
     """ln w of :func:`self_consistent_deflection` (-inf where D(Q(0)) = 0), and the slope dH/du there [-].
 
-    With ``start`` (a guess of ln w) and ``slope`` (of dH/du at the root), the iteration starts with the Newton step
-    from ``start`` (kept in the bracket) instead of the step just below u_0: from a neighbouring walker's root and
-    slope, 3-5 residual evaluations instead of 7-8; the root is unique, so only the tolerance separates the two.
+    With ``start`` (a guess of ln w, at most u_0) and ``slope`` (of dH/du at the root), the iteration starts with
+    the Newton step from ``start``, bracketed by dH/du >= 1 (the root lies within |H(start)| of it): from a
+    neighbouring walker's root and slope, about 4 residual evaluations instead of 8; the root is unique, so only
+    the tolerance separates the two.
     """
     omega = np.asarray(angular_frequency, dtype=float)
     w0 = np.asarray(deflection_at_q(quality_factor(np.zeros_like(omega))), dtype=float)
@@ -144,14 +145,16 @@ def self_consistent_roots(deflection_at_q, quality_factor, angular_frequency, rt
         return u - np.log(np.where(driven, deflection, 1.0))
 
     u0 = np.log(np.where(driven, w0, 1.0))
-    h0 = residual(u0)
-    low, high = u0 - h0, u0
     if start is None:
+        h0 = residual(u0)
+        low, high = u0 - h0, u0
         u1 = u0 - FIRST_STEP
         h1 = residual(u1)
-    else:  # a point beside the start, on the line of the given slope: the first secant step is Newton's
-        u1 = np.clip(np.where(driven, start, u0), low, high)
+    else:  # dH/du >= 1 brackets the root within |H| of the start; a point beside it on the line of the given
+        # slope makes the first secant step Newton's
+        u1 = np.minimum(np.where(driven, start, u0), u0)
         h1 = residual(u1)
+        low, high = np.where(h1 > 0, u1 - h1, u1), np.minimum(np.where(h1 > 0, u1, u1 - h1), u0)
         u0, h0 = u1 + FIRST_STEP, h1 + np.where(np.asarray(slope) >= 1, slope, 1.0) * FIRST_STEP
     with np.errstate(divide="ignore", invalid="ignore"):
         rate = (h1 - h0) / (u1 - u0)

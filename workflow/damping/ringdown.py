@@ -122,7 +122,10 @@ def integrated_decay(quality_factor, frequency, initial_velocity, time, nodes=QU
     Vectorised over everything: the arguments broadcast to one shape, and the table runs once over
     the distinct times (a record's samples are shared by its bursts).
     """
-    f, v0, t = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (frequency, initial_velocity, time)))
+    f, v0, t = (np.asarray(x, dtype=float) for x in (frequency, initial_velocity, time))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        shape = np.broadcast_shapes(f.shape, v0.shape, t.shape, np.shape(quality_factor(v0)))  # with Q's parameters
+    f, v0, t = (np.broadcast_to(x, shape) for x in (f, v0, t))
     grid, where = np.unique(t, return_inverse=True)
     values = decay_on_grid(quality_factor, f, v0, grid, nodes)
     return np.take_along_axis(values, where.reshape((1,) + t.shape), axis=0)[0]
@@ -152,14 +155,17 @@ def decay_on_grid(quality_factor, frequency, initial_velocity, grid, nodes=QUADR
     whose slope dx/dt = pi f / Q is known at every node.  Accuracy: |delta ln v| < 1e-7 over a record that
     falls by e^-5 (tested against the closed forms).
     """
-    f, v0 = np.broadcast_arrays(np.asarray(frequency, dtype=float), np.asarray(initial_velocity, dtype=float))
+    f, v0 = (np.asarray(x, dtype=float) for x in (frequency, initial_velocity))
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        q_start = quality_factor(v0)
+    f, v0 = (np.broadcast_to(x, np.broadcast_shapes(f.shape, v0.shape, q_start.shape)) for x in (f, v0))
     grid = np.asarray(grid, dtype=float)
     end = float(grid[-1]) if grid.size else 0.0
     if end <= 0.0:
         return np.broadcast_to(v0, grid.shape + v0.shape).copy()
     rate = np.pi * f
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        drop = np.minimum(_largest_fall(quality_factor, v0, rate * end), MAX_DROP)
+        drop = np.minimum(_largest_fall(quality_factor, v0, rate * end, q_start), MAX_DROP)
         fall = drop * np.linspace(0.0, 1.0, nodes + 1).reshape((-1,) + (1,) * v0.ndim)
         q = quality_factor(v0 * np.exp(-fall))
         elapsed = _cumulative_integral(q, drop / nodes) / rate  # t at each node
@@ -174,15 +180,15 @@ FALL_STEPS, FALL_PASSES = 8, 2
 """Steps and passes of the lower Riemann sums that bound the fall of ln v over a record (:func:`_largest_fall`) [-]."""
 
 
-def _largest_fall(quality_factor, initial_velocity, budget):
-    """An upper bound of x = ln(v0 / v) at the end of a record, ``budget`` = pi f t_end [-].
+def _largest_fall(quality_factor, initial_velocity, budget, q_start):
+    """An upper bound of x = ln(v0 / v) at the end of a record, ``budget`` = pi f t_end [-]; ``q_start`` = Q(v0).
 
     Q only grows as v falls, so pi f t(x) = integral_0^x Q(v0 e^-u) du is bounded below by its left Riemann sum
     on any grid: from the first bound budget / Q(v0), each pass sums Q on :data:`FALL_STEPS` equal steps up to
     the current bound and moves the bound to where that sum spends the budget (one Q(v) call per pass).  Tighter
     than budget / Q(v0) where Q rises during the decay, so the quadrature's nodes fall where the decay goes.
     """
-    bound = budget / quality_factor(initial_velocity)
+    bound = budget / q_start  # Q(v0)
     fraction = (np.arange(FALL_STEPS) / FALL_STEPS).reshape((-1,) + (1,) * np.ndim(bound))
     for _ in range(FALL_PASSES):
         width = bound / FALL_STEPS
