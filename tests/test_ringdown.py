@@ -151,7 +151,8 @@ def test_joint_sweeps_and_ringdowns_recover_the_law_softening_and_drift(tmp_path
 
 
 def test_laws_without_a_closed_form_decay_are_integrated():
-    """The flexible law (the misfit fallback) has no alpha: its decay is integrated, not a closed form."""
+    """The flexible law (the misfit fallback) has no alpha: its decay is computed segment by segment, not by the power
+    laws' closed forms."""
     from workflow.damping.laws import MonotoneSpline, QuadraticLoss
     from workflow.damping.ringdown import decay_velocity
 
