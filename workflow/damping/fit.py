@@ -323,7 +323,8 @@ def initial_guess(data: FitData, sweeps: SweepEstimates) -> Tuple[np.ndarray, np
 
 
 def maximum_a_posteriori(data: FitData, start: np.ndarray, scale: np.ndarray) -> np.ndarray:
-    """The MAP by L-BFGS-B in standardised coordinates z = (theta - start) / scale.
+    """The MAP by L-BFGS-B in standardised coordinates z = (theta - start) / s, s the coordinate ``scale``
+    rescaled by the curvature at each stage's start (:func:`_maximise`).
 
     Two stages: the physical parameters with the noise held at its starting value (so
     the optimiser cannot explain the sweeps away as noise), then everything.  The
