@@ -177,3 +177,18 @@ def test_map_screening_finds_the_flexible_law_close_to_the_threshold_truth(thres
     log_likelihood = {name: map_fit(threshold_campaign, name, sweeps)[3] for name in ("quadratic", "threshold", "flexible")}
     assert log_likelihood["threshold"] - log_likelihood["quadratic"] > 20
     assert log_likelihood["flexible"] > log_likelihood["threshold"] - 3
+
+
+def test_the_flexible_law_summed_as_hinges_is_its_clipped_segments():
+    """The loss is summed as hinges on cached segments; written out segment by segment (clipped shares of each rise,
+    the last continued), for walker-shaped rises and velocities beyond v_top, it is the same law."""
+    rng = np.random.default_rng(3)
+    rises = rng.uniform(0.0, 0.01, (8, 5, 1))
+    law = MonotoneSpline(rng.uniform(80.0, 300.0, (5, 1)), *rises, v_top=0.3, v_first=0.08)
+    velocity = np.linspace(0.0, 0.5, 101)
+    squared = np.square(MonotoneSpline.knots(0.3, 0.08))
+    expected = 1 / law.q0 + sum(
+        rise * np.clip((velocity**2 - low) / (high - low), 0.0, np.inf if j == 7 else 1.0)
+        for j, (rise, low, high) in enumerate(zip(rises, squared, squared[1:]))
+    )
+    assert np.allclose(law.loss(velocity), expected, rtol=1e-13, atol=0)

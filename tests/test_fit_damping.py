@@ -222,3 +222,30 @@ def test_damping_option_on_evaluate_and_optimize(tmp_path, capsys):
         assert_readable(out)
     status, _, err = run_cli(capsys, "optimize", "--hp-mm", "1", "--damping", tmp_path / "missing.npz")
     assert status != 0 and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+def test_autocorrelation_times_are_emcee_s_over_every_lag_or_the_lags_the_window_needs():
+    from emcee.autocorr import integrated_time
+
+    from workflow.damping.fit import autocorrelation_times
+
+    rng = np.random.default_rng(0)
+    noise = rng.standard_normal((3000, 12, 3))
+    chain = np.empty_like(noise)
+    chain[0] = noise[0]
+    for step in range(1, len(chain)):
+        chain[step] = np.array([0.5, 0.9, 0.98]) * chain[step - 1] + noise[step]
+    full = autocorrelation_times(chain)
+    assert np.allclose(full, integrated_time(chain, tol=0), rtol=1e-5)
+    assert np.allclose(autocorrelation_times(chain, lags=int(20 * full.max())), full, rtol=1e-5)
+    assert np.allclose(autocorrelation_times(chain, lags=5), full, rtol=1e-5)  # window beyond the lags: every lag
+
+
+def test_the_preconditioned_map_search_converges_the_flexible_law_to_at_least_the_quadratic_optimum(campaign):
+    """The flexible law holds the quadratic law exactly (equal slopes in v^2): its MAP cannot be worse than the
+    quadratic one's, unless the search stopped early (the unpreconditioned one crawled for ~850 iterations)."""
+    from workflow.damping.fit import map_fit
+
+    sweeps = sweep_estimates(campaign)
+    quadratic, flexible = (map_fit(campaign, name, sweeps) for name in ("quadratic", "flexible"))
+    assert flexible[3] >= quadratic[3] - 1e-3

@@ -76,6 +76,12 @@ def self_consistent_amplitude(static_amplitude, frequency, resonance_frequency, 
     numpy.ndarray
         The deflection amplitude w [m], broadcast shape of the inputs and Q's parameters.
     """
+    return self_consistent_deflection(single_mode_deflection(static_amplitude, frequency, resonance_frequency),
+                                      quality_factor, 2 * np.pi * np.asarray(frequency, dtype=float), rtol, max_iter)
+
+
+def single_mode_deflection(static_amplitude, frequency, resonance_frequency):
+    """D(Q) = w_s / sqrt((1 - r^2)^2 + (r / Q)^2), r = f / f_r, of one driven mode, as a function of Q [m]."""
     w_s, f, f_r = (np.asarray(x, dtype=float) for x in (static_amplitude, frequency, resonance_frequency))
     ratio2 = (f / f_r) ** 2
     detuning2 = (1 - ratio2) ** 2
@@ -83,7 +89,7 @@ def self_consistent_amplitude(static_amplitude, frequency, resonance_frequency, 
     def deflection_at_q(q):
         return w_s / np.sqrt(detuning2 + ratio2 / q**2)
 
-    return self_consistent_deflection(deflection_at_q, quality_factor, 2 * np.pi * f, rtol, max_iter)
+    return deflection_at_q
 
 
 def self_consistent_deflection(deflection_at_q, quality_factor, angular_frequency, rtol=1e-12, max_iter=50):
@@ -117,25 +123,47 @@ def self_consistent_deflection(deflection_at_q, quality_factor, angular_frequenc
         If some element has not reached ``rtol`` after ``max_iter`` iterations (a Q(v)
         increasing with v, a D decreasing in Q, or non-finite inputs).
     """
+    return np.exp(self_consistent_roots(deflection_at_q, quality_factor, angular_frequency, rtol, max_iter)[0])
+
+
+def self_consistent_roots(deflection_at_q, quality_factor, angular_frequency, rtol=1e-12, max_iter=50, start=None,
+                          slope=None):
+    """ln w of :func:`self_consistent_deflection` (-inf where D(Q(0)) = 0), and the slope dH/du there [-].
+
+    With ``start`` (a guess of ln w, at most u_0) and ``slope`` (of dH/du at the root), the iteration starts with
+    the Newton step from ``start``, bracketed by dH/du >= 1 (the root lies within |H(start)| of it): from a
+    neighbouring walker's root and slope, about 4 residual evaluations instead of 8; the root is unique, so only
+    the tolerance separates the two.
+    """
     omega = np.asarray(angular_frequency, dtype=float)
-    start = np.asarray(deflection_at_q(quality_factor(np.zeros_like(omega))), dtype=float)
-    omega, start = np.broadcast_arrays(omega, start)
-    driven = start != 0  # NaN stays in and is reported
+    w0 = np.asarray(deflection_at_q(quality_factor(np.zeros_like(omega))), dtype=float)
+    omega, w0 = np.broadcast_arrays(omega, w0)
+    driven = w0 != 0  # NaN stays in and is reported
 
     def residual(u):
         deflection = deflection_at_q(quality_factor(omega * np.exp(u)))
         return u - np.log(np.where(driven, deflection, 1.0))
 
-    u0 = np.log(np.where(driven, start, 1.0))
-    h0 = residual(u0)
-    low, high = u0 - h0, u0
-    u1 = u0 - FIRST_STEP
-    h1 = residual(u1)
+    u0 = np.log(np.where(driven, w0, 1.0))
+    if start is None:
+        h0 = residual(u0)
+        low, high = u0 - h0, u0
+        u1 = u0 - FIRST_STEP
+        h1 = residual(u1)
+    else:  # dH/du >= 1 brackets the root within |H| of the start; a point beside it on the line of the given
+        # slope makes the first secant step Newton's
+        u1 = np.minimum(np.where(driven, start, u0), u0)
+        h1 = residual(u1)
+        low, high = np.where(h1 > 0, u1 - h1, u1), np.minimum(np.where(h1 > 0, u1, u1 - h1), u0)
+        u0, h0 = u1 + FIRST_STEP, h1 + np.where(np.asarray(slope) >= 1, slope, 1.0) * FIRST_STEP
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rate = (h1 - h0) / (u1 - u0)
     for _ in range(max_iter):
         done = np.abs(h1) <= rtol
         if np.all(done):
-            return np.where(driven, np.exp(u1), 0.0)
+            return np.where(driven, u1, -np.inf), rate
         with np.errstate(divide="ignore", invalid="ignore"):  # h1 == h0 where done (held below)
+            rate = np.where(done, rate, (h1 - h0) / (u1 - u0))
             secant = u1 - h1 * (u1 - u0) / (h1 - h0)
         u = np.where((secant >= low) & (secant <= high), secant, 0.5 * (low + high))
         u = np.where(done, u1, u)
@@ -316,6 +344,51 @@ def softened_amplitudes(static_amplitude, frequency, resonance_frequency, soften
     numpy.ndarray (..., P)
         w [m]; NaN where no root was found.
     """
+    if not follow:
+        return np.exp(softened_roots(static_amplitude, frequency, resonance_frequency, softening, quality_factor,
+                                     rtol=rtol)[0])
+    residual_at, (w_s, f, f_r0) = _softened_residual(static_amplitude, frequency, resonance_frequency, softening,
+                                                      quality_factor)
+    if start is None:
+        start = response_amplitude(w_s[0], f[0] / f_r0[0], quality_factor(np.zeros_like(f[0])))
+    return np.exp(follow_branch(residual_at, np.log(start), len(f), rtol))
+
+
+def softened_roots(static_amplitude, frequency, resonance_frequency, softening, quality_factor, start=None, slope=1.0,
+                   rtol=1e-10):
+    """ln w of every point of :func:`softened_amplitudes` solved at once (no order: where :func:`single_valued`
+    holds), from ``start``, and the slope dH/du there (to start a neighbouring solve).
+
+    Parameters
+    ----------
+    static_amplitude, frequency, resonance_frequency, softening, quality_factor
+        As :func:`softened_amplitudes`.
+    start : array (..., P), optional
+        ln w to start each point's iteration from (default: the small-amplitude response); with one root, any start
+        reaches it, a near one in fewer residual evaluations (:func:`root_near`).
+    slope : array (..., P)
+        Estimate of dH/du at each root (1: far from resonance).
+    rtol : float
+
+    Returns
+    -------
+    roots, slope : numpy.ndarray (..., P)
+        ln w [-] (NaN where no root was found) and the last secant slope [-].
+    """
+    residual_at, (w_s, f, f_r0) = _softened_residual(static_amplitude, frequency, resonance_frequency, softening,
+                                                      quality_factor)
+    if start is None:
+        start = np.log(response_amplitude(w_s, f / f_r0, quality_factor(np.zeros_like(f))))
+    else:
+        start = np.moveaxis(np.broadcast_to(start, np.moveaxis(w_s, 0, -1).shape), -1, 0)
+    slope = np.moveaxis(np.broadcast_to(slope, np.moveaxis(w_s, 0, -1).shape), -1, 0)
+    roots, slope = root_near(lambda u: residual_at(Ellipsis, u), start, slope, rtol)
+    return np.moveaxis(roots, 0, -1), np.moveaxis(slope, 0, -1)
+
+
+def _softened_residual(static_amplitude, frequency, resonance_frequency, softening, quality_factor):
+    """H_p(u) = u - ln w_s + ln A / 2 of the softened single mode as ``residual_at(point index, u)``, and the inputs
+    with the points' axis first (w_s, f, f_r0)."""
     w_s, f, f_r0 = (np.moveaxis(x, -1, 0) for x in np.broadcast_arrays(
         *(np.asarray(x, dtype=float) for x in (static_amplitude, frequency, resonance_frequency))))
     kappa = np.asarray(softening, dtype=float)
@@ -327,13 +400,7 @@ def softened_amplitudes(static_amplitude, frequency, resonance_frequency, soften
         ratio2 = (f[index] / softened_resonance(f_r0[index], kappa, velocity)) ** 2
         return u - ln_static[index] + 0.5 * np.log((1 - ratio2) ** 2 + ratio2 / quality_factor(velocity) ** 2)
 
-    if not follow:
-        small = response_amplitude(w_s, f / f_r0, quality_factor(np.zeros_like(f)))
-        roots, _ = root_near(lambda u: residual_at(Ellipsis, u), np.log(small), 1.0, rtol)
-        return np.exp(np.moveaxis(roots, 0, -1))
-    if start is None:
-        start = response_amplitude(w_s[0], f[0] / f_r0[0], quality_factor(np.zeros_like(f[0])))
-    return np.exp(follow_branch(residual_at, np.log(start), len(f), rtol))
+    return residual_at, (w_s, f, f_r0)
 
 
 SINGLE_VALUED_GRID = 16

@@ -41,7 +41,13 @@ from typing import Optional, Tuple
 
 import numpy as np
 
-from workflow.damping.harmonic import self_consistent_amplitude, single_valued, softened_amplitudes
+from workflow.damping.harmonic import (
+    self_consistent_roots,
+    single_mode_deflection,
+    single_valued,
+    softened_amplitudes,
+    softened_roots,
+)
 from workflow.damping.laws import LAWS, MonotoneSpline, ThresholdLoss, parameter_names
 from workflow.damping.logs import CampaignLog
 from workflow.damping.ringdown import burst_decays, decay_quality_factors
@@ -89,6 +95,9 @@ FIRST_KNOT_RANGE = (0.1, 0.6)
 """Bounds of the flexible law's first knot, relative to its last one (the largest antinode velocity) [-]."""
 
 
+SOLVE_RTOL = 1e-10
+"""Tolerance of the self-consistent solves of the sweeps' forward model, on ln w [-]: 1e-10 of the deflection, far
+below any vibrometer's noise (0.5 % here)."""
 SOFTENING_MAX_SHIFT = 0.2
 """kappa's prior stops where f_r at the highest antinode velocity measured would fall by this fraction [-]."""
 V0_RANGE = (0.1, 10.0)
@@ -111,9 +120,9 @@ class ParameterLayout:
         """The law's sampled parameter names (``q0``, ``alpha``, ...)."""
         return tuple(name for name in parameter_names(LAWS[self.law_name]) if name in SAMPLED_LAW_PARAMETERS)
 
-    @property
+    @cached_property
     def names(self) -> Tuple[str, ...]:
-        """All sampled coordinates, in order."""
+        """All sampled coordinates, in order (computed once)."""
         law = tuple(SAMPLED_LAW_PARAMETERS[name] for name in self.law_parameters)
         sweeps = ("ln_gain",) + tuple(f"f_r_{k}" for k in range(self.n_sweeps)) if self.n_sweeps else ()
         effects = ("kappa",) * self.forward.softening + ("drift_rate",) * self.forward.drift
@@ -340,7 +349,7 @@ class SweepGrid:
 
 
 def predicted_velocity(theta, layout: ParameterLayout, frequency, voltage, sweep, time_offset=None,
-                       mode_factor=None, grid: Optional[SweepGrid] = None) -> np.ndarray:
+                       mode_factor=None, grid: Optional[SweepGrid] = None, warm: Optional["WarmStarts"] = None) -> np.ndarray:
     """Noise-free velocity amplitude at the measurement point, 2 pi f w |phi|, at each sweep row, one row per walker [m/s].
 
     Parameters
@@ -358,6 +367,8 @@ def predicted_velocity(theta, layout: ParameterLayout, frequency, voltage, sweep
         |phi| at the measurement point [-]; default 1.
     grid : SweepGrid, optional
         ``SweepGrid.of(sweep)``, when already computed (with softening).
+    warm : WarmStarts, optional
+        Solutions of walkers evaluated before, to start the softened solve from (:class:`WarmStarts`).
 
     Returns
     -------
@@ -370,28 +381,84 @@ def predicted_velocity(theta, layout: ParameterLayout, frequency, voltage, sweep
     if layout.forward.drift and time_offset is not None:
         resonance = resonance + layout.column(theta, "drift_rate") * time_offset
     if layout.forward.softening:
-        deflection = _softened_rows(theta, layout, gain * voltage, frequency, resonance, grid or SweepGrid.of(sweep))
+        deflection = _softened_rows(theta, layout, gain * voltage, frequency, resonance, grid or SweepGrid.of(sweep), warm)
     else:
-        deflection = self_consistent_amplitude(gain * voltage, frequency, resonance, layout.law(theta).quality_factor)
+        start, slope = (None, None) if warm is None else warm.nearest(theta)
+        roots, slope = self_consistent_roots(single_mode_deflection(gain * voltage, frequency, resonance),
+                                             layout.law(theta).quality_factor, 2 * np.pi * frequency, SOLVE_RTOL, start=start,
+                                             slope=slope)
+        deflection = np.exp(roots)
+        if warm is not None:
+            warm.add(theta, roots, slope)
     return 2 * np.pi * frequency * deflection * (1.0 if mode_factor is None else mode_factor)
 
 
-def _softened_rows(theta, layout: ParameterLayout, static, frequency, resonance, grid: SweepGrid) -> np.ndarray:
+def _softened_rows(theta, layout: ParameterLayout, static, frequency, resonance, grid: SweepGrid,
+                   warm: Optional["WarmStarts"] = None) -> np.ndarray:
     """Deflection at each row with softening: sweeps in measuring order; branch following only for the walkers
-    whose curves may fold (:func:`~workflow.damping.harmonic.single_valued`)."""
+    whose curves may fold (:func:`~workflow.damping.harmonic.single_valued`); the others solved at once, from the
+    nearest walker ``warm`` holds when given."""
     kappa, law = layout.column(theta, "kappa"), layout.law(theta)
     points = (static[:, grid.index], frequency[grid.index], resonance[:, grid.index])
     single = single_valued(*points, kappa, law.quality_factor).all(axis=1)
-    if single.all():
-        solved = softened_amplitudes(*points, kappa, law.quality_factor, follow=False)
-    else:
-        solved = np.empty(points[0].shape)
-        for follow in (False, True):
-            walkers = np.nonzero(single != follow)[0]
-            if walkers.size:
-                solved[walkers] = softened_amplitudes(points[0][walkers], points[1], points[2][walkers], kappa[walkers],
-                                                      layout.law(theta[walkers]).quality_factor, follow=follow)
+    solved = np.empty(points[0].shape)
+    at_once = np.nonzero(single)[0]
+    if at_once.size:
+        chosen, chosen_law = (slice(None), law) if single.all() else (at_once, layout.law(theta[at_once]))
+        start, slope = (None, None) if warm is None else warm.nearest(theta[chosen])
+        roots, slope = softened_roots(points[0][chosen], points[1], points[2][chosen], kappa[chosen],
+                                      chosen_law.quality_factor, start, 1.0 if slope is None else slope, SOLVE_RTOL)
+        solved[chosen] = np.exp(roots)
+        if warm is not None:
+            warm.add(theta[chosen], roots, slope)
+    walkers = np.nonzero(~single)[0]
+    if walkers.size:
+        solved[walkers] = softened_amplitudes(points[0][walkers], points[1], points[2][walkers], kappa[walkers],
+                                              layout.law(theta[walkers]).quality_factor, rtol=SOLVE_RTOL)
     return solved.reshape(len(solved), -1)[:, grid.position]
+
+
+class WarmStarts:
+    """The softened solve's roots (ln w on the sweep grid) and slopes of the walkers evaluated last, to start nearby
+    walkers from: a Markov chain's proposals and a gradient's batch lie close to walkers already solved.
+
+    Used only where the root is unique (:func:`~workflow.damping.harmonic.single_valued`): any start reaches it, a
+    near one in about 4 residual evaluations instead of 9 from the small-amplitude response.  The result differs
+    from a cold start's only within the solve's tolerance (1e-10 in ln w), so a log-probability with warm starts
+    depends on what was evaluated before at that level only.  Nearest: in the coordinates scaled by their spread
+    among the walkers held.
+
+    Parameters
+    ----------
+    capacity : int
+        Walkers held (the most recent, in a ring) [-].
+    """
+
+    def __init__(self, capacity: int = 64):
+        self.capacity = capacity
+        self.held = self.next = 0
+        self.theta = self.roots = self.slope = None
+
+    def nearest(self, theta: np.ndarray):
+        """(roots, slope) of the walker held nearest each row of ``theta`` (W, D); (None, None) when none is held."""
+        if not self.held:
+            return None, None
+        held = self.theta[: self.held]
+        spread = np.std(held, axis=0)
+        scaled, points = held / np.where(spread > 0, spread, 1.0), theta / np.where(spread > 0, spread, 1.0)
+        distance = np.sum(np.square(scaled), axis=1) - 2 * points @ scaled.T  # + |point|^2, the same for every walker held
+        near = np.argmin(distance, axis=1)
+        return self.roots[near], self.slope[near]
+
+    def add(self, theta: np.ndarray, roots: np.ndarray, slope: np.ndarray) -> None:
+        """Hold the walkers ``theta`` (W, D) whose every root was found (not NaN), with their ``roots`` and ``slope`` (W, ...)."""
+        good = np.nonzero(~np.any(np.isnan(roots.reshape(len(roots), -1)), axis=1))[0][-self.capacity:]
+        if self.theta is None:
+            self.theta, self.roots, self.slope = (np.empty((self.capacity,) + x.shape[1:]) for x in (theta, roots, slope))
+        place = (self.next + np.arange(len(good))) % self.capacity
+        self.theta[place], self.roots[place], self.slope[place] = theta[good], roots[good], slope[good]
+        self.next = (self.next + len(good)) % self.capacity
+        self.held = min(self.held + len(good), self.capacity)
 
 
 def predicted_decay(theta, layout: ParameterLayout, decays: DecayData) -> np.ndarray:
@@ -406,15 +473,16 @@ def _gaussian(measured, model, sigma_rel, sigma_abs):
     return -0.5 * ((measured - model) ** 2 / variance + np.log(2 * np.pi * variance))
 
 
-def pointwise_log_likelihood(theta, data: FitData) -> np.ndarray:
-    """ln p(v_i | theta) for each walker and measured value (sweep rows, then ring-down samples), shape (W, N)."""
+def pointwise_log_likelihood(theta, data: FitData, warm: Optional[WarmStarts] = None) -> np.ndarray:
+    """ln p(v_i | theta) for each walker and measured value (sweep rows, then ring-down samples), shape (W, N);
+    ``warm``: :class:`WarmStarts` for the softened solve."""
     theta = np.atleast_2d(theta)
     layout = data.layout
     parts = []
     if layout.n_sweeps:
         grid = data.sweep_grid if layout.forward.softening else None
         model = predicted_velocity(theta, layout, data.frequency, data.voltage, data.sweep, data.time_offset, data.mode_factor,
-                                   grid)
+                                   grid, warm)
         noise = (np.exp(layout.column(theta, name)) for name in ("ln_sigma_rel", "ln_sigma_abs"))
         parts.append(_gaussian(data.velocity[: data.n_rows], model, *noise))
     if data.decays is not None:
@@ -470,18 +538,18 @@ def log_prior(theta, layout: ParameterLayout) -> np.ndarray:
     return -0.5 * np.sum(np.square(np.diff(slopes, axis=1) / RANDOM_WALK_SCALE), axis=1)
 
 
-def log_probability(theta, data: FitData) -> np.ndarray:
+def log_probability(theta, data: FitData, warm: Optional[WarmStarts] = None) -> np.ndarray:
     """Log-posterior (up to a constant) of each walker, shape (W,); -inf outside the prior.
 
     Vectorised: ``theta`` is (W, D), as emcee passes it with ``vectorize=True``; a single
-    (D,) vector gives shape (1,).
+    (D,) vector gives shape (1,).  ``warm``: :class:`WarmStarts` for the softened solve (a chain, a MAP search).
     """
     theta = np.atleast_2d(theta)
     result = np.full(len(theta), -np.inf)
     inside = in_prior(theta, data)
     if inside.any():
         with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-            total = pointwise_log_likelihood(theta[inside], data).sum(axis=1) + log_prior(theta[inside], data.layout)
+            total = pointwise_log_likelihood(theta[inside], data, warm).sum(axis=1) + log_prior(theta[inside], data.layout)
         result[inside] = np.where(np.isfinite(total), total, -np.inf)
     return result
 

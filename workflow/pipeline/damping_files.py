@@ -1,6 +1,7 @@
 """Files of a damping fit: the posterior samples (what ``--damping`` loads), ``fit.json`` and figures."""
 
 import json
+import shutil
 from pathlib import Path
 
 from workflow import logformat
@@ -67,7 +68,7 @@ def write_fit(fit, out, figures: bool = True, protect=()) -> dict:
     sampled = (answer_fit.samples, answer_fit.data.layout.names) if answer_fit else (fit.best.samples, fit.best.data.layout.names)
     save_posterior(fit.answer, out / POSTERIOR_FILE, *sampled)
     _refuse_overwriting_input(out / INFERENCE_DATA_FILE, protect)
-    save_inference_data(fit.best.inference_data, out / INFERENCE_DATA_FILE)
+    shutil.copyfile(out / f"posterior_{fit.preferred}.nc", out / INFERENCE_DATA_FILE)  # the preferred law's, written above
     files = {
         "posterior": str(out / POSTERIOR_FILE),
         "inference_data": str(out / INFERENCE_DATA_FILE),

@@ -192,13 +192,13 @@ def corner_figure(law_fit: LawFit, bins: int = 30):
     columns = [(label, convert(natural[name]), log) for name, label, convert, log in _display_columns(law_fit)]
     edges = [np.geomspace(v.min(), v.max(), bins + 1) if log else np.linspace(v.min(), v.max(), bins + 1) for _, v, log in columns]
     n = len(columns)
-    figure, axes = plt.subplots(n, n, figsize=(1.9 * n + 1, 1.9 * n + 1), squeeze=False, layout="constrained")
+    size = 1.9 * n + 1
+    figure = plt.figure(figsize=(size, size))  # a fixed layout: constrained layout took half the drawing time here
+    grid = figure.add_gridspec(n, n, left=1.0 / size, bottom=1.2 / size, right=1 - 0.1 / size, top=1 - 0.45 / size,
+                               wspace=0.08, hspace=0.08)
     for i, (label_i, x_i, log_i) in enumerate(columns):
-        for j, (label_j, x_j, log_j) in enumerate(columns):
-            ax = axes[i, j]
-            if j > i:
-                ax.set_axis_off()
-                continue
+        for j, (label_j, x_j, log_j) in enumerate(columns[: i + 1]):  # the lower triangle only: no empty axes
+            ax = figure.add_subplot(grid[i, j])
             if i == j:
                 ax.hist(x_i, bins=edges[i], color="C0", histtype="stepfilled", alpha=0.6)
                 ax.set_yticks([])
@@ -212,11 +212,11 @@ def corner_figure(law_fit: LawFit, bins: int = 30):
                 ax.set_xlabel(label_j, fontsize=8)
                 ax.tick_params(axis="x", labelrotation=45)
             else:
-                ax.set_xticklabels([])
+                ax.tick_params(axis="x", labelbottom=False)
             if j == 0 and i > 0:
                 ax.set_ylabel(label_i, fontsize=8)
             elif i != j:
-                ax.set_yticklabels([])
+                ax.tick_params(axis="y", labelleft=False)
             ax.tick_params(labelsize=7)
     figure.suptitle(f"posterior of the {law_fit.law_name} law ({len(law_fit.samples)} samples)")
     return figure
