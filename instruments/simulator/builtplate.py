@@ -26,8 +26,9 @@ from workflow.models.fem.surface import SurfaceModes, evaluate_surface
 from workflow.models.materials import DESIGN_VOLTAGE, PLATE_Q
 from workflow.models.plate import Plate
 
-SIMULATION_ACCURACY = FemAccuracy(target=0.002)
-"""FEM accuracy of a simulated built plate (0.2 % in frequency, as the designs: a few seconds, once per plate) [-]."""
+SIMULATION_ACCURACY = FemAccuracy(target=0.01)
+"""FEM accuracy of a simulated built plate (1 % in frequency, degree 3: a few seconds, once per plate) [-]; the
+simulator's plate is a discretisation of its own, as a built plate is a plate of its own."""
 
 
 @dataclass(frozen=True, eq=False)
