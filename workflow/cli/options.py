@@ -340,6 +340,11 @@ def add_bench_arguments(parser) -> None:
     group.add_argument("--softening", type=bounded(float, *LIMITS["softening_s2_m2"], "s^2/m^2"), default=0.0,
                        metavar="KAPPA", help="amplitude softening of the simulated resonance, f_r (1 - KAPPA v^2) with v "
                        f"the antinode velocity, {limit_text('softening_s2_m2', 's^2/m^2')} (default 0: none)")
+    group.add_argument("--no-heating", dest="heating", action="store_false",
+                       help="the simulated plate does not warm with the power it dissipates (default: it does)")
+    group.add_argument("--thermal-factor", type=bounded(float, 0.0, 100.0), default=1.0, metavar="K",
+                       help="multiply the simulated plate's frequency coefficient (-1.75e-4 /K, CuBe) by K: a stress "
+                       "case of the hold, 0 to 100 (default 1)")
     group.add_argument("--point-mm", type=_point, default=(0.0, 0.0), metavar="X,Y",
                        help="where the simulated vibrometer points on the paper's plate, from its centre [mm] (default "
                        "0,0: an antinode; a built plate's spot is moved by its scanner instead)")
@@ -471,7 +476,7 @@ def bench_settings(args):
         if args.point_mm != (0.0, 0.0):
             raise TactileError("--point-mm points the paper's plate; a built plate's spot is moved by its scanner "
                                "('tactile measure scan --points')")
-        return built_bench_settings(built_plate_model(args, built, deviations_from_args(args)), **fields)
+        return _heated(built_bench_settings(built_plate_model(args, built, deviations_from_args(args)), **fields), args)
     point = tuple(value * MM for value in args.point_mm)
     off = point_problem(ORIGINAL_PLATE, *point)
     if off:
@@ -481,7 +486,16 @@ def bench_settings(args):
         settings.mode_factor()
     except ValueError as error:
         raise TactileError(f"--point-mm {args.point_mm[0]:g},{args.point_mm[1]:g}: {error}") from None
-    return settings
+    return _heated(settings, args)
+
+
+def _heated(settings, args):
+    """``settings`` with the plate's heating of --no-heating and --thermal-factor."""
+    from dataclasses import replace
+
+    thermal = settings.response.thermal
+    thermal = None if not args.heating or thermal is None else thermal.scaled(args.thermal_factor)
+    return replace(settings, response=replace(settings.response, thermal=thermal))
 
 
 # Stop signals as an exception, so that a command's cleanup (the bench's output off) runs on each.
