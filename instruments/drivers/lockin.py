@@ -56,7 +56,10 @@ ESR_ERRORS = {4: "execution error (a parameter out of range)", 5: "command error
 TEMPERATURE_SENSOR_SCALE = 5e-3
 """The plate's temperature sensor on an Aux In: a thermocouple amplifier (AD8495 class), 5 mV per deg C [V/K]."""
 CAPTURE_FILTER_POLES = 4
-"""Output filter of a capture: 24 dB/oct, enough to remove the 2f ripple at TC >= 1 / (8 f)."""
+"""Output filter of a capture: 24 dB/oct."""
+CAPTURE_MAX_TIME_CONSTANT = 10e-6
+"""Longest time constant of a capture [s]: it follows a plate's envelope (tau >= 0.2 ms) and still removes the 2f
+ripple of a 25-35 kHz carrier (-49 dB at 64 kHz with 24 dB/oct)."""
 CAPTURE_SETTLE_CONSTANTS = 10
 """A capture's filter has forgotten a kink in the signal after this many time constants [-]."""
 
@@ -95,8 +98,9 @@ def is_capture_interval(interval: float) -> bool:
 
 
 def capture_time_constant(interval: float) -> float:
-    """The output filter time constant [s] a capture at ``interval`` [s] uses: the longest at most interval / 4."""
-    fitting = [tc for tc in TIME_CONSTANTS if tc <= interval / 4 * (1 + 1e-9)]
+    """The output filter time constant [s] a capture at ``interval`` [s] uses: the longest at most interval / 4 and
+    :data:`CAPTURE_MAX_TIME_CONSTANT`."""
+    fitting = [tc for tc in TIME_CONSTANTS if tc <= min(interval / 4, CAPTURE_MAX_TIME_CONSTANT) * (1 + 1e-9)]
     return fitting[-1] if fitting else TIME_CONSTANTS[0]
 
 

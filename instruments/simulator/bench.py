@@ -9,7 +9,8 @@ lock-in's Aux In 1.
 
 Time is simulated: each command line takes ``command_time`` of bench time (a serial exchange) and
 :meth:`Bench.sleep` advances it, so simulated campaigns run as fast as the CPU allows and are
-reproducible from their seeds.  After every command the plate's steady response to the drive is the
+reproducible from their seeds.  Served on pseudo-terminals, the bench follows the wall clock instead
+(:meth:`Bench.catch_up`): a client waiting for the lock-in to settle waits in real time.  After every command the plate's steady response to the drive is the
 lock-in's input and sets the power it dissipates (:mod:`.thermal`); both are held until the next one.
 
 A burst (``*TRG``) builds the plate up from rest and lets it ring down; an amplitude-modulated output
@@ -208,6 +209,10 @@ class Bench:
     def sleep(self, seconds: float) -> None:
         """Let ``seconds`` of bench time pass, instantly."""
         self.time += seconds
+
+    def catch_up(self, elapsed: float) -> None:
+        """Bring bench time to ``elapsed`` [s] if it is behind (a bench served in real time: the pseudo-terminals)."""
+        self.time = max(self.time, elapsed)
 
     def ceramic_voltage(self) -> float:
         """Peak voltage across the ceramics now [V] (0 when the output is off or not a sine)."""

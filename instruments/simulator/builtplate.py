@@ -15,7 +15,6 @@ f' = f f_r / f_r(t) the drive frequency seen relative to the drifted resonance.
 
 from dataclasses import dataclass
 
-
 from instruments.simulator.physics import PlateResponse, default_law
 from instruments.simulator.thermal import thermal_model
 from workflow.models.builtplate import BuiltPlate, PlateDeviations, deviated_plate
