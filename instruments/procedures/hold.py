@@ -6,8 +6,11 @@ Q = 54, so the plate is in its steady state at every reading) and reads the velo
 phi against the drive (the decoder's delay removed).  Then:
 
 * phase-locked loop: the velocity is in phase with the drive at resonance and leads it below, with
-  d phi / d f = -2 Q / f_r there; so f <- f + K_f phi, with K_f = g_f f / (2 Q(v)) [Hz/rad]: each
-  period removes the fraction g_f = 0.5 of the frequency error (a quarter-bandwidth per 45 deg);
+  d phi / d f = -2 Q / f_r there; so f <- f + K_f phi + r, r <- r + g_d K_f phi, with
+  K_f = g_f f / (2 Q(v)) [Hz/rad]: each period removes the fraction g_f = 0.5 of the frequency error
+  (a quarter-bandwidth per 45 deg), and r, the drift per period, learns the warm-up's ramp (g_d = 0.1)
+  so that the loop follows it without lagging; the error obeys z^2 - (2 - g_f - g_d g_f) z + 1 - g_f,
+  |z| = 0.71, stable with K_f off by 2 either way;
 * amplitude, a PI in velocity form on e = v* - v: V <- V + K_p (e - e_prev) + K_i e with
   K_i = g_i / S and K_p = g_p / S, g_i = 0.5, g_p = 0.1, S = dv/dV the plant's gain at resonance,
   S = (v / V) / (1 - d ln Q / d ln v) from the Q(v) law (a falling Q makes v grow slower than V);
@@ -44,6 +47,8 @@ from workflow.progress import Progress
 
 FREQUENCY_GAIN = 0.5
 """g_f: fraction of the frequency error removed per period [-]."""
+DRIFT_GAIN = 0.1
+"""g_d: the PLL's drift integrator, relative to its frequency gain [-]."""
 INTEGRAL_GAIN = 0.5
 """g_i: integral gain of the amplitude loop, relative to the plant's gain [-]."""
 PROPORTIONAL_GAIN = 0.1
@@ -171,6 +176,8 @@ class Loop:
     def __init__(self, plan: HoldPlan, limit: float, frequency: float):
         self.plan, self.limit = plan, limit
         self.frequency, self.voltage = frequency, min(plan.start_voltage, limit)
+        self.drift = 0.0
+        """The PLL's estimate of the resonance's drift per period [Hz]."""
         self.error = None
         self.locked = False
         self.in_lock = self.out_of_lock = self.periods = 0
@@ -190,7 +197,9 @@ class Loop:
         if self.locked and not plan.closed:
             return
         gains = loop_gains(plan.law, self.frequency, max(velocity, 1e-6 * target), self.voltage)
-        self.frequency += gains.frequency * math.radians(phase_deg)
+        correction = gains.frequency * math.radians(phase_deg)
+        self.drift += DRIFT_GAIN * correction
+        self.frequency += correction + self.drift
         change = gains.integral * error + (0.0 if self.error is None else gains.proportional * (error - self.error))
         step = MAX_STEP_FRACTION * self.limit
         self.voltage = float(np.clip(self.voltage + np.clip(change, -step, step), 0.0, self.limit))
@@ -253,15 +262,15 @@ def _run(station: Station, log: LogWriter, plan: HoldPlan, times: np.ndarray, ke
     try:
         with Progress(len(pending), "hold", unit="samples", enabled=True) as bar:
             while pending:
-                station.drive(loop.frequency, loop.voltage)
-                reading = station.read_velocity()
+                reading = station.retry(lambda: _drive_and_read(station, loop.frequency, loop.voltage),
+                                        f"holding at {loop.frequency:.3f} Hz, {loop.voltage:.4g} V")
                 readings.append((reading.amplitude, reading.phase_deg))
                 now = station.clock()
                 start = now if start is None else start
                 due = [k for k in pending if times[k] <= origin + now - start + 1e-9]
                 if due:
                     velocity, phase = np.mean(readings, axis=0)
-                    temperature = station.read_temperature()
+                    temperature = station.retry(station.read_temperature, "reading the plate temperature")
                     log.append_rows([{logformat.SWEEP: 0, logformat.TIMESTAMP: now, logformat.HOLD_TIME: times[k],
                                       logformat.FREQUENCY: loop.frequency, logformat.DRIVE_VOLTAGE: loop.voltage,
                                       logformat.VELOCITY: velocity, logformat.PHASE: phase,
@@ -275,6 +284,12 @@ def _run(station: Station, log: LogWriter, plan: HoldPlan, times: np.ndarray, ke
         raise
     finally:
         station.shutdown()
+
+
+def _drive_and_read(station: Station, frequency: float, voltage: float):
+    """Set the drive, read the settled velocity."""
+    station.drive(frequency, voltage)
+    return station.read_velocity()
 
 
 def _reason(error: BaseException) -> str:

@@ -402,7 +402,7 @@ class Bench:
             line = raw.decode("ascii", errors="replace").strip()
             if not line:
                 continue
-            fault = self.faults.next_fault()
+            fault = self.faults.next_fault(instrument)
             if fault is Fault.DISCONNECT:
                 self._input[instrument].clear()
                 raise SimulatedDisconnect(f"simulated {instrument} disconnected at command {self.faults.commands}")

@@ -495,7 +495,7 @@ def _hold(args, station, metadata: dict, out: Path, frequency: float):
 
 def _hold_figure(log: Path, path: Path) -> dict:
     """The hold's figure (velocity, frequency, drive and temperature against time) at ``path``."""
-    from workflow.pipeline.figures.hold import hold_figure_file
+    from workflow.pipeline.hold_logs import hold_figure_file
 
     return hold_figure_file([log], path)
 

@@ -333,6 +333,8 @@ def add_bench_arguments(parser) -> None:
     group.add_argument("--garble-rate", type=float, default=0.0, help="probability of a garbled reply (default 0)")
     group.add_argument("--disconnect-at", type=int, default=None, metavar="N",
                        help="cut the line at the N-th command (once; default never)")
+    group.add_argument("--faulty", choices=("generator", "vibrometer", "lockin"), default=None,
+                       help="drop and garble the replies of this instrument only (default: of all)")
     group.add_argument("--bench-limit", type=bounded(float, *LIMITS["simulator.ceramic_voltage_limit_v"], "V"),
                        default=None, metavar="VOLTS",
                        help="the simulated generator's own limit, peak volts across the ceramics, "
@@ -465,7 +467,8 @@ def bench_settings(args):
     from instruments.simulator.bench import built_bench_settings
 
     try:
-        faults = FaultSettings(args.drop_rate, args.garble_rate, args.disconnect_at, seed=args.seed)
+        faults = FaultSettings(args.drop_rate, args.garble_rate, args.disconnect_at, seed=args.seed,
+                               instruments=None if args.faulty is None else (args.faulty,))
     except ValueError as error:
         raise TactileError(f"bad fault flag: {error}") from None
     limit = DEFAULT_CERAMIC_VOLTAGE_LIMIT if args.bench_limit is None else args.bench_limit
