@@ -22,12 +22,14 @@ from instruments.drivers.lockin import (
     BYTES_PER_VALUE,
     CAPTURE_FILTER_POLES,
     CAPTURE_GET_KB,
+    CAPTURE_LENGTH_KB,
     CAPTURE_MAX_RATE_EXPONENT,
     CAPTURE_SETTLE_CONSTANTS,
     INPUT_RANGES,
     OVERLOAD_INPUT,
     SENSITIVITIES,
     capture_delay,
+    capture_interval,
     capture_time_constant,
     is_capture_interval,
 )
@@ -74,7 +76,13 @@ class CaptureWindow:
 
     def __post_init__(self):
         if not is_capture_interval(self.interval):
-            raise PlanError(f"{self.interval * 1e6:g} us is not a capture interval of the lock-in (2^k x 0.8 us)")
+            raise PlanError(f"{self.interval * 1e6:g} us is not a capture interval of the lock-in (2^k x 0.8 us; nearest "
+                            f"{capture_interval(self.interval) * 1e6:g} us)")
+        if not 2 <= self.samples:
+            raise PlanError(f"a capture keeps at least 2 samples, got {self.samples}")
+        if self.length_kb > CAPTURE_LENGTH_KB[1]:
+            raise PlanError(f"{self.first + self.samples} samples of {self.interval * 1e6:g} us do not fit the lock-in's "
+                            f"{CAPTURE_LENGTH_KB[1]} kB capture buffer")
 
     @classmethod
     def after(cls, interval: float, start: float, samples: int) -> "CaptureWindow":

@@ -34,7 +34,7 @@ switches the output off and writes why as a ``#`` line in the log, then the erro
 """
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -42,7 +42,6 @@ from instruments.drivers.errors import InstrumentError
 from instruments.procedures.logwriter import HOLD_KEY_COLUMNS, LogWriter, point_key
 from instruments.procedures.sweeps import PlanError, ProcedureResult, Station, check_frequencies
 from workflow import logformat
-from workflow.damping.laws import law_parameters
 from workflow.progress import Progress
 
 FREQUENCY_GAIN = 0.5
@@ -163,7 +162,7 @@ class HoldPlan:
         return {"plan_frequency": self.frequency, "plan_target_velocity": self.target_velocity,
                 "plan_duration": self.duration, "plan_interval": self.interval, "plan_closed": self.closed,
                 "plan_start_voltage": self.start_voltage, "plan_law": self.law.name,
-                **{f"plan_law_{key}": value for key, value in law_parameters(self.law).items()}}
+                **{f"plan_law_{field.name}": getattr(self.law, field.name) for field in fields(self.law)}}
 
 
 class HoldStopped(InstrumentError):

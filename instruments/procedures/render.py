@@ -19,7 +19,6 @@ import numpy as np
 from instruments.drivers.arbitrary import ModulatedDrive, drive_of_codes
 from instruments.procedures.capture import CaptureWindow, capture_envelope, prepare_capture
 from instruments.procedures.logwriter import LogWriter, point_key
-from instruments.procedures.ringdown import INTERVAL_US_RANGE, SAMPLES_RANGE
 from instruments.procedures.sweeps import PlanError, ProcedureResult, Station, check_frequencies
 from workflow import logformat
 from workflow.progress import Progress
@@ -70,13 +69,10 @@ class RenderPlan:
     def __post_init__(self):
         if not self.playbacks:
             raise PlanError("render plan: at least one playback")
-        low, high = SAMPLES_RANGE
-        if not low <= self.samples <= high:
-            raise PlanError(f"render plan: samples must be {low} to {high}, got {self.samples}")
-        low, high = INTERVAL_US_RANGE
-        if not low <= self.interval * 1e6 <= high:
-            raise PlanError(f"render plan: interval must be {low} to {high} us, got {self.interval * 1e6:g} us")
-        self.window()
+        try:
+            self.window()
+        except PlanError as error:
+            raise PlanError(f"render plan: {error}") from None
         for playback in self.playbacks:
             check_frequencies(playback.drive.carrier_frequency, playback.drive.carrier_frequency, "render plan")
             if not len(playback.wanted) == len(playback.predicted) == self.samples:

@@ -17,20 +17,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from instruments.drivers.lockin import capture_interval, is_capture_interval
+from instruments.drivers.lockin import capture_interval
 from instruments.procedures.capture import CaptureWindow, EnvelopeRecord, capture_envelope, prepare_capture
 from instruments.procedures.logwriter import LogWriter, point_key, row_key
 from instruments.procedures.sweeps import PlanError, ProcedureResult, Station, check_frequencies, check_sizes
 from workflow import logformat
-from workflow.models.limits import LIMITS
 from workflow.progress import Progress
 
 MAX_BURSTS = 1000
 """Most bursts of one ring-down procedure."""
-SAMPLES_RANGE = LIMITS["campaign.ringdown_samples"]
-"""Envelope samples kept after a burst [-]."""
-INTERVAL_US_RANGE = LIMITS["campaign.ringdown_interval_us"]
-"""Time between samples [us]."""
 
 
 @dataclass(frozen=True)
@@ -65,14 +60,10 @@ class RingdownPlan:
             raise PlanError(f"ring-down plan: 1 to {MAX_BURSTS} burst levels, got {len(self.voltages)}")
         if not (isinstance(self.cycles, int) and 1 <= self.cycles <= 100_000_000):
             raise PlanError(f"ring-down plan: cycles must be an integer from 1 to 100000000, got {self.cycles!r}")
-        low, high = SAMPLES_RANGE
-        if not low <= self.samples <= high:
-            raise PlanError(f"ring-down plan: samples must be {low} to {high}, got {self.samples}")
-        low, high = INTERVAL_US_RANGE
-        if not (low <= self.interval * 1e6 <= high and is_capture_interval(self.interval)):
-            raise PlanError(f"ring-down plan: interval must be a capture interval of the lock-in (2^k x 0.8 us) from "
-                            f"{low} to {high} us, got {self.interval * 1e6:g} us (nearest: "
-                            f"{capture_interval(self.interval) * 1e6:g} us)")
+        try:
+            self.window()
+        except PlanError as error:
+            raise PlanError(f"ring-down plan: {error}") from None
 
     @property
     def burst_duration(self) -> float:

@@ -134,7 +134,7 @@ def register(subparsers) -> None:
     sweep.add_argument("--frequency-hz", type=float, help="drive frequency [Hz] (default: see above)")
     ring = procedures.add_parser("ringdown", parents=[common], help="free decays after bursts at resonance",
                                  description="One burst per level at the resonance (33500 burst mode, bus trigger), "
-                                 "then the vibrometer's envelope record of the free decay; one row per sample, with "
+                                 "then the lock-in's capture of the free decay; one row per sample, with "
                                  "the plate temperature where the bench reports it (docs/log-format.md). Without "
                                  "--frequency-hz the frequency comes from the log being resumed or from a resonance "
                                  "search logged to <out>-resonance.csv.")
