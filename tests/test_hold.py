@@ -176,11 +176,11 @@ def test_garbled_and_dropped_lockin_replies_are_retried_then_reported_in_one_lin
     faults = FaultSettings(drop_rate=0.05, garble_rate=0.05, seed=5, instruments=("lockin",))
     settings = bench_settings(heating=False, faults=faults)
     station, bench = simulated_station(settings, time_constant=DEMO_TIME_CONSTANT, retries=6)
-    plan = HoldPlan(32126.0, working_point_velocity(), 60.0, 2.0, settings.response.law)
-    assert hold(station, tmp_path / "ok.csv", plan, fsync=False).measured == 31
-    assert bench.faults.commands > 200
+    plan = HoldPlan(32126.0, working_point_velocity(), 30.0, 2.0, settings.response.law)
+    assert hold(station, tmp_path / "ok.csv", plan, fsync=False).measured == 16
+    assert bench.faults.commands > 100
     for kind in ("--drop-rate", "--garble-rate"):
-        argv = ["measure", "hold", "--simulate", "--duration-s", "20", "--frequency-hz", "32126", "--time-constant",
+        argv = ["measure", "hold", "--simulate", "--duration-s", "10", "--frequency-hz", "32126", "--time-constant",
                 "0.1", "--interval-s", "2", kind, "0.95", "--faulty", "lockin", "--retries", "2",
                 "--out", str(tmp_path / f"bad{kind}.csv")]
         assert main(argv) == 2
@@ -191,11 +191,12 @@ def test_garbled_and_dropped_lockin_replies_are_retried_then_reported_in_one_lin
 
 def test_cli_hold_resumes_writes_its_figure_and_refuses_a_loop_faster_than_the_lockin(tmp_path, capsys):
     out = tmp_path / "h.csv"
-    argv = ["measure", "hold", "--simulate", "--duration-s", "30", "--interval-s", "2", "--time-constant", "0.1",
+    argv = ["measure", "hold", "--simulate", "--duration-s", "20", "--interval-s", "2", "--time-constant", "0.1",
+            "--coarse-points", "31", "--fine-points", "21", "--start-hz", "30000", "--stop-hz", "34000",
             "--out", str(out), "--json"]
     assert main(argv) == 0
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
-    assert summary["procedure"] == "hold" and summary["measured"] == 16 and (tmp_path / "h-resonance.csv").exists()
+    assert summary["procedure"] == "hold" and summary["measured"] == 11 and (tmp_path / "h-resonance.csv").exists()
     assert summary["figure"] == str(tmp_path / "h.png") and (tmp_path / "h.png").stat().st_size > 10_000
     target = summary["target_velocity_m_s"]
     assert target == pytest.approx(working_point_velocity(), rel=0.01)  # the plate's working deflection at f_r

@@ -334,7 +334,7 @@ def run(args):
         if figure is not None:
             figures = {"scan": lambda: _scan_figure(args, result.path, figure),
                        "render": lambda: _render_comparison(result.path, figure),
-                       "hold": lambda: _hold_figure(result.path, figure)}
+                       "hold": lambda: _hold_figure(result, figure)}
             compared = figures[result.procedure]()
     summary = {
         "log": str(result.path),
@@ -493,11 +493,14 @@ def _hold(args, station, metadata: dict, out: Path, frequency: float):
     return hold(station, out, plan, metadata, args.restart)
 
 
-def _hold_figure(log: Path, path: Path) -> dict:
-    """The hold's figure (velocity, frequency, drive and temperature against time) at ``path``."""
+def _hold_figure(result, path: Path) -> dict:
+    """The hold's figure (velocity, frequency, drive and temperature against time) at ``path``, drawn again only
+    when the hold measured something (a rerun with nothing left to hold keeps it)."""
     from workflow.pipeline.hold_logs import hold_figure_file
 
-    return hold_figure_file([log], path)
+    if not result.measured and path.exists():
+        return {"figure": str(path)}
+    return hold_figure_file([result.path], path)
 
 
 def _render_comparison(log: Path, path: Path) -> dict:

@@ -342,7 +342,7 @@ def add_bench_arguments(parser) -> None:
     group.add_argument("--softening", type=bounded(float, *LIMITS["softening_s2_m2"], "s^2/m^2"), default=0.0,
                        metavar="KAPPA", help="amplitude softening of the simulated resonance, f_r (1 - KAPPA v^2) with v "
                        f"the antinode velocity, {limit_text('softening_s2_m2', 's^2/m^2')} (default 0: none)")
-    group.add_argument("--no-heating", dest="heating", action="store_false",
+    group.add_argument("--no-heating", action="store_true",
                        help="the simulated plate does not warm with the power it dissipates (default: it does)")
     group.add_argument("--thermal-factor", type=bounded(float, 0.0, 100.0), default=1.0, metavar="K",
                        help="multiply the simulated plate's frequency coefficient (-1.75e-4 /K, CuBe) by K: a stress "
@@ -497,7 +497,7 @@ def _heated(settings, args):
     from dataclasses import replace
 
     thermal = settings.response.thermal
-    thermal = None if not args.heating or thermal is None else thermal.scaled(args.thermal_factor)
+    thermal = None if args.no_heating or thermal is None else thermal.scaled(args.thermal_factor)
     return replace(settings, response=replace(settings.response, thermal=thermal))
 
 
