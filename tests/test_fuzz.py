@@ -318,6 +318,33 @@ def test_the_simulated_vibrometer_answers_every_query_with_one_line(lines):
         assert device.decoder_range in device.ranges
 
 
+LOCKIN_WORDS = ("*IDN?", "*RST", "*CLS", "*ESR?", "RSRC", "RSRC?", "OFLT", "OFLT?", "SCAL", "SCAL?", "IRNG", "OFSL",
+                "FREQ", "FREQ?", "OUTP?", "SNAP?", "CUROVLDSTAT?", "LIAS?", "OAUX?", "CAPTURECFG", "CAPTURELEN",
+                "CAPTURERATE", "CAPTURERATE?", "CAPTURESTART", "CAPTURESTOP", "CAPTURESTAT?", "CAPTUREGET?",
+                "CAPTUREVAL?", "ONE", "TRIG", "IMM", "R", "THeta", "0", "2", "3", "21", "99", "-1", "1e9", "nan", "")
+lockin_lines = st.one_of(
+    st.lists(st.one_of(st.sampled_from(LOCKIN_WORDS), st.text(max_size=5)), max_size=5).map(
+        lambda words: (words[0] + " " + ",".join(words[1:])) if words else ""),
+    st.text(max_size=100),
+)
+
+
+@fuzz(lines=st.lists(lockin_lines, max_size=10), step=st.floats(min_value=0, max_value=10))
+def test_the_simulated_lockin_answers_any_line_with_a_reply_or_a_status_bit(lines, step):
+    """Any line: a printable ASCII reply, a binary block, or nothing (a refused command sets *ESR? bits); its state
+    stays within the SR860's settings; nothing raises."""
+    from instruments.simulator.bench import Bench
+
+    bench = Bench(default_bench_settings())
+    for line in lines:
+        bench.sleep(step)
+        reply = bench.lockin.handle_line(line)
+        assert reply is None or (isinstance(reply, bytes) and reply.startswith(b"#")) or (
+            isinstance(reply, str) and reply.isascii() and reply.isprintable()), reply
+    state = bench.lockin.state
+    assert 0 <= state["time_constant"] <= 21 and 0 <= state["sensitivity"] <= 27 and 0 <= state["slope"] <= 3
+
+
 # --- the generator driver's limit over the simulated generator -----------------------------------
 
 DRIVER_DEVICE_LIMIT = 1e6

@@ -206,3 +206,26 @@ def test_cli_hold_resumes_writes_its_figure_and_refuses_a_loop_faster_than_the_l
     assert main(argv) == 0 and '"measured": 0' in capsys.readouterr().out
     assert main(["measure", "hold", "--simulate", "--interval-s", "0.1", "--out", str(tmp_path / "x.csv")]) == 2
     assert "shorter than the loop period" in capsys.readouterr().err
+
+
+def test_a_stop_signal_mid_hold_switches_the_output_off_and_the_log_says_so(tmp_path):
+    """SIGTERM (the CLI's Stopped) in the middle of a hold: the output goes off, the log's last line names the signal,
+    the rows held so far stay."""
+    import signal
+
+    from workflow.cli.options import Stopped
+
+    settings = bench_settings(heating=False)
+    station, bench = simulated_station(settings, time_constant=DEMO_TIME_CONSTANT)
+
+    def interrupted(seconds):
+        bench.sleep(seconds)
+        if bench.time > 20.0:
+            raise Stopped(signal.SIGTERM)
+
+    station.sleep = interrupted
+    plan = HoldPlan(32126.0, working_point_velocity(), 60.0, 2.0, settings.response.law)
+    with pytest.raises(Stopped):
+        hold(station, tmp_path / "h.csv", plan, fsync=False)
+    assert "stopped by SIGTERM" in stopped(tmp_path / "h.csv") and bench.ceramic_voltage() == 0.0
+    assert len(read_log(tmp_path / "h.csv", logformat.HOLD_COLUMNS).rows) > 3

@@ -292,9 +292,8 @@ def _drive_and_read(station: Station, frequency: float, voltage: float):
 
 
 def _reason(error: BaseException) -> str:
-    """One line saying why the hold stopped."""
-    name = getattr(error, "name", None)
-    return f"stopped by {name}" if name else f"{type(error).__name__}: {error}"
+    """One line saying why the hold stopped (a stop signal's exception carries its ``signum`` and names it)."""
+    return f"stopped by {error}" if hasattr(error, "signum") else f"{type(error).__name__}: {error}"
 
 
 def hold_summary(rows: list, plan: HoldPlan) -> dict:
