@@ -180,4 +180,5 @@ def capture_envelope(station: Station, window: CaptureWindow, exponent: int, arm
                                   f"{readout.range * 1e3:g} mm/s/V")
         readout.set_range(larger[0])
     magnitude = _read_capture(station, window)
+    readout.used_ranges.add(readout.range)
     return EnvelopeRecord(window.times() - clock_offset, math.sqrt(2) * magnitude * readout.range)

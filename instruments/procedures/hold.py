@@ -40,7 +40,7 @@ import numpy as np
 
 from instruments.drivers.errors import InstrumentError
 from instruments.procedures.logwriter import HOLD_KEY_COLUMNS, LogWriter, point_key
-from instruments.procedures.sweeps import PlanError, ProcedureResult, Station, check_frequencies
+from instruments.procedures.sweeps import PlanError, ProcedureResult, Station, check_frequencies, note_readout
 from workflow import logformat
 from workflow.progress import Progress
 
@@ -278,9 +278,12 @@ def _run(station: Station, log: LogWriter, plan: HoldPlan, times: np.ndarray, ke
                     bar.update(len(due))
                 loop.step(reading.amplitude, reading.phase_deg)
     except BaseException as error:
+        note_readout(log, station)
         log.append_comment(f"hold stopped at hold time {origin + (station.clock() - start if start else 0.0):.3f} s: "
                            f"{_reason(error)}; generator output switched off")
         raise
+    else:
+        note_readout(log, station)
     finally:
         station.shutdown()
 

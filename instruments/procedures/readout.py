@@ -92,6 +92,10 @@ class Readout:
         self.range = None
         self.sensitivity = None
         self.delay = 0.0
+        self.used_ranges: set = set()
+        """Decoder ranges of the readings and captures taken [m/s/V]."""
+        self.used_sensitivities: set = set()
+        """Lock-in sensitivities of the readings taken [V]."""
 
     @property
     def settle(self) -> float:
@@ -103,6 +107,7 @@ class Readout:
         return {**self.vibrometer.settings(), "lockin": self.lockin.identity,
                 "lockin_reference": "EXT (the generator's sync)", "lockin_time_constant_s": self.time_constant,
                 "lockin_filter_db_oct": 6 * DEFAULT_FILTER_POLES, "lockin_input_range_v": INPUT_RANGE,
+                "lockin_sensitivity_v": f"{SENSITIVITIES[0]:g} at the start, then per reading",
                 "lockin_settle_s": self.settle, "ranging": "auto: decoder range and lock-in sensitivity per reading",
                 "temperature_sensor": "none" if self.temperature_aux is None
                 else f"lock-in Aux In {self.temperature_aux}, {TEMPERATURE_SENSOR_SCALE * 1e3:g} mV/degC"}
@@ -111,6 +116,7 @@ class Readout:
         """Acknowledge off; the decoder's ranges and delay; the lock-in on the external reference (the sync's rising
         TTL edge), the readout's time constant and filter, the 1 V input range; the decoder's largest range."""
         self.vibrometer.acknowledge_off()
+        self.used_ranges, self.used_sensitivities = set(), set()
         self.ranges = self.vibrometer.ranges
         self.delay = self.vibrometer.signal_delay
         lockin = self.lockin
@@ -172,7 +178,18 @@ class Readout:
         else:
             raise InstrumentError(f"{self.lockin.name}: still ranging after {RANGING_STEPS} readings at "
                                   f"{frequency:.6g} Hz")
+        self.used_ranges.add(self.range)
+        self.used_sensitivities.add(self.sensitivity)
         return VelocityReading(velocity, wrap_degrees(reading.phase_deg + 360.0 * frequency * self.delay))
+
+    def usage(self) -> str:
+        """The settings the readings used, for a ``#`` line after a run's rows ("" before any reading)."""
+        if not self.used_ranges:
+            return ""
+        ranges = ", ".join(f"{r * 1e3:g}" for r in sorted(self.used_ranges))
+        sensitivities = ", ".join(f"{v:g}" for v in sorted(self.used_sensitivities))
+        return (f"readout: decoder ranges {ranges} mm/s/V" + (f"; lock-in sensitivities {sensitivities} V" if sensitivities
+                                                             else "") + f"; time constant {self.time_constant:g} s")
 
     def read_temperature(self) -> float | None:
         """Plate temperature [deg C] from its sensor on the lock-in's Aux In, or None without one."""

@@ -19,7 +19,7 @@ import numpy as np
 from instruments.drivers.arbitrary import ModulatedDrive, drive_of_codes
 from instruments.procedures.capture import CaptureWindow, capture_envelope, prepare_capture
 from instruments.procedures.logwriter import LogWriter, point_key
-from instruments.procedures.sweeps import PlanError, ProcedureResult, Station, check_frequencies
+from instruments.procedures.sweeps import PlanError, ProcedureResult, Station, check_frequencies, note_readout
 from workflow import logformat
 from workflow.progress import Progress
 
@@ -162,6 +162,7 @@ def render_playback(station: Station, path, plan: RenderPlan, metadata: dict | N
                     bar.update()
         finally:
             station.shutdown()
+            note_readout(log, station)
     playbacks = [{"playback": j, "name": p.name, "carrier_hz": p.drive.carrier_frequency,
                   "peak_drive_v": float(station.amplifier.ceramic_voltage(p.drive.amplitude_vpp))}
                  for j, p in enumerate(plan.playbacks)]

@@ -20,7 +20,7 @@ import numpy as np
 from instruments.drivers.lockin import capture_interval
 from instruments.procedures.capture import CaptureWindow, EnvelopeRecord, capture_envelope, prepare_capture
 from instruments.procedures.logwriter import LogWriter, point_key, row_key
-from instruments.procedures.sweeps import PlanError, ProcedureResult, Station, check_frequencies, check_sizes
+from instruments.procedures.sweeps import PlanError, ProcedureResult, Station, check_frequencies, check_sizes, note_readout
 from workflow import logformat
 from workflow.progress import Progress
 
@@ -141,6 +141,7 @@ def ringdown(station: Station, path, plan: RingdownPlan, metadata: dict | None =
                     bar.update()
         finally:
             station.shutdown()
+            note_readout(log, station)
         rows = log.rows
     bursts = []
     for j, voltage in enumerate(plan.voltages):

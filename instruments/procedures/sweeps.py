@@ -343,8 +343,16 @@ def run_procedure(station: Station, path, procedure: str, plan: dict, voltages, 
                 measured += _measure_points(station, log, points, procedure)
         finally:
             station.shutdown()
+            note_readout(log, station)
         return log.rows, dict(path=Path(path), procedure=procedure, planned=planned, measured=measured,
                               resumed=resumed, truncated_bytes=log.truncated_bytes, warnings=tuple(log.warnings))
+
+
+def note_readout(log: LogWriter, station: Station) -> None:
+    """After a run's rows, a ``#`` line with the decoder ranges and sensitivities its readings used (none: nothing)."""
+    used = station.readout.usage()
+    if used:
+        log.append_comment(used)
 
 
 def _sweep_rows(rows: list[dict], sweep: int) -> tuple[np.ndarray, np.ndarray]:
