@@ -69,7 +69,7 @@ def assert_safe_state(port: str) -> None:
 
 def campaign(ports: dict, out, *extra: str) -> list[str]:
     return TACTILE + ["measure", "campaign", "--generator", ports["generator"], "--vibrometer", ports["vibrometer"],
-                      "--lockin", ports["lockin"], "--center-hz", "31000", "--out", str(out), *extra]
+                      "--lockin", ports["lockin"], "--center-hz", "31000", "--time-constant", "0.001", "--out", str(out), *extra]
 
 
 def data_rows(path) -> int:
