@@ -57,7 +57,7 @@ def _write(path, text: str) -> str:
 
 @pytest.mark.parametrize("arguments, message", [
     (["--period-mm", "-2"], "argument --period-mm: expected a positive number"),
-    (["--levels-um", "0.3,9"], "the texture asks for 9 um, above the"),
+    (["--levels-um", "0.3,9"], "the texture asks for 9 µm, above the"),
     (["--levels-um", "1,0.5"], "--levels-um needs 0 <= LOW < HIGH"),
     (["--friction-curve", "{empty}", "--levels-friction", "1,0.6"], "empty (expected a header row amplitude_um,friction"),
     (["--friction-curve", "{wavy}", "--levels-friction", "1,0.6"], "line 4: the friction ratio must be strictly monotonic"),

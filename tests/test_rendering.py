@@ -106,7 +106,7 @@ def test_the_error_falls_as_the_grating_period_grows(design_model):
 
 
 def test_an_amplitude_the_plate_cannot_reach_is_refused(design_model):
-    with pytest.raises(TextureError, match=r"above the .* um this plate reaches at the voltage limit 5 V"):
+    with pytest.raises(TextureError, match=r"above the .* µm this plate reaches at the voltage limit 5 V"):
         render(design_model, GRATING, ConstantSpeed(0.1), 5.0)
 
 

@@ -53,7 +53,7 @@ def check_reachable(model: EnvelopeModel, highest: float, voltage_limit: float) 
     """TextureError unless the plate holds ``highest`` [m] steady within ``voltage_limit`` [V] (carrier set)."""
     reachable = model.reachable_velocity(voltage_limit) / (2 * np.pi * float(model.carrier))
     if highest > reachable:
-        raise TextureError(f"the texture asks for {highest / UM:.3g} um, above the {reachable / UM:.3g} um this plate "
+        raise TextureError(f"the texture asks for {highest / UM:.3g} µm, above the {reachable / UM:.3g} µm this plate "
                            f"reaches at the voltage limit {voltage_limit:g} V")
 
 

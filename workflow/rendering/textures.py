@@ -73,7 +73,7 @@ class Grating:
             raise TextureError(f"grating duty cycle must be between 0 and 1 (exclusive), got {self.duty:g}")
         if not (np.isfinite(self.low) and np.isfinite(self.high) and 0 <= self.low < self.high):
             raise TextureError(f"grating levels must satisfy 0 <= low < high, got {self.low / UM:g} and "
-                               f"{self.high / UM:g} um")
+                               f"{self.high / UM:g} µm")
 
     @property
     def levels(self) -> tuple:
