@@ -70,7 +70,7 @@ def build_and_measure(context: RunContext, plate: Plate, name: str, scan: bool) 
     from instruments.simulator.bench import built_bench_settings
     from workflow.models.builtplate import PlateDeviations
     from workflow.pipeline.builtplate import built_plate_model, read_scan, scan_mac
-    from workflow.pipeline.steps import bench_settings, built_plate_deviations
+    from workflow.pipeline.domain import bench_settings, built_plate_deviations
 
     loop = context.config["loop"]
     model = built_plate_model(plate, built_plate_deviations(context.config), cache=context.cache)
@@ -127,12 +127,11 @@ def first_plate(context: RunContext) -> BuiltMeasurement | None:
 def first_plate_figures(context: RunContext, measured: BuiltMeasurement | None) -> None:
     from workflow.pipeline.builtplate import built_plate_model, read_scan
     from workflow.pipeline.figures.scan import scan_figure
-    from workflow.pipeline.steps import save_figure
 
     if measured is None or measured.scan_log is None:
         return
     nominal = built_plate_model(measured.plate, cache=context.cache)
-    save_figure(scan_figure(read_scan(measured.scan_log), nominal, measured.mac), context.figure_path("loop_scan.png"))
+    context.save_figure(scan_figure(read_scan(measured.scan_log), nominal, measured.mac), "loop_scan.png")
 
 
 def loop_calibration(context: RunContext):

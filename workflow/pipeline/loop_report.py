@@ -1,5 +1,7 @@
 """The report's sections on the loop of ``tactile run`` and on the published plates (:mod:`workflow.pipeline.loop`)."""
 
+from workflow.pipeline.loop import LOOP_FOLDER
+from workflow.pipeline.markdown import figure, table
 from workflow.pipeline.runner import RunContext
 from workflow.units import KHZ, MM
 
@@ -16,9 +18,6 @@ def _geometry(plate) -> str:
 
 def loop_section(context: RunContext, second) -> str:
     """"Closing the loop on a built plate": each stage's f_r, the scan and the calibration's pairs."""
-    from workflow.pipeline.loop import LOOP_FOLDER
-    from workflow.pipeline.report import figure, table
-
     if second is None:
         return ""
     first = context.results["loop_first_plate"]
@@ -67,8 +66,6 @@ def loop_section(context: RunContext, second) -> str:
 
 def case_study_section(context: RunContext, directions) -> str:
     """"Case study: the published plates": calibrate on one, predict the other."""
-    from workflow.pipeline.report import table
-
     if directions is None:
         return ""
     rows = [

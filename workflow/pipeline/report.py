@@ -7,6 +7,7 @@ import numpy as np
 from workflow.models.analytical import BEAM_CALIBRATION
 from workflow.optimise.maps import TRANSVERSE_THRESHOLD
 from workflow.pipeline.loop_report import case_study_section, loop_section
+from workflow.pipeline.markdown import figure, relative_link, table
 from workflow.pipeline.runner import RunContext
 from workflow.units import KHZ, MM, UM
 
@@ -23,18 +24,6 @@ def write_report(context: RunContext) -> Path:
     path = context.out / "report.md"
     path.write_text("\n\n".join(s.strip() for s in sections if s) + "\n", encoding="utf-8")
     return path
-
-
-def table(header, rows) -> str:
-    """A markdown table."""
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(str(cell) for cell in row) + " |" for row in rows]
-    return "\n".join(lines)
-
-
-def figure(context: RunContext, name: str, caption: str) -> str:
-    """A markdown image link to a figure written by a step."""
-    return f"![{caption}]({context.figures[name]})\n\n*{caption}*"
 
 
 def _title(context: RunContext) -> str:
@@ -388,18 +377,9 @@ def _analytical_optima(context: RunContext, optima) -> str:
 
 
 def _logs(context: RunContext, logs) -> str:
-    names = ", ".join(f"[{Path(p).name}]({_relative(context, p)})" for p in logs)
+    names = ", ".join(f"[{Path(p).name}]({relative_link(context, p)})" for p in logs)
     origin = "simulated on the bench simulator for the original plate" if not context.logs else "given with --logs"
     return f"## Interferometer logs\n\nFitted logs ({origin}): {names}."
-
-
-def _relative(context: RunContext, path) -> str:
-    """A link target relative to the report (absolute when outside the output folder)."""
-    path = Path(path).resolve()
-    try:
-        return path.relative_to(context.out.resolve()).as_posix()
-    except ValueError:
-        return path.as_uri()
 
 
 def _damping_fit(context: RunContext, fit) -> str:

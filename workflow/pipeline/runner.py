@@ -18,6 +18,7 @@ import workflow
 from workflow.errors import TactileError
 from workflow.execution.cache import EvaluationCache, content_key, package_directory, source_version
 from workflow.inputfiles import MAX_LOG_BYTES, read_input
+from workflow.pipeline.outputs import save_figure
 from workflow.progress import format_duration
 
 
@@ -48,10 +49,10 @@ class RunContext:
     cache: Optional[EvaluationCache] = None
     calibration: Optional[Path] = None
 
-    def figure_path(self, name: str) -> Path:
-        """Where the figure ``name`` (a PNG file name) is written; recorded for the report."""
+    def save_figure(self, figure, name: str) -> Path:
+        """Write a matplotlib figure as the PNG ``name`` (relative to the output folder); recorded for the report."""
         self.figures[name] = name
-        return self.out / name
+        return Path(save_figure(figure, self.out / name, tight=True))
 
 
 @dataclass(frozen=True)

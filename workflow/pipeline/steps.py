@@ -13,86 +13,18 @@ from typing import Any, Dict, List, Optional
 import numpy as np
 
 from workflow.errors import InputFileError, TactileError
-from workflow.optimise.problem import DesignProblem, optimise_analytical
+from workflow.optimise.problem import optimise_analytical
 from workflow.pipeline import loop
 from workflow.pipeline.damping_files import FIT_OUTPUTS, stated_noise, write_fit
+from workflow.pipeline.domain import bench_settings, build_plate, design_problems, fem_model, fem_settings
 from workflow.pipeline.runner import RunContext, Step
 from workflow.units import KHZ, MM, UM
-
-
-def build_plate(config: dict):
-    """The original plate made of the [design] section's ceramic, resonator and bond."""
-    from workflow.models import materials
-    from workflow.models.plate import ORIGINAL_PLATE
-
-    design = config["design"]
-    try:
-        return ORIGINAL_PLATE.with_(
-            ceramic=materials.ceramic(design["ceramic"]),
-            resonator=materials.resonator(design["resonator"]),
-            glue_thickness=design["glue_um"] * UM,
-        )
-    except TactileError as error:
-        raise TactileError(f"configuration [design]: {error}") from None
-
-
-def design_problems(config: dict, thicknesses_mm=None) -> Dict[float, DesignProblem]:
-    """One :class:`DesignProblem` per h_p (default: those of the [design] section), keyed by h_p [m]."""
-    design = config["design"]
-    thicknesses_mm = design["ceramic_thicknesses_mm"] if thicknesses_mm is None else thicknesses_mm
-    return {
-        thickness * MM: DesignProblem(
-            ceramic_thickness=thickness * MM,
-            width=design["width_mm"] * MM,
-            voltage=design["voltage_v"],
-            min_frequency=design["min_frequency_khz"] * KHZ,
-            min_resonator_thickness=design["hi_min_mm"] * MM,
-            max_resonator_thickness=design["hi_max_mm"] * MM,
-            wavelength_range=(design["wavelength_min_mm"] * MM, design["wavelength_max_mm"] * MM),
-            build=build_plate(config),
-        )
-        for thickness in thicknesses_mm
-    }
 
 
 def analytical_optima(context: RunContext):
     """The beam-model optimum with constant Q for every h_p."""
     q = context.config["design"]["q"]
     return {hp: optimise_analytical(problem, q=q) for hp, problem in design_problems(context.config).items()}
-
-
-def bench_settings(config: dict):
-    """The simulated bench of the [simulator] section (original plate)."""
-    from instruments.simulator.bench import default_bench_settings
-    from instruments.simulator.physics import default_law
-
-    simulator = config["simulator"]
-    law = default_law(low_velocity_q=simulator["low_velocity_q"], working_q=simulator["working_q"])
-    return default_bench_settings(
-        law=law,
-        drift_rate=simulator["drift_hz_per_s"],
-        softening=simulator["softening_s2_m2"],
-        amplifier_gain=simulator["amplifier_gain"],
-        ceramic_voltage_limit=simulator["ceramic_voltage_limit_v"],
-        relative_noise=simulator["relative_noise"],
-        floor_fraction=simulator["floor_fraction"],
-        phase_noise=simulator["phase_noise_deg"],
-        seed=config["campaign"]["seed"],
-    )
-
-
-def built_plate_deviations(config: dict):
-    """The hidden deviations of the simulated built plate: the ``built_*`` keys of the [simulator] section."""
-    from workflow.models.builtplate import PlateDeviations
-
-    simulator = config["simulator"]
-    return PlateDeviations(
-        glue_thickness=simulator["built_glue_um"] * UM,
-        ceramic_modulus_factor=simulator["built_ceramic_factor"],
-        resonator_modulus_factor=simulator["built_resonator_factor"],
-        resonator_thickness_offset=simulator["built_hi_offset_um"] * UM,
-        ceramic_offset=simulator["built_ceramic_offset_mm"] * MM,
-    )
 
 
 def campaign_logs(context: RunContext) -> List[Path]:
@@ -224,42 +156,7 @@ def damped_design_figures(context: RunContext, result) -> None:
     for hp, hp_maps in maps.items():
         for quantity in ("deflection", "voltage"):
             figure = design_map_figure(hp_maps, quantity, **marks)
-            save_figure(figure, context.figure_path(f"qv_{quantity}_hp{hp / MM:g}mm.png"))
-
-
-def save_figure(figure, path: Path) -> None:
-    """Write a matplotlib figure as PNG and release it."""
-    import matplotlib.pyplot as plt
-
-    figure.savefig(path, dpi=120, bbox_inches="tight")
-    plt.close(figure)
-
-
-def fem_settings(config: dict, key: str = "accuracy"):
-    """The FEM settings of the [fem] section: the accuracy ``key`` (``accuracy`` for designs,
-    ``survey_accuracy`` for maps and the width sweep), or the fixed mesh of the mesh keys when it is 0."""
-    from workflow.models.fem import FemSettings
-    from workflow.models.fem.accuracy import FemAccuracy
-
-    names = FemSettings().as_dict()
-    mesh = FemSettings(**{name: config["fem"][name] for name in names})
-    target = config["fem"][key]
-    return FemAccuracy(target=target, n_modes=mesh.n_modes, piezo=mesh.piezo) if target > 0 else mesh
-
-
-def fem_model(context: RunContext, q: Optional[float] = None, accuracy: str = "accuracy"):
-    """The cached, parallel FEM plate model of the run (``accuracy``: the [fem] key of its target)."""
-    from workflow.optimise.fem_model import FemModel
-
-    design = context.config["design"]
-    return FemModel(
-        q=design["q"] if q is None else q,
-        voltage=design["voltage_v"],
-        settings=fem_settings(context.config, accuracy),
-        cache=context.cache,
-        scheduler=context.scheduler,
-        progress=True,
-    )
+            context.save_figure(figure, f"qv_{quantity}_hp{hp / MM:g}mm.png")
 
 
 def fem_original(context: RunContext):
@@ -270,7 +167,7 @@ def fem_original(context: RunContext):
 def fem_original_figures(context: RunContext, result) -> None:
     from workflow.pipeline.figures.fem_responses import modes_figure
 
-    save_figure(modes_figure(result), context.figure_path("fem_modes_original.png"))
+    context.save_figure(modes_figure(result), "fem_modes_original.png")
 
 
 def fem_responses(context: RunContext):
@@ -285,8 +182,8 @@ def fem_responses_figures(context: RunContext, responses) -> None:
     from workflow.pipeline.figures.fem_responses import frequency_response_figure, transient_figure
 
     frequency, transient = responses
-    save_figure(frequency_response_figure(frequency), context.figure_path("fem_frequency_response.png"))
-    save_figure(transient_figure(transient), context.figure_path("fem_transient.png"))
+    context.save_figure(frequency_response_figure(frequency), "fem_frequency_response.png")
+    context.save_figure(transient_figure(transient), "fem_transient.png")
 
 
 @dataclass(frozen=True)
@@ -322,7 +219,7 @@ def fem_optima_figures(context: RunContext, optima) -> None:
         return
     searches = {hp: (record.space_mapping, record.direct) for hp, record in optima.items()}
     minimum = context.config["design"]["min_frequency_khz"] * KHZ
-    save_figure(trajectory_figure(searches, minimum), context.figure_path("space_mapping_trajectories.png"))
+    context.save_figure(trajectory_figure(searches, minimum), "space_mapping_trajectories.png")
 
 
 def recommended_design(context: RunContext):
@@ -377,7 +274,7 @@ def recommended_design_figures(context: RunContext, recommendation) -> None:
         if design.admittance is not None
     }
     if curves:
-        save_figure(admittance_figure(curves), context.figure_path("admittance.png"))
+        context.save_figure(admittance_figure(curves), "admittance.png")
 
 
 def texture_rendering(context: RunContext) -> dict:
@@ -415,7 +312,7 @@ def texture_rendering_figures(context: RunContext, renderings: dict) -> None:
     """Envelope error of gratings against their period, per design."""
     from workflow.pipeline.figures.rendering import period_error_figure
 
-    save_figure(period_error_figure(renderings), context.figure_path("rendering_periods.png"))
+    context.save_figure(period_error_figure(renderings), "rendering_periods.png")
 
 
 def calibrated_designs(context: RunContext) -> dict:
@@ -474,7 +371,7 @@ def maps_figures(context: RunContext, maps) -> None:
     from workflow.pipeline.figures.maps import map_figure
 
     for hp, design_map in maps.items():
-        save_figure(map_figure(design_map), context.figure_path(f"map_{design_map.model}_hp{hp / MM:g}mm.png"))
+        context.save_figure(map_figure(design_map), f"map_{design_map.model}_hp{hp / MM:g}mm.png")
 
 
 def sweep_widths(fem: dict, plate_width: float) -> np.ndarray:
@@ -507,7 +404,7 @@ def width_sweep_figures(context: RunContext, sweep) -> None:
     from workflow.pipeline.figures.maps import width_sweep_figure
 
     design_width = context.config["design"]["width_mm"] * MM
-    save_figure(width_sweep_figure(sweep, design_width=design_width), context.figure_path("width_sweep_fem.png"))
+    context.save_figure(width_sweep_figure(sweep, design_width=design_width), "width_sweep_fem.png")
 
 
 RUN_OUTPUTS = ("report.md", "simulated_campaign.csv", "simulated_ringdown.csv", "*.png", *(f"damping/{pattern}" for pattern in FIT_OUTPUTS),

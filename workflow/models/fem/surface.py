@@ -15,7 +15,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from workflow.models.fem.accuracy import FemAccuracy, evaluate_to_accuracy
-from workflow.models.fem.evaluate import FemResult, evaluate_fem
+from workflow.models.fem.evaluate import evaluate_fem
+from workflow.models.fem.result import FemResult
 from workflow.models.fem.harmonic import ProbeModalModel
 from workflow.models.fem.mesh import top_face
 from workflow.models.fem.probes import probe_matrix
