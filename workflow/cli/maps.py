@@ -21,6 +21,7 @@ from workflow.cli.options import (
     bounded,
     build_plate,
     calibration_fem_model,
+    command_fem_model,
     design_problem,
     fem_accuracy,
     limit_text,
@@ -28,7 +29,6 @@ from workflow.cli.options import (
     load_damping,
 )
 from workflow.errors import TactileError
-from workflow.execution.cache import EvaluationCache
 from workflow.models.fem.accuracy import SURVEY_ACCURACY
 from workflow.optimise.damped import damped_fem_optimum, damped_maps, damped_optimum, fem_damped_maps, map_draws
 from workflow.optimise.fem_optimum import optimise_fem
@@ -112,16 +112,7 @@ def _maps(args, problem, posterior, points: int) -> dict:
     if args.model == "analytical":
         model = analytical_model(args.q, args.voltage)
     else:
-        from workflow.optimise.fem_model import FemModel
-
-        model = FemModel(
-            q=args.q,
-            voltage=args.voltage,
-            settings=fem_accuracy(args),
-            cache=EvaluationCache(),
-            scheduler=args.scheduler,
-            progress=True,
-        )
+        model = command_fem_model(args.q, args.voltage, fem_accuracy(args), args.scheduler)
     if posterior is None:
         record = _constant_q_record(args, problem, model, points)
     else:

@@ -13,6 +13,7 @@ from workflow.calibration.parameters import CalibrationSettings
 from workflow.damping.logs import SAME_PLATE_TOLERANCE
 from workflow.errors import InputFileError
 from workflow.inputfiles import MAX_CALIBRATION_BYTES, load_json
+from workflow.models.fem.accuracy import FemAccuracy
 from workflow.models.fem.surface import modal_assurance_criterion
 from workflow.optimise.robust import RobustDesign
 from workflow.pipeline.builtplate import is_scan_log, read_scan
@@ -81,6 +82,12 @@ def write_calibration(calibration: Calibration, out: Path, figures: bool = True,
 
         files["figures"].append(save_figure(pairs_figure(calibration), out / PAIRS_FIGURE, dpi=110))
     return files
+
+
+def calibration_accuracy(fem: dict) -> FemAccuracy:
+    """The FEM accuracy a calibration was made at (its ``fem`` record: ``accuracy`` and ``piezo``), which every
+    prediction with it uses."""
+    return FemAccuracy(target=fem["accuracy"], piezo=fem["piezo"])
 
 
 def load_calibration(path) -> Calibration:

@@ -94,15 +94,19 @@ def fem_settings(config: dict, key: str = "accuracy"):
     return FemAccuracy(target=target, n_modes=mesh.n_modes, piezo=mesh.piezo) if target > 0 else mesh
 
 
-def fem_model(context: RunContext, q: Optional[float] = None, accuracy: str = "accuracy"):
-    """The cached, parallel FEM plate model of the run (``accuracy``: the [fem] key of its target)."""
+def fem_model(context: RunContext, q: Optional[float] = None, accuracy: str = "accuracy", settings=None):
+    """The cached, parallel FEM plate model of the run at its Q (or ``q``) and voltage.
+
+    ``accuracy``: the [fem] key of its target; ``settings``: an accuracy or mesh instead of the [fem] section's
+    (a calibration's, the coupled model's).
+    """
     from workflow.optimise.fem_model import FemModel
 
     design = context.config["design"]
     return FemModel(
         q=design["q"] if q is None else q,
         voltage=design["voltage_v"],
-        settings=fem_settings(context.config, accuracy),
+        settings=fem_settings(context.config, accuracy) if settings is None else settings,
         cache=context.cache,
         scheduler=context.scheduler,
         progress=True,

@@ -100,16 +100,15 @@ def build_and_measure(context: RunContext, plate: Plate, name: str, scan: bool) 
 def calibration_model(context: RunContext):
     """(FEM model, its conditions) of the loop's calibration: the run's Q and voltage, the survey accuracy
     (:data:`~workflow.models.fem.accuracy.SURVEY_ACCURACY` when [fem] survey_accuracy is 0: a fixed mesh)."""
-    from workflow.models.fem.accuracy import SURVEY_ACCURACY, FemAccuracy
-    from workflow.optimise.fem_model import FemModel
+    from workflow.models.fem.accuracy import SURVEY_ACCURACY
+    from workflow.pipeline.calibration_files import calibration_accuracy
+    from workflow.pipeline.domain import fem_model
 
     design = context.config["design"]
     accuracy = context.config["fem"]["survey_accuracy"] or SURVEY_ACCURACY
     fem = {"q": design["q"], "voltage_v": design["voltage_v"], "accuracy": accuracy,
            "piezo": context.config["fem"]["piezo"]}
-    model = FemModel(q=fem["q"], voltage=fem["voltage_v"], settings=FemAccuracy(target=fem["accuracy"], piezo=fem["piezo"]),
-                     cache=context.cache, scheduler=context.scheduler, progress=True)
-    return model, fem
+    return fem_model(context, settings=calibration_accuracy(fem)), fem
 
 
 def first_plate(context: RunContext) -> BuiltMeasurement | None:

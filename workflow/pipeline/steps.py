@@ -289,7 +289,6 @@ def texture_rendering(context: RunContext) -> dict:
 
     from workflow.damping.fit import parameter_summary
     from workflow.models.materials import MIN_USEFUL_DEFLECTION
-    from workflow.optimise.fem_model import FemModel
     from workflow.pipeline.design_rendering import design_rendering
 
     config = context.config
@@ -297,9 +296,7 @@ def texture_rendering(context: RunContext) -> dict:
     law = fit.answer.median_law()
     softening = parameter_summary(fit.best).get("kappa", {}).get("median", 0.0)
     accuracy = "accuracy" if config["fem"]["piezo"] == "coupled" else "survey_accuracy"
-    coupled = FemModel(q=config["design"]["q"], voltage=config["design"]["voltage_v"],
-                       settings=replace(fem_settings(config, accuracy), piezo="coupled"), cache=context.cache,
-                       scheduler=context.scheduler, progress=True)
+    coupled = fem_model(context, settings=replace(fem_settings(config, accuracy), piezo="coupled"))
     designs = context.results["recommended_design"].designs
     results = coupled.evaluate_plates([design.plate for design in designs.values()])
     levels = (MIN_USEFUL_DEFLECTION, config["design"]["target_deflection_um"] * UM)
@@ -318,16 +315,15 @@ def texture_rendering_figures(context: RunContext, renderings: dict) -> None:
 def calibrated_designs(context: RunContext) -> dict:
     """The recommended designs' f_r and w_dyn as the calibration (``--calibration``) predicts them, with 90 %
     intervals (docs/calibration.md); empty without a calibration.  Q and voltage are the run's."""
-    from workflow.models.fem.accuracy import FemAccuracy
-    from workflow.optimise.fem_model import FemModel
-    from workflow.pipeline.calibration_files import calibrated_record, load_calibration
+    from dataclasses import replace
+
+    from workflow.pipeline.calibration_files import calibrated_record, calibration_accuracy, load_calibration
 
     if context.calibration is None:
         return {}
     calibration = load_calibration(context.calibration)
-    design = context.config["design"]
-    model = FemModel(q=design["q"], voltage=design["voltage_v"], cache=context.cache, scheduler="synchronous",
-                     settings=FemAccuracy(target=calibration.fem["accuracy"], piezo=calibration.fem["piezo"]))
+    model = replace(fem_model(context, settings=calibration_accuracy(calibration.fem)), scheduler="synchronous",
+                    progress=False)
     designs = context.results["recommended_design"].designs
     return {hp: {"nominal_f_r_khz": d.frequency / KHZ,
                  **calibrated_record(calibration, d.plate, model.evaluate_plates, str(context.calibration))}

@@ -3,7 +3,7 @@
 from dataclasses import replace
 
 from workflow.models import analytical
-from workflow.models.fem.accuracy import FemAccuracy, evaluate_to_accuracy
+from workflow.models.fem.accuracy import FemAccuracy
 from workflow.models.fem.assembly import PlateSystem, assemble_system
 from workflow.models.fem.harmonic import ModalSolution, modal_solution
 from workflow.models.fem.mesh import quarter_plate_mesh
@@ -40,8 +40,12 @@ def evaluate_fem(plate: Plate, q: float, voltage: float, settings: FemSettings |
     FemResult
         On a fixed mesh with its :attr:`~FemResult.solution`; to an accuracy without it.
     """
-    if isinstance(settings, FemAccuracy):
-        return evaluate_to_accuracy(plate, settings, lambda mesh, lower: evaluate_fem(plate, q, voltage, mesh, lower))
+    return settings.evaluated(plate, lambda mesh, lower: evaluate_on_mesh(plate, q, voltage, mesh, lower), start)
+
+
+def evaluate_on_mesh(plate: Plate, q: float, voltage: float, settings: FemSettings, start: ModalSolution | None = None
+                     ) -> FemResult:
+    """:func:`evaluate_fem` on a fixed mesh, with the piezo model the settings name."""
     if settings.piezo == "coupled":
         return evaluate_fem_coupled(plate, q, voltage, settings, start)
     mesh, system, probes = discretise(plate, voltage, settings)
