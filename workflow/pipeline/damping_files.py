@@ -83,9 +83,9 @@ def _write_figures(fit, out: Path, input_paths) -> list:
     from workflow.pipeline.figures.damping import fit_figures
 
     written = []
-    for name, figure in fit_figures(fit).items():
+    for name, (_, draw) in fit_figures(fit).items():
         _refuse_overwriting_input(out / name, input_paths)
-        written.append(save_figure(figure, out / name))
+        written.append(save_figure(draw(), out / name))
     return written
 
 

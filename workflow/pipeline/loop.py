@@ -23,6 +23,8 @@ LOOP_OUTPUTS = ("*.csv", "calibration.json", "*.png")
 """Glob patterns of the files the loop writes into its sub-folder."""
 PAPER_LOGS = ("paper_P1.csv", "paper_P2.csv")
 """The published plates' logs (the case study), shipped in :mod:`workflow.calibration.published`."""
+PAIRS_CAPTION = "Posterior of the calibration on plate #1"
+"""Caption of the loop's calibration pairs figure."""
 SCAN_VOLTAGE = 5.0
 """Drive of the deflection scan [V peak across the ceramics]."""
 
@@ -130,7 +132,14 @@ def first_plate_figures(context: RunContext, measured: BuiltMeasurement | None) 
     if measured is None or measured.scan_log is None:
         return
     nominal = built_plate_model(measured.plate, cache=context.cache)
-    context.save_figure(scan_figure(read_scan(measured.scan_log), nominal, measured.mac), "loop_scan.png")
+    context.save_figure(scan_figure(read_scan(measured.scan_log), nominal, measured.mac), "loop_scan.png",
+                        scan_caption(context, measured))
+
+
+def scan_caption(context: RunContext, measured: BuiltMeasurement) -> str:
+    """The caption of plate #1's scan figure: the scan grid and the MAC against the nominal FEM."""
+    grid = " × ".join(map(str, context.config["loop"]["scan_grid"]))
+    return f"Plate #1 as built, scanned on a {grid} grid, beside the nominal FEM's map: MAC {measured.mac:.4f}"
 
 
 def loop_calibration(context: RunContext):
@@ -154,12 +163,12 @@ def loop_calibration(context: RunContext):
 
 def loop_calibration_files(context: RunContext, result) -> None:
     """``loop/calibration.json`` and the pairs figure."""
-    from workflow.pipeline.calibration_files import PAIRS_FIGURE, write_calibration
+    from workflow.pipeline.calibration_files import write_calibration
 
     if result is None:
         return
-    write_calibration(result[0], loop_folder(context))
-    context.figures[f"{LOOP_FOLDER}/{PAIRS_FIGURE}"] = f"{LOOP_FOLDER}/{PAIRS_FIGURE}"
+    for path in write_calibration(result[0], loop_folder(context))["figures"]:
+        context.record_figure(Path(path).relative_to(context.out).as_posix(), PAIRS_CAPTION)
 
 
 def redesign(context: RunContext):

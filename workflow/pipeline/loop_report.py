@@ -1,7 +1,7 @@
 """The report's sections on the loop of ``tactile run`` and on the published plates (:mod:`workflow.pipeline.loop`)."""
 
 from workflow.pipeline.loop import LOOP_FOLDER
-from workflow.pipeline.markdown import figure, table
+from workflow.pipeline.markdown import step_figures, table
 from workflow.pipeline.runner import RunContext
 from workflow.units import KHZ, MM
 
@@ -57,10 +57,7 @@ def loop_section(context: RunContext, second) -> str:
         + "\n\n"
         f"The simulator's truth for plate #1 as built: {first.built_frequency / KHZ:.3f} kHz; for the re-designed "
         f"plate: {second.built_frequency / KHZ:.3f} kHz.\n\n"
-        + figure(context, "loop_scan.png", f"Plate #1 as built, scanned on a {' × '.join(map(str, context.config['loop']['scan_grid']))} "
-                 f"grid, beside the nominal FEM's map: MAC {first.mac:.4f}")
-        + "\n\n"
-        + figure(context, f"{LOOP_FOLDER}/calibration_pairs.png", "Posterior of the calibration on plate #1")
+        + "\n\n".join(filter(None, (step_figures(context, "loop_first_plate"), step_figures(context, "loop_calibration"))))
     )
 
 

@@ -12,9 +12,15 @@ def table(header, rows) -> str:
     return "\n".join(lines)
 
 
-def figure(context: RunContext, name: str, caption: str) -> str:
-    """A markdown image link to a figure written by a step."""
-    return f"![{caption}]({context.figures[name]})\n\n*{caption}*"
+def figure(context: RunContext, name: str) -> str:
+    """A markdown image link to the figure ``name`` a step wrote, under the caption the step gave it."""
+    written = context.figures[name]
+    return f"![{written.caption}]({written.name})\n\n*{written.caption}*"
+
+
+def step_figures(context: RunContext, step: str) -> str:
+    """Markdown image links to every figure the step ``step`` (its key) wrote, in order (empty if none)."""
+    return "\n\n".join(figure(context, written.name) for written in context.figures_of(step))
 
 
 def relative_link(context: RunContext, path) -> str:

@@ -105,11 +105,13 @@ def run_forward_model(damping: dict, log):
 
 def damping_fit_files(context: RunContext, fit) -> None:
     """The posterior, ``fit.json`` and the fit's figures under ``damping/``."""
+    from workflow.pipeline.figures.damping import fit_figures
+
     protect = {Path(path).resolve() for path in context.results["logs"]}
     files = write_fit(fit, context.out / "damping", figures=True, protect=protect)
+    captions = {name: caption for name, (caption, _) in fit_figures(fit).items()}
     for path in files["figures"]:
-        name = Path(path).relative_to(context.out).as_posix()
-        context.figures[name] = name
+        context.record_figure(Path(path).relative_to(context.out).as_posix(), captions[Path(path).name])
 
 
 def damped_design(context: RunContext):
@@ -153,10 +155,13 @@ def damped_design_figures(context: RunContext, result) -> None:
         "design_voltage": context.config["design"]["voltage_v"],
         "voltage_limit": context.config["simulator"]["ceramic_voltage_limit_v"],
     }
+    target = context.config["design"]["target_deflection_um"]
+    captions = {"deflection": "beam model: deflection with Q(v) at the design voltage, h_p = {hp:g} mm",
+                "voltage": f"beam model: voltage needed for {target:g} µm with Q(v), h_p = {{hp:g}} mm"}
     for hp, hp_maps in maps.items():
-        for quantity in ("deflection", "voltage"):
+        for quantity, caption in captions.items():
             figure = design_map_figure(hp_maps, quantity, **marks)
-            context.save_figure(figure, f"qv_{quantity}_hp{hp / MM:g}mm.png")
+            context.save_figure(figure, f"qv_{quantity}_hp{hp / MM:g}mm.png", caption.format(hp=hp / MM))
 
 
 def fem_original(context: RunContext):
@@ -167,7 +172,8 @@ def fem_original(context: RunContext):
 def fem_original_figures(context: RunContext, result) -> None:
     from workflow.pipeline.figures.fem_responses import modes_figure
 
-    context.save_figure(modes_figure(result), "fem_modes_original.png")
+    context.save_figure(modes_figure(result), "fem_modes_original.png",
+                        "deflection and transverse indicator of the evaluated modes")
 
 
 def fem_responses(context: RunContext):
@@ -182,8 +188,9 @@ def fem_responses_figures(context: RunContext, responses) -> None:
     from workflow.pipeline.figures.fem_responses import frequency_response_figure, transient_figure
 
     frequency, transient = responses
-    context.save_figure(frequency_response_figure(frequency), "fem_frequency_response.png")
-    context.save_figure(transient_figure(transient), "fem_transient.png")
+    context.save_figure(frequency_response_figure(frequency), "fem_frequency_response.png",
+                        "frequency response |w|(f) around the working mode")
+    context.save_figure(transient_figure(transient), "fem_transient.png", "deflection after a sine at resonance is switched on")
 
 
 @dataclass(frozen=True)
@@ -219,7 +226,8 @@ def fem_optima_figures(context: RunContext, optima) -> None:
         return
     searches = {hp: (record.space_mapping, record.direct) for hp, record in optima.items()}
     minimum = context.config["design"]["min_frequency_khz"] * KHZ
-    context.save_figure(trajectory_figure(searches, minimum), "space_mapping_trajectories.png")
+    context.save_figure(trajectory_figure(searches, minimum), "space_mapping_trajectories.png",
+                        "FEM points of each space-mapping search, numbered in order")
 
 
 def recommended_design(context: RunContext):
@@ -274,7 +282,8 @@ def recommended_design_figures(context: RunContext, recommendation) -> None:
         if design.admittance is not None
     }
     if curves:
-        context.save_figure(admittance_figure(curves), "admittance.png")
+        context.save_figure(admittance_figure(curves), "admittance.png",
+                            "Admittance |Y| and phase of the recommended designs, with the plate's Q")
 
 
 def texture_rendering(context: RunContext) -> dict:
@@ -309,7 +318,8 @@ def texture_rendering_figures(context: RunContext, renderings: dict) -> None:
     """Envelope error of gratings against their period, per design."""
     from workflow.pipeline.figures.rendering import period_error_figure
 
-    context.save_figure(period_error_figure(renderings), "rendering_periods.png")
+    context.save_figure(period_error_figure(renderings), "rendering_periods.png",
+                        "Envelope error of gratings against their period in time, per design")
 
 
 def calibrated_designs(context: RunContext) -> dict:
@@ -367,7 +377,8 @@ def maps_figures(context: RunContext, maps) -> None:
     from workflow.pipeline.figures.maps import map_figure
 
     for hp, design_map in maps.items():
-        context.save_figure(map_figure(design_map), f"map_{design_map.model}_hp{hp / MM:g}mm.png")
+        context.save_figure(map_figure(design_map), f"map_{design_map.model}_hp{hp / MM:g}mm.png",
+                            f"{design_map.model} model, h_p = {hp / MM:g} mm: w_dyn and f_r")
 
 
 def sweep_widths(fem: dict, plate_width: float) -> np.ndarray:
@@ -400,7 +411,8 @@ def width_sweep_figures(context: RunContext, sweep) -> None:
     from workflow.pipeline.figures.maps import width_sweep_figure
 
     design_width = context.config["design"]["width_mm"] * MM
-    context.save_figure(width_sweep_figure(sweep, design_width=design_width), "width_sweep_fem.png")
+    context.save_figure(width_sweep_figure(sweep, design_width=design_width), "width_sweep_fem.png",
+                        "w(b) and f(b); transverse-mixed widths marked")
 
 
 RUN_OUTPUTS = ("report.md", "simulated_campaign.csv", "simulated_ringdown.csv", "*.png", *(f"damping/{pattern}" for pattern in FIT_OUTPUTS),
