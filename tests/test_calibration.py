@@ -281,7 +281,7 @@ def test_run_step_predicts_the_recommended_designs_with_the_calibration(tmp_path
     calibration = calibrate([plate], FAST, coarse_model.evaluate_plates, {**FEM_RECORD, "accuracy": 0.05})
     files = write_calibration(calibration, tmp_path, figures=False)
     designs = {1e-3: SimpleNamespace(plate=P1, frequency=25.1e3)}
-    context = SimpleNamespace(calibration=Path(files["calibration"]), config=default_config(), cache=None,
+    context = SimpleNamespace(calibration=Path(files["calibration"]), config=default_config(), cache=None, scheduler=None,
                               results={"recommended_design": SimpleNamespace(designs=designs)})
     predicted = calibrated_designs(context)[1e-3]
     assert predicted["f_r_khz_p05"] <= plate.frequency / KHZ <= predicted["f_r_khz_p95"]
