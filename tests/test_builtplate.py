@@ -218,7 +218,7 @@ def test_cli_scan_errors_are_one_line(tmp_path, capsys, argv, message):
 
 def test_run_configuration_defaults_to_the_demonstration_deviations():
     from workflow.pipeline.config import default_config
-    from workflow.pipeline.steps import built_plate_deviations
+    from workflow.pipeline.domain import built_plate_deviations
 
     config = default_config()
     deviations = built_plate_deviations(config)

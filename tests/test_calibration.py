@@ -12,7 +12,7 @@ from calibration_setup import FAST, FEM_RECORD, P1, P2, TRUTH
 from workflow.calibration.calibration import Calibration, MeasuredPlate, calibrate, nominal_theta, predict
 from workflow.calibration.case_study import cross_predictions
 from workflow.calibration.logs import read_built_plate
-from workflow.calibration.measurements import peak_frequency
+from workflow.resonance import log_parabolic_peak_frequency
 from workflow.calibration.parameters import default_settings, deviated_plate, load_settings
 from workflow.calibration.plate_surrogate import build_plate_surrogate
 from workflow.calibration.surrogate import fit_response_surface, latin_hypercube
@@ -57,8 +57,8 @@ def test_response_surface_is_exact_on_a_quadratic_and_its_loo_error_sees_a_wrong
 def test_peak_of_a_sweep_is_located_between_its_points():
     f = np.linspace(24e3, 26e3, 41)
     v = 1 / np.sqrt(1 + (50 * (f / 25_013.0 - 25_013.0 / f)) ** 2)
-    assert peak_frequency(f, v) == pytest.approx(25_013.0, abs=5.0)
-    assert peak_frequency(f, f) is None
+    assert log_parabolic_peak_frequency(f, v) == pytest.approx(25_013.0, abs=5.0)
+    assert log_parabolic_peak_frequency(f, f) is None
 
 
 def test_surrogate_error_against_fresh_fem_evaluations(coarse_model):
@@ -281,7 +281,7 @@ def test_run_step_predicts_the_recommended_designs_with_the_calibration(tmp_path
     calibration = calibrate([plate], FAST, coarse_model.evaluate_plates, {**FEM_RECORD, "accuracy": 0.05})
     files = write_calibration(calibration, tmp_path, figures=False)
     designs = {1e-3: SimpleNamespace(plate=P1, frequency=25.1e3)}
-    context = SimpleNamespace(calibration=Path(files["calibration"]), config=default_config(), cache=None,
+    context = SimpleNamespace(calibration=Path(files["calibration"]), config=default_config(), cache=None, scheduler=None,
                               results={"recommended_design": SimpleNamespace(designs=designs)})
     predicted = calibrated_designs(context)[1e-3]
     assert predicted["f_r_khz_p05"] <= plate.frequency / KHZ <= predicted["f_r_khz_p95"]

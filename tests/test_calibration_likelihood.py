@@ -16,7 +16,8 @@ from instruments.procedures.scan import grid_points
 from instruments.simulator.physics import plate_response
 from workflow import logformat
 from workflow.calibration.calibration import Calibration, MeasuredPlate, calibrate
-from workflow.calibration.measurements import aligned_misfit, lorentzian_top, mirror_scatter, real_pattern, scan_shape
+from workflow.calibration.measurements import aligned_misfit, mirror_scatter, real_pattern, scan_shape
+from workflow.resonance import lorentzian_top
 from workflow.calibration.parameters import deviated_plate
 from workflow.calibration.plate_surrogate import build_plate_surrogate, fem_pattern, point_deflection_per_volt
 from workflow.calibration.posterior import prior_bounds

@@ -8,9 +8,10 @@ from workflow.damping.posterior import DampingPosterior
 from workflow.models import analytical, materials
 from workflow.models.plate import ORIGINAL_PLATE, Plate
 from workflow.optimise.damped import (
+    DampedFemModel,
+    damped_beam_model,
     damped_deflection,
     damped_maps,
-    damped_model,
     design_with_damping,
     fem_damped_deflection,
     fem_required_voltage,
@@ -54,12 +55,12 @@ def test_more_voltage_more_deflection_more_loss_less_deflection():
     assert damped_deflection(ORIGINAL_PLATE, 30.0, LAW) < 2 * damped_deflection(ORIGINAL_PLATE, 15.0, LAW)
 
 
-def test_damped_model_drives_the_optimiser():
+def test_damped_beam_model_drives_the_optimiser():
     problem = DesignProblem(ceramic_thickness=1e-3)
-    constant = maximise_deflection(damped_model(ConstantQ(materials.PLATE_Q)), problem)
+    constant = maximise_deflection(damped_beam_model(ConstantQ(materials.PLATE_Q)), problem)
     reference = optimise_analytical(problem)
     assert constant.deflection == pytest.approx(reference.deflection, rel=1e-6)
-    damped = maximise_deflection(damped_model(LAW), problem)
+    damped = maximise_deflection(damped_beam_model(LAW), problem)
     assert damped.frequency >= problem.min_frequency * (1 - 1e-6)
     # the optimum geometry barely moves (the paper, docs/damping.md)
     assert float(damped.plate.wavelength) == pytest.approx(float(reference.plate.wavelength), rel=0.02)
@@ -119,11 +120,11 @@ def test_damped_fem_model_with_constant_q_is_the_fem():
     fem = FemModel(q=materials.PLATE_Q, voltage=10.0, settings=settings)
     plate = ORIGINAL_PLATE
     (result,) = fem.results(plate)
-    constant = damped_model(ConstantQ(materials.PLATE_Q), voltage=15.0, model="fem", fem_model=fem)
+    constant = DampedFemModel(ConstantQ(materials.PLATE_Q), fem, voltage=15.0)
     deflection, frequency = constant(plate)
     assert float(deflection) == pytest.approx(1.5 * result.deflection, rel=1e-9)
     assert float(frequency) == result.frequency
-    damped, _ = damped_model(LAW, voltage=15.0, model="fem", fem_model=fem)(plate)
+    damped, _ = DampedFemModel(LAW, fem, voltage=15.0)(plate)
     v = 2 * np.pi * result.frequency * float(damped)
     assert float(damped) == pytest.approx(1.5 * float(result.deflection_at_q(LAW.quality_factor(v))), rel=1e-8)
 

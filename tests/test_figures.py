@@ -7,7 +7,7 @@ import pytest
 from workflow.damping.fit import fit_damping
 from workflow.damping.posterior import DampingPosterior
 from workflow.damping.synthetic import simulate_campaign
-from workflow.models.fem.evaluate import ModeResult
+from workflow.models.fem.result import ModeResult
 from workflow.models.plate import ORIGINAL_PLATE
 from workflow.optimise.damped import damped_maps
 from workflow.optimise.fem_optimum import FemOptimum

@@ -2,7 +2,8 @@
 
 workflow: base <- models <- damping <- calibration <- optimise <- pipeline <- cli, with execution (pool, Dask,
 cache) beside the models and below optimise, and rendering (textures, drive synthesis) on damping.  instruments: drivers <- simulator <- procedures
-<- (pipeline, cli).  Command modules import no other command module, only ``cli.options``.
+<- (pipeline, cli).  Command modules import no other command module, only ``cli.options``.  No import cycle, not even
+through an import inside a function: what two modules both need lives in a module below them.
 """
 
 import ast
@@ -14,7 +15,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 BASE = (
     "workflow", "workflow.errors", "workflow.units", "workflow.serialise", "workflow.logformat", "workflow.progress",
-    "workflow.inputfiles",
+    "workflow.inputfiles", "workflow.resonance",
     "instruments",
 )
 LAYER_PREFIXES = {
@@ -121,3 +122,62 @@ def test_the_checker_sees_a_violation(tmp_path, monkeypatch):
     monkeypatch.setattr(Path, "read_text", lambda self, encoding=None: "from workflow.pipeline import steps\n")
     assert imports(fake) == [(1, "workflow.pipeline"), (1, "workflow.pipeline.steps")]
     assert layer_of("workflow.pipeline.steps") not in ALLOWED[layer_of(module_name(fake))]
+
+
+def import_graph(sources=SOURCES) -> dict[str, set[str]]:
+    """Module -> the project modules it imports, at the top or inside a function (a module's own packages left out:
+    importing ``a.b.c`` runs ``a`` and ``a.b`` first whatever the code says)."""
+    names = {module_name(p) for p in sources}
+    graph = {}
+    for path in sources:
+        here = module_name(path)
+        graph[here] = {t for _, t in imports(path) if t in names and t != here and not here.startswith(t + ".")}
+    return graph
+
+
+def import_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan), each sorted: every import cycle is in one."""
+    index, low, on_stack, stack, cycles = {}, {}, set(), [], []
+
+    def visit(module):
+        index[module] = low[module] = len(index)
+        stack.append(module)
+        on_stack.add(module)
+        for target in sorted(graph[module]):
+            if target not in index:
+                visit(target)
+                low[module] = min(low[module], low[target])
+            elif target in on_stack:
+                low[module] = min(low[module], index[target])
+        if low[module] == index[module]:
+            component = []
+            while not component or component[-1] != module:
+                component.append(stack.pop())
+                on_stack.discard(component[-1])
+            if len(component) > 1:
+                cycles.append(sorted(component))
+
+    for module in sorted(graph):
+        if module not in index:
+            visit(module)
+    return cycles
+
+
+def test_no_import_cycles():
+    """No two modules import each other, directly or through others, even from inside a function."""
+    graph = import_graph()
+    described = [" <-> ".join(cycle) + ": " + "; ".join(f"{m} imports {', '.join(sorted(graph[m] & set(cycle)))}"
+                                                       for m in cycle) for cycle in import_cycles(graph)]
+    assert described == []
+
+
+def test_the_cycle_checker_sees_a_cycle_inside_a_function(monkeypatch):
+    """A cycle closed by an import inside a function is caught, and a package's own ``__init__`` is no cycle."""
+    graph = {"a.x": {"a.y"}, "a.y": {"a.z"}, "a.z": {"a.x"}, "a": {"a.w"}, "a.w": set(), "b": set()}
+    assert import_cycles(graph) == [["a.x", "a.y", "a.z"]]
+    assert import_cycles({**graph, "a.z": set()}) == []
+    steps, loop = ROOT / "workflow" / "pipeline" / "steps.py", ROOT / "workflow" / "pipeline" / "loop.py"
+    probe = {steps: "def f():\n    from workflow.pipeline import loop\n",
+             loop: "def g():\n    from workflow.pipeline.steps import STEPS\n"}
+    monkeypatch.setattr(Path, "read_text", lambda self, encoding=None: probe[self])
+    assert import_cycles(import_graph([steps, loop])) == [["workflow.pipeline.loop", "workflow.pipeline.steps"]]

@@ -1,6 +1,7 @@
 """The interferometer-log reader: valid logs, tolerated problems and refused input."""
 
 import os
+import re
 import tempfile
 import time
 import tracemalloc
@@ -184,3 +185,17 @@ def test_a_line_over_the_length_limit_is_refused_with_its_line(tmp_path):
     path.write_text("".join(lines))
     with pytest.raises(InputFileError, match=rf"wide.csv, line 11: .*longer than the {logformat.MAX_LINE_LENGTH}"):
         read_log(path)
+
+
+def test_metadata_lines_are_parsed_and_written_in_one_place():
+    """``# key: value`` is read by logformat.metadata_entry and written by logformat.metadata_line, nowhere else."""
+    assert logformat.metadata_entry(logformat.metadata_line("h_i_mm", "1.0")) == ("h_i_mm", "1.0")
+    assert logformat.metadata_entry("  #  started: 2026-01-01T12:00:00 ") == ("started", "2026-01-01T12:00:00")
+    assert logformat.metadata_entry("# tactile interferometer log") is None
+    assert logformat.metadata_entry("frequency_hz,drive_voltage_v") is None
+    assert logformat.metadata_entry("# : no key") is None
+    root = Path(logformat.__file__).parents[1]
+    parsers = [path.relative_to(root).as_posix() for folder in ("workflow", "instruments")
+               for path in (root / folder).rglob("*.py")
+               if re.search(r"\[1:\]\.partition\(\":\"\)", path.read_text(encoding="utf-8"))]
+    assert parsers == ["workflow/logformat.py"]

@@ -96,7 +96,10 @@ def test_the_report_tables_each_stage_and_the_case_study(tmp_path):
     best = types.SimpleNamespace(plate=redesigned, frequency=(25.01e3, 25.48e3, 25.9e3), probability=0.954, probability_error=0.0015)
     run.results["loop_redesign"] = types.SimpleNamespace(best=best)
     second = loop.BuiltMeasurement(redesigned, 27.0e3, 25.3e3, 25.31e3, Path("r2.csv"), None, None)
-    run.figures.update({"loop_scan.png": "loop_scan.png", "loop/calibration_pairs.png": "loop/calibration_pairs.png"})
+    run.step = "loop_first_plate"
+    run.record_figure("loop_scan.png", loop.scan_caption(run, run.results["loop_first_plate"]))
+    run.step = "loop_calibration"
+    run.record_figure("loop/calibration_pairs.png", loop.PAIRS_CAPTION)
     writers = dict(SECTIONS)
     text = writers["loop_second_plate"](run, second)
     assert "## Closing the loop on a built plate" in text

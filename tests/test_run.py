@@ -4,6 +4,7 @@ import contextlib
 import io
 import json
 import re
+from pathlib import Path
 
 import pytest
 from tiny_config import TINY
@@ -122,6 +123,26 @@ def test_every_link_of_the_report_resolves(tiny_run):
     for target in targets:
         if "://" not in target:
             assert (out / target).is_file(), target
+
+
+def test_the_report_shows_every_figure_the_run_wrote_once(tiny_run):
+    """The report links what the steps produced: each PNG in the output folder appears once, with a caption."""
+    _, out, _, _ = tiny_run
+    text = (out / "report.md").read_text()
+    written = sorted(path.relative_to(out).as_posix() for path in out.rglob("*.png"))
+    linked = re.findall(r"!\[([^]]+)\]\(([^)]+\.png)\)", text)
+    assert written and sorted(target for _, target in linked) == written
+    assert all(caption.strip() for caption, _ in linked)
+
+
+def test_the_report_names_no_figure_file():
+    """Figure names are written once, where a step writes the figure (the report asks the run what it produced)."""
+    import workflow.pipeline.loop_report
+    import workflow.pipeline.report
+
+    for module in (workflow.pipeline.report, workflow.pipeline.loop_report):
+        source = Path(module.__file__).read_text(encoding="utf-8")
+        assert re.findall(r"[\w{}/.-]+\.png", source) == [], module.__name__
 
 
 def test_print_config_shows_the_effective_configuration(capsys, tmp_path):

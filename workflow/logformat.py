@@ -1,7 +1,8 @@
 """Interferometer log format, version 1 (docs/log-format.md): the names, once, and the metadata reader.
 
 UTF-8 CSV.  Optional leading metadata lines ``# key: value`` (the first may be a title
-line), then one header row and the data rows.  Readers live in
+line), then one header row and the data rows.  A metadata line is read by :func:`metadata_entry` and written by
+:func:`metadata_line` (every reader and the writer use them).  Readers live in
 :mod:`workflow.damping.logs`; the writer in :mod:`instruments.procedures.logwriter`.
 """
 
@@ -88,6 +89,20 @@ MAX_LINE_LENGTH = 10_000
 """Longest accepted line [characters]; a data row is under 200."""
 
 
+def metadata_line(key: str, text: str) -> str:
+    """The ``# key: value`` line of a metadata entry (no line end)."""
+    return f"{METADATA_PREFIX}{key}: {text}"
+
+
+def metadata_entry(line: str) -> tuple[str, str] | None:
+    """(key, value) of a ``# key: value`` line (leading blanks allowed, both stripped); None for any other line."""
+    text = line.lstrip()
+    if not text.startswith("#"):
+        return None
+    key, separator, value = text[1:].partition(":")
+    return (key.strip(), value.strip()) if separator and key.strip() else None
+
+
 def read_metadata(path: Path) -> dict:
     """key -> (value, line number) of the ``# key: value`` lines before a log's header row.
 
@@ -110,9 +125,9 @@ def read_metadata(path: Path) -> dict:
                     raise InputFileError(f"{path}, line {number}: longer than the {MAX_LINE_LENGTH} characters accepted per line")
                 if line.strip() and not line.lstrip().startswith("#"):
                     break
-                key, separator, value = line.lstrip()[1:].partition(":")
-                if separator and key.strip():
-                    metadata.setdefault(key.strip(), (value.strip(), number))
+                entry = metadata_entry(line)
+                if entry:
+                    metadata.setdefault(entry[0], (entry[1], number))
         except OSError as error:
             raise InputFileError(f"{path}: cannot read ({error.strerror or error})") from None
         except UnicodeDecodeError as error:

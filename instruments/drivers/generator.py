@@ -28,8 +28,12 @@ from instruments.drivers.base import LineInstrument, control, measurement, parse
 from instruments.drivers.errors import InstrumentError, SafetyLimitError
 
 NO_ERROR_CODE = 0
-LOWEST_AMPLITUDE_VPP = 1e-3
-"""The 33500 series' smallest amplitude [V peak-to-peak]: the safe state left at the end of a run."""
+FREQUENCY_RANGE = (1e-6, 20e6)
+"""The 33500 series' sine frequency range [Hz] (what a plan may ask of it; the simulator accepts the same)."""
+AMPLITUDE_RANGE = (1e-3, 10.0)
+"""The 33500 series' amplitude range of the output stage [V peak-to-peak]."""
+LOWEST_AMPLITUDE_VPP = AMPLITUDE_RANGE[0]
+"""The smallest amplitude [V peak-to-peak]: the safe state left at the end of a run."""
 AMPLITUDE_QUERY = "VOLT:UNIT VPP;:VOLT?"
 """The amplitude in V peak-to-peak whatever unit the instrument was left in."""
 _LEVEL_NODE = re.compile(r"VOLT|OFFS|AMPL|APPL|HIGH|LOW|LEV|LOAD|DEPT|AM$", re.IGNORECASE)

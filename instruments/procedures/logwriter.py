@@ -265,9 +265,9 @@ def read_log(path: Path, columns: tuple = logformat.COLUMNS) -> LoggedRows:
     for number, line in enumerate(text.split("\n")[:-1], start=1):
         line = line.removesuffix("\r")
         if header is None and line.startswith("#"):
-            key, separator, value = line[1:].partition(":")
-            if separator:
-                metadata[key.strip()] = value.strip()
+            entry = logformat.metadata_entry(line)
+            if entry:
+                metadata[entry[0]] = entry[1]
             continue
         if header is not None and (not line.strip() or line.startswith("#")):
             continue
@@ -365,7 +365,7 @@ class LogWriter:
     def _open(self, restart: bool) -> None:
         if not (self.path.exists() and not restart and self._resume()):
             self._file = open(self.path, "w", encoding="utf-8", newline="")
-            lines = [f"# {TITLE}"] + [f"# {key}: {_metadata_text(value)}" for key, value in self.metadata.items()]
+            lines = [f"# {TITLE}"] + [logformat.metadata_line(key, _metadata_text(value)) for key, value in self.metadata.items()]
             self._write("\n".join(lines) + "\n" + ",".join(self.columns) + "\n")
 
     def _resume(self) -> bool:

@@ -23,15 +23,15 @@ import numpy as np
 
 from instruments.drivers.amplifier import PowerAmplifier
 from instruments.drivers.errors import CommunicationError, InstrumentError, SafetyLimitError
-from instruments.drivers.generator import FunctionGenerator, check_voltage_limit
+from instruments.drivers.generator import FREQUENCY_RANGE, FunctionGenerator, check_voltage_limit
 from instruments.drivers.lockin import LockIn
 from instruments.drivers.vibrometer import Vibrometer
 from instruments.procedures.logwriter import LogWriter, point_key
 from instruments.procedures.readout import DEFAULT_TIME_CONSTANT, Readout, VelocityReading
-from instruments.simulator.generator import FREQUENCY_RANGE
 from workflow import logformat
 from workflow.errors import InputFileError, TactileError
 from workflow.progress import Progress
+from workflow.resonance import half_power_bandwidth, parabolic_peak
 from workflow.units import MM
 
 DEFAULT_RETRIES = 3
@@ -365,31 +365,11 @@ def _sweep_rows(rows: list[dict], sweep: int) -> tuple[np.ndarray, np.ndarray]:
     return frequency, velocity[first]
 
 
-def peak_of(frequency: np.ndarray, velocity: np.ndarray) -> tuple[float, float]:
-    """Peak of a sampled resonance curve by a parabola through the largest sample and its neighbours.
-
-    Returns (frequency [Hz], velocity [m/s]).
-    """
-    i = int(np.clip(np.argmax(velocity), 1, len(velocity) - 2))
-    f, v = frequency[i - 1 : i + 2], velocity[i - 1 : i + 2]
-    a, b, c = np.polyfit(f - f[1], v, 2)
-    if a >= 0:
-        j = int(np.argmax(velocity))
-        return float(frequency[j]), float(velocity[j])
-    shift = float(np.clip(-b / (2 * a), f[0] - f[1], f[2] - f[1]))
-    return float(f[1] + shift), float(c + b * shift + a * shift**2)
-
-
-def half_power_bandwidth(frequency: np.ndarray, velocity: np.ndarray, peak: float) -> float | None:
-    """Width [Hz] between the interpolated crossings of peak/sqrt(2), or None if the sweep misses one."""
-    level = peak / np.sqrt(2)
-    above = np.nonzero(velocity >= level)[0]
-    if above.size == 0 or above[0] == 0 or above[-1] == len(velocity) - 1:
-        return None
-    lo, hi = above[0], above[-1]
-    f_low = np.interp(level, [velocity[lo - 1], velocity[lo]], [frequency[lo - 1], frequency[lo]])
-    f_high = np.interp(level, [velocity[hi + 1], velocity[hi]], [frequency[hi + 1], frequency[hi]])
-    return float(f_high - f_low)
+def q_estimate(frequency: np.ndarray, velocity: np.ndarray, f_peak: float, v_peak: float) -> float | None:
+    """Half-power quality factor f_peak / bandwidth of a sweep [-] (:func:`workflow.resonance.half_power_bandwidth`),
+    or None when the sweep misses both half-power crossings."""
+    bandwidth = half_power_bandwidth(frequency, velocity, v_peak)
+    return float(f_peak / bandwidth) if np.isfinite(bandwidth) else None
 
 
 @dataclass(frozen=True)
@@ -425,18 +405,17 @@ def resonance_search(station: Station, path, plan: ResonancePlan = ResonancePlan
 
     def stages(log):
         yield [PlannedPoint(0, f, plan.voltage) for f in coarse]
-        centre, _ = peak_of(*_sweep_rows(log.rows, 0))
+        centre, _ = parabolic_peak(*_sweep_rows(log.rows, 0))
         yield [PlannedPoint(1, f, plan.voltage) for f in np.linspace(centre - 2 * step, centre + 2 * step, plan.fine_points)]
 
     rows, counts = run_procedure(station, path, "resonance", vars(plan), [plan.voltage], stages, metadata or {}, restart, fsync,
                                  sweeps=(0, 1))
     frequency, velocity = _sweep_rows(rows, 1)
-    f_r, v_peak = peak_of(frequency, velocity)
-    bandwidth = half_power_bandwidth(frequency, velocity, v_peak)
+    f_r, v_peak = parabolic_peak(frequency, velocity)
     summary = {
         "resonance_frequency_hz": f_r,
         "peak_velocity_m_s": v_peak,
-        "q_estimate": f_r / bandwidth if bandwidth else None,
+        "q_estimate": q_estimate(frequency, velocity, f_r, v_peak),
     }
     return ProcedureResult(**counts, summary=summary)
 
@@ -518,10 +497,9 @@ def q_campaign(station: Station, path, plan: CampaignPlan, metadata: dict | None
     sweeps = []
     for sweep, voltage in enumerate(plan.voltages):
         frequency, velocity = _sweep_rows(rows, sweep)
-        f_peak, v_peak = peak_of(frequency, velocity)
-        bandwidth = half_power_bandwidth(frequency, velocity, v_peak)
+        f_peak, v_peak = parabolic_peak(frequency, velocity)
         sweeps.append({"sweep": sweep, "voltage_v": voltage, "peak_frequency_hz": f_peak, "peak_velocity_m_s": v_peak,
-                       "q_estimate": f_peak / bandwidth if bandwidth else None})
+                       "q_estimate": q_estimate(frequency, velocity, f_peak, v_peak)})
     return ProcedureResult(**counts, summary={"sweeps": sweeps})
 
 

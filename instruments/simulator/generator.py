@@ -25,16 +25,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from instruments.drivers.arbitrary import DAC_FULL_SCALE, MIN_POINTS, NAME, SAMPLE_RATE_RANGE
+from instruments.drivers.generator import AMPLITUDE_RANGE, FREQUENCY_RANGE
 from instruments.simulator.scpi import header_regex, split_program
 
 IDENTITY = "Agilent Technologies,33521A,TACTILE-SIM,1.0-sim"
 """``*IDN?`` reply (manufacturer, model, serial, firmware), as the 33500 series formats it."""
 MAX_ERRORS = 20
 """Depth of the error queue; further errors replace the last one with -350 (queue overflow)."""
-FREQUENCY_RANGE = (1e-6, 20e6)
-"""Sine frequency range [Hz]."""
-AMPLITUDE_RANGE = (1e-3, 10.0)
-"""Amplitude range of the output stage [V peak-to-peak]."""
 FUNCTIONS = ("SIN", "SQU", "TRI", "RAMP", "PULS", "PRBS", "NOIS", "ARB", "DC")
 FUNCTION_LONG_FORMS = {"SINUSOID": "SIN", "SQUARE": "SQU", "TRIANGLE": "TRI", "PULSE": "PULS", "NOISE": "NOIS"}
 NO_ERROR = '+0,"No error"'

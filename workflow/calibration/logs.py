@@ -5,7 +5,7 @@ here), ``# ceramic``, ``# resonator`` (material record names), ``# glue_um`` (op
 rows are a resonance sweep (or several): the measured f_r is the velocity peak of each sweep,
 refined by a parabola through ln v at the three highest points, and the median over sweeps.
 The deflection per volt comes from the lowest-drive sweep that resolves its resonance
-(:func:`~workflow.calibration.measurements.lorentzian_top`), mapped onto the antinode when the
+(:func:`~workflow.resonance.lorentzian_top`), mapped onto the antinode when the
 log names a measurement point off it; a log whose ``# amplitude: synthesised`` says its velocities
 are not measured amplitudes (the published plates' logs) has none.
 """
@@ -15,12 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
-from workflow.calibration.measurements import lorentzian_top, peak_frequency
 from workflow.damping.logs import read_log
 from workflow.errors import InputFileError, TactileError
 from workflow.logformat import read_metadata
 from workflow.models.builtplate import BuiltPlate
 from workflow.models.plate import Plate
+from workflow.resonance import log_parabolic_peak_frequency, lorentzian_top
 
 SYNTHESISED_AMPLITUDE = ("amplitude", "synthesised")
 """Metadata item of a log whose velocity amplitudes are made up around a published frequency (no deflection per volt)."""
@@ -72,7 +72,7 @@ def read_built_plate(path) -> BuiltPlateLog:
         raise InputFileError(str(error) if str(path) in str(error) else f"{path}: {error}") from None
     log = read_log(path)
     sweeps = [(log.frequency[log.sweep == k], log.velocity[log.sweep == k]) for k in range(log.n_sweeps)]
-    located = [(frequency_step(f), peak_frequency(f, v)) for f, v in sweeps]
+    located = [(frequency_step(f), log_parabolic_peak_frequency(f, v)) for f, v in sweeps]
     located = [(step, peak) for step, peak in located if peak is not None]
     if not located:
         raise InputFileError(f"{path}: no sweep has its velocity peak inside the swept range; cannot locate f_r")

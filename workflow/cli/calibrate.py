@@ -6,7 +6,14 @@ from pathlib import Path
 
 from workflow.calibration.calibration import calibrate
 from workflow.calibration.parameters import load_settings
-from workflow.cli.options import add_fem_options, add_force_option, add_json_flag, add_mixed_plates_option, fem_accuracy
+from workflow.cli.options import (
+    add_fem_options,
+    add_force_option,
+    add_json_flag,
+    add_mixed_plates_option,
+    command_fem_model,
+    fem_accuracy,
+)
 from workflow.models import materials
 from workflow.pipeline.calibration_files import CALIBRATION_OUTPUTS, calibration_summary, measured_plates, write_calibration
 from workflow.pipeline.outputs import output_folder
@@ -39,9 +46,6 @@ def register(subparsers) -> None:
 
 
 def run(args) -> dict:
-    from workflow.execution.cache import EvaluationCache
-    from workflow.optimise.fem_model import FemModel
-
     started = time.perf_counter()
     settings = load_settings(args.config)
     warnings = []
@@ -49,8 +53,7 @@ def run(args) -> dict:
     for warning in warnings:
         print(f"tactile calibrate: warning: {warning}", file=sys.stderr)
     fem = {"q": materials.PLATE_Q, "voltage_v": materials.DESIGN_VOLTAGE, "accuracy": args.accuracy, "piezo": args.piezo}
-    model = FemModel(q=fem["q"], voltage=fem["voltage_v"], settings=fem_accuracy(args), cache=EvaluationCache(),
-                     progress=True)
+    model = command_fem_model(fem["q"], fem["voltage_v"], fem_accuracy(args))
     input_paths = {Path(p).resolve() for p in args.logs}
     with output_folder(args.out, CALIBRATION_OUTPUTS, force=args.force) as out:
         nominal = [r.frequency for r in model.evaluate_plates([plate.plate for plate in plates])]

@@ -21,6 +21,7 @@ from workflow.cli.options import (
     bounded,
     build_plate,
     calibration_fem_model,
+    command_fem_model,
     design_problem,
     fem_accuracy,
     limit_text,
@@ -28,14 +29,13 @@ from workflow.cli.options import (
     load_damping,
 )
 from workflow.errors import TactileError
-from workflow.execution.cache import EvaluationCache
 from workflow.models.fem.accuracy import SURVEY_ACCURACY
 from workflow.optimise.damped import damped_fem_optimum, damped_maps, damped_optimum, fem_damped_maps, map_draws
 from workflow.optimise.fem_optimum import optimise_fem
 from workflow.optimise.maps import design_map, width_sweep
 from workflow.optimise.problem import analytical_model, optimise_analytical
 from workflow.models.limits import LIMITS
-from workflow.pipeline.outputs import output_folder
+from workflow.pipeline.outputs import output_folder, save_figure
 from workflow.pipeline.records import damped_optimum_record, fem_damping_record
 from workflow.units import KHZ, MM, UM
 
@@ -112,16 +112,7 @@ def _maps(args, problem, posterior, points: int) -> dict:
     if args.model == "analytical":
         model = analytical_model(args.q, args.voltage)
     else:
-        from workflow.optimise.fem_model import FemModel
-
-        model = FemModel(
-            q=args.q,
-            voltage=args.voltage,
-            settings=fem_accuracy(args),
-            cache=EvaluationCache(),
-            scheduler=args.scheduler,
-            progress=True,
-        )
+        model = command_fem_model(args.q, args.voltage, fem_accuracy(args), args.scheduler)
     if posterior is None:
         record = _constant_q_record(args, problem, model, points)
     else:
@@ -134,7 +125,7 @@ def _maps(args, problem, posterior, points: int) -> dict:
         plate = build_plate(args)
         sweep = width_sweep(model, plate, sweep_widths(default_config()["fem"], plate.width))
         figure = width_sweep_figure(sweep, design_width=args.b_mm * MM)
-        record["figures"].append(_save(figure, args.out / "width_sweep_fem.png"))
+        record["figures"].append(save_figure(figure, args.out / "width_sweep_fem.png"))
         record["width_sweep"] = {
             "b_mm": (sweep.width / MM).tolist(),
             "w_dyn_um": (sweep.deflection / UM).tolist(),
@@ -178,7 +169,7 @@ def _constant_q_record(args, problem, model, points: int) -> dict:
     correction = {}
     if getattr(args, "loaded_calibration", None) is not None:
         result, optimum, correction = calibrated_map(args, result, optimum)
-    figure = _save(map_figure(result), args.out / f"map_{args.model}_hp{args.hp_mm:g}mm.png")
+    figure = save_figure(map_figure(result), args.out / f"map_{args.model}_hp{args.hp_mm:g}mm.png")
     return {
         **_map_keys(args, result.wavelength, result.resonator_thickness, result.deflection, result.frequency),
         "optimum": _optimum_keys(optimum),
@@ -223,7 +214,7 @@ def _damped_record(args, problem, model, points: int, posterior) -> dict:
         maps = fem_damped_maps(posterior, problem, model, points, draws, optimum)
     stem = f"map_{args.model}_qv_hp{args.hp_mm:g}mm"
     figures = [
-        _save(design_map_figure(maps, quantity, design_voltage=args.voltage), args.out / f"{stem}_{quantity}.png") for quantity in ("deflection", "voltage")
+        save_figure(design_map_figure(maps, quantity, design_voltage=args.voltage), args.out / f"{stem}_{quantity}.png") for quantity in ("deflection", "voltage")
     ]
     p05, _, p95 = maps.required_voltage_interval
     return {
@@ -237,11 +228,3 @@ def _damped_record(args, problem, model, points: int, posterior) -> dict:
         "optimum": {**_optimum_keys(optimum), "q": keys["q"], "required_voltage_v": keys["required_voltage_v"]},
         "figures": figures,
     }
-
-
-def _save(figure, path: Path) -> str:
-    import matplotlib.pyplot as plt
-
-    figure.savefig(path, dpi=120)
-    plt.close(figure)
-    return str(path)

@@ -40,7 +40,7 @@ from workflow.cli.options import (
 from workflow.errors import TactileError
 from workflow.models.limits import LIMITS, point_problem
 from workflow.models.materials import PLATE_Q
-from workflow.pipeline.outputs import output_folder
+from workflow.pipeline.outputs import output_folder, save_figure
 from workflow.units import MM
 
 DEFAULT_DATA_DIR = Path("measurements")
@@ -435,22 +435,13 @@ def _figure_output(args, log: Path):
 def _scan_figure(args, log: Path, path: Path) -> dict:
     """Compare a scan with the FEM's map of the nominal plate: write the figure at ``path``; its path, the MAC and
     the FEM's f_r."""
-    import matplotlib.pyplot as plt
-
     from workflow.pipeline.builtplate import read_scan, scan_mac
     from workflow.pipeline.figures.scan import scan_figure
 
     scan = read_scan(log)
     nominal = built_plate_model(args, scan.plate)
     mac = scan_mac(scan, nominal)
-    figure = scan_figure(scan, nominal, mac)
-    try:
-        figure.savefig(path, dpi=120)
-    except OSError as error:
-        raise TactileError(f"cannot write the figure {path}: {error.strerror or error}") from None
-    finally:
-        plt.close(figure)
-    return {"mac": mac, "figure": str(path), "nominal_fem_frequency_hz": nominal.resonance_frequency}
+    return {"mac": mac, "figure": save_figure(scan_figure(scan, nominal, mac), path), "nominal_fem_frequency_hz": nominal.resonance_frequency}
 
 
 def _render(args, station, metadata: dict, out: Path, frequency: float):

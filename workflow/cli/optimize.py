@@ -5,6 +5,7 @@ from workflow.cli.options import (
     add_calibration_option,
     bounded,
     calibration_fem_model,
+    command_fem_model,
     load_calibration_option,
     add_ceramic_option,
     add_damping_option,
@@ -92,10 +93,7 @@ def stock_list(text: str) -> tuple:
 
 def _fem_model(args):
     """The cached, parallel FEM at --q, --voltage and --accuracy."""
-    from workflow.execution.cache import EvaluationCache
-    from workflow.optimise.fem_model import FemModel
-
-    return FemModel(q=args.q, voltage=args.voltage, settings=fem_accuracy(args), cache=EvaluationCache(), progress=True)
+    return command_fem_model(args.q, args.voltage, fem_accuracy(args))
 
 
 def run(args) -> dict:

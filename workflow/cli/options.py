@@ -594,11 +594,18 @@ def load_calibration_option(args):
 
 def calibration_fem_model(calibration, q: float, voltage: float):
     """The cached, in-process FEM at the calibration's accuracy and piezo model, driven at ``q`` and ``voltage``."""
+    from workflow.pipeline.calibration_files import calibration_accuracy
+
+    return command_fem_model(q, voltage, calibration_accuracy(calibration.fem), scheduler="synchronous")
+
+
+def command_fem_model(q: float, voltage: float, settings, scheduler=None):
+    """The FEM of a command: cached on disk, progress on stderr, at ``q`` [-], ``voltage`` [V peak] and ``settings``
+    (an accuracy or a mesh); ``scheduler`` as :func:`~workflow.execution.parallel.map_evaluations` takes it."""
     from workflow.execution.cache import EvaluationCache
     from workflow.optimise.fem_model import FemModel
 
-    accuracy = FemAccuracy(target=calibration.fem["accuracy"], piezo=calibration.fem["piezo"])
-    return FemModel(q=q, voltage=voltage, settings=accuracy, cache=EvaluationCache(), scheduler="synchronous", progress=True)
+    return FemModel(q=q, voltage=voltage, settings=settings, cache=EvaluationCache(), scheduler=scheduler, progress=True)
 
 
 def calibration_line(record: dict) -> str:

@@ -65,7 +65,7 @@ def run(args):
     print(f"report: {report}", file=sys.stderr if args.json else sys.stdout)
     return {
         "report": str(report),
-        "figures": sorted(context.figures.values()),
+        "figures": sorted(context.figures),
         "timings_s": {t.name: round(t.seconds, 3) for t in context.timings},
         "from_cache": [t.name for t in context.timings if t.cached],
     }

@@ -48,6 +48,7 @@ from workflow.damping.likelihood import (
 from workflow.damping.logs import CampaignLog, drop_short_sweeps
 from workflow.damping.posterior import DampingPosterior, stacked_posterior
 from workflow.progress import Progress
+from workflow.resonance import half_power_bandwidth
 
 DEFAULT_LAWS = SAMPLED_LAWS
 """The laws screened and sampled by default; every law of :data:`~workflow.damping.laws.LAWS` gets a MAP and a BIC."""
@@ -247,32 +248,16 @@ class DampingFit:
 
 
 def sweep_estimates(log: CampaignLog) -> SweepEstimates:
-    """Peak and half-power-bandwidth quality factor of every sweep (model-free)."""
+    """Peak and half-power-bandwidth quality factor of every sweep (model-free, :mod:`workflow.resonance`)."""
     rows = [(np.nan,) * 4] if not log.n_sweeps else []
     for k in range(log.n_sweeps):
         mine = log.sweep == k
         order = np.argsort(log.frequency[mine])
         f, v = log.frequency[mine][order], log.velocity[mine][order]
         peak = int(np.argmax(v))
-        level = v[peak] / np.sqrt(2)
-        left = _crossing(f[: peak + 1][::-1], v[: peak + 1][::-1], level)
-        right = _crossing(f[peak:], v[peak:], level)
-        if np.isfinite(left) and np.isfinite(right):
-            bandwidth = right - left
-        else:
-            bandwidth = 2 * np.nanmin([f[peak] - left, right - f[peak]]) if np.isfinite(left) or np.isfinite(right) else np.nan
-        rows.append((np.median(log.drive_voltage[mine]), f[peak], v[peak], f[peak] / bandwidth))
+        rows.append((np.median(log.drive_voltage[mine]), f[peak], v[peak], f[peak] / half_power_bandwidth(f, v)))
     voltage, frequency, velocity, q = (np.array(column) for column in zip(*rows))
     return SweepEstimates(voltage, frequency, velocity, q)
-
-
-def _crossing(f: np.ndarray, v: np.ndarray, level: float) -> float:
-    """Frequency where v, walked from the peak outwards, first drops below ``level`` (interpolated)."""
-    below = np.nonzero(v < level)[0]
-    if below.size == 0:
-        return np.nan
-    j = below[0]
-    return float(f[j - 1] + (level - v[j - 1]) * (f[j] - f[j - 1]) / (v[j] - v[j - 1]))
 
 
 def initial_guess(data: FitData, sweeps: SweepEstimates) -> Tuple[np.ndarray, np.ndarray]:

@@ -510,9 +510,9 @@ def _content_lines(path: Path, stream, warnings: list, metadata: dict):
         seen_text = seen_text or bool(line.strip())
         line = line.rstrip("\r")
         if not line.strip() or line.lstrip().startswith("#"):
-            key, separator, value = line.lstrip()[1:].partition(":")
-            if separator and not header_seen:
-                metadata.setdefault(key.strip(), (value.strip(), number))
+            entry = logformat.metadata_entry(line)
+            if entry and not header_seen:
+                metadata.setdefault(entry[0], (entry[1], number))
             continue
         header_seen = True
         yield number, line, complete

@@ -149,8 +149,9 @@ class _ScaledResult:
         return self.scale * self.result.deflection_at_q(q)
 
 
-def damped_model(law, voltage: float = materials.DESIGN_VOLTAGE, model: str = "analytical", fem_model=None) -> PlateModel:
-    """A plate model with Q(v), usable by :func:`~workflow.optimise.problem.maximise_deflection`.
+def damped_beam_model(law, voltage: float = materials.DESIGN_VOLTAGE) -> PlateModel:
+    """The beam model with Q(v), usable by :func:`~workflow.optimise.problem.maximise_deflection`
+    (:class:`DampedFemModel` is the FEM's).
 
     Parameters
     ----------
@@ -158,23 +159,12 @@ def damped_model(law, voltage: float = materials.DESIGN_VOLTAGE, model: str = "a
         Scalar parameters.
     voltage : float
         Drive amplitude [V peak].
-    model : {"analytical", "fem"}
-    fem_model : workflow.optimise.fem_model.FemModel, optional
-        For ``model="fem"``; default a new uncached one at ``voltage``.
     """
-    if model == "analytical":
 
-        def beam(plate: Plate):
-            return damped_deflection(plate, voltage, law), analytical.resonance_frequency(plate)
+    def beam(plate: Plate):
+        return damped_deflection(plate, voltage, law), analytical.resonance_frequency(plate)
 
-        return beam
-    if model == "fem":
-        if fem_model is None:
-            from workflow.optimise.fem_model import FemModel
-
-            fem_model = FemModel(voltage=voltage)
-        return DampedFemModel(law, fem_model, voltage)
-    raise ValueError(f"model must be 'analytical' or 'fem', got {model!r}")
+    return beam
 
 
 @dataclass(frozen=True)
@@ -190,7 +180,7 @@ class DrawTask:
 def optimise_draw(task: DrawTask) -> tuple:
     """(lambda [m], h_i [m], deflection [m], frequency [Hz], required voltage [V]) of one draw's beam optimum."""
     law = POSTERIOR_LAWS[task.law_name](*task.parameters)
-    optimum = maximise_deflection(damped_model(law, task.problem.voltage), task.problem)
+    optimum = maximise_deflection(damped_beam_model(law, task.problem.voltage), task.problem)
     voltage = float(required_voltage(optimum.plate, law, task.target))
     return (
         float(optimum.plate.wavelength),
@@ -293,7 +283,7 @@ def design_with_damping(
     for problem in problems:
         tasks = [DrawTask(posterior.law_name, tuple(float(c[i]) for c in columns), problem, target) for i in range(draws)]
         rows = np.array(map_evaluations(optimise_draw, tasks, scheduler=scheduler, progress=progress, description="Q(v) draws"))
-        damped = maximise_deflection(damped_model(median, problem.voltage), problem)
+        damped = maximise_deflection(damped_beam_model(median, problem.voltage), problem)
         optima[problem.ceramic_thickness] = DampedOptimum(
             problem=problem,
             constant_q=maximise_deflection(analytical_model(materials.PLATE_Q, problem.voltage), problem),
@@ -450,7 +440,7 @@ def design_summary(design: DampedDesign) -> dict:
 
 def damped_optimum(law, problem: DesignProblem) -> Optimum:
     """The beam optimum with the Q(v) ``law`` solved self-consistently at ``problem.voltage``."""
-    return maximise_deflection(damped_model(law, problem.voltage), problem)
+    return maximise_deflection(damped_beam_model(law, problem.voltage), problem)
 
 
 def damped_fem_optimum(law, problem: DesignProblem, fem_model, method: str):
@@ -464,8 +454,8 @@ def damped_fem_optimum(law, problem: DesignProblem, fem_model, method: str):
     -------
     (FemOptimum, FemResult)
     """
-    fine = damped_model(law, problem.voltage, model="fem", fem_model=fem_model)
-    found = optimise_fem(problem, fine, method, coarse_model=damped_model(law, problem.voltage))
+    fine = DampedFemModel(law, fem_model, problem.voltage)
+    found = optimise_fem(problem, fine, method, coarse_model=damped_beam_model(law, problem.voltage))
     (result,) = fem_model.results(found.optimum.plate)
     return found, result
 

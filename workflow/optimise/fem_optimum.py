@@ -112,7 +112,7 @@ def optimise_fem(
     clears the margin by more than :data:`SETTLE_TOLERANCE`, which would give away deflection.
     Parameters as :func:`optimise_fem_on_mesh`.
     """
-    accuracy = getattr(fem_model, "settings", None)
+    accuracy = fem_model.settings
     if not isinstance(accuracy, FemAccuracy):
         return optimise_fem_on_mesh(problem, fem_model, method, q, coarse_model)
     if coarse_model is None:

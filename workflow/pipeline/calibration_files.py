@@ -13,9 +13,11 @@ from workflow.calibration.parameters import CalibrationSettings
 from workflow.damping.logs import SAME_PLATE_TOLERANCE
 from workflow.errors import InputFileError
 from workflow.inputfiles import MAX_CALIBRATION_BYTES, load_json
+from workflow.models.fem.accuracy import FemAccuracy
 from workflow.models.fem.surface import modal_assurance_criterion
 from workflow.optimise.robust import RobustDesign
 from workflow.pipeline.builtplate import is_scan_log, read_scan
+from workflow.pipeline.outputs import save_figure
 from workflow.pipeline.records import geometry_record
 from workflow.units import KHZ, NM, UM
 
@@ -76,15 +78,16 @@ def write_calibration(calibration: Calibration, out: Path, figures: bool = True,
             raise InputFileError(f"--out: writing {out / name} would overwrite an input log; choose another folder")
     (out / CALIBRATION_FILE).write_text(json.dumps(calibration.to_dict()) + "\n", encoding="utf-8")
     if figures:
-        import matplotlib.pyplot as plt
-
         from workflow.pipeline.figures.calibration import pairs_figure
 
-        figure = pairs_figure(calibration)
-        figure.savefig(out / PAIRS_FIGURE, dpi=110)
-        plt.close(figure)
-        files["figures"].append(str(out / PAIRS_FIGURE))
+        files["figures"].append(save_figure(pairs_figure(calibration), out / PAIRS_FIGURE, dpi=110))
     return files
+
+
+def calibration_accuracy(fem: dict) -> FemAccuracy:
+    """The FEM accuracy a calibration was made at (its ``fem`` record: ``accuracy`` and ``piezo``), which every
+    prediction with it uses."""
+    return FemAccuracy(target=fem["accuracy"], piezo=fem["piezo"])
 
 
 def load_calibration(path) -> Calibration:

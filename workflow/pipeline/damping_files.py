@@ -10,7 +10,7 @@ from workflow.damping.inference_data import save_inference_data
 from workflow.damping.posterior import POSTERIOR_FILE, save_posterior
 from workflow.errors import InputFileError
 from workflow.models.limits import problem
-from workflow.pipeline.outputs import writable_folder
+from workflow.pipeline.outputs import save_figure, writable_folder
 from workflow.serialise import jsonable
 
 FIT_OUTPUTS = ("posterior*.npz", "posterior*.nc", "fit.json", "*.png")
@@ -80,16 +80,12 @@ def write_fit(fit, out, figures: bool = True, protect=()) -> dict:
 
 
 def _write_figures(fit, out: Path, input_paths) -> list:
-    import matplotlib.pyplot as plt
-
     from workflow.pipeline.figures.damping import fit_figures
 
     written = []
-    for name, figure in fit_figures(fit).items():
+    for name, (_, draw) in fit_figures(fit).items():
         _refuse_overwriting_input(out / name, input_paths)
-        figure.savefig(out / name, dpi=120)
-        plt.close(figure)
-        written.append(str(out / name))
+        written.append(save_figure(draw(), out / name))
     return written
 
 

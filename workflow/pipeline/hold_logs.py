@@ -8,7 +8,7 @@ import numpy as np
 from instruments.procedures.logwriter import HOLD_KEY_COLUMNS, read_log
 from workflow import logformat
 from workflow.errors import InputFileError
-from workflow.pipeline.rendering import save_figure
+from workflow.pipeline.outputs import save_figure
 
 
 @dataclass(frozen=True)

@@ -23,6 +23,8 @@ LOOP_OUTPUTS = ("*.csv", "calibration.json", "*.png")
 """Glob patterns of the files the loop writes into its sub-folder."""
 PAPER_LOGS = ("paper_P1.csv", "paper_P2.csv")
 """The published plates' logs (the case study), shipped in :mod:`workflow.calibration.published`."""
+PAIRS_CAPTION = "Posterior of the calibration on plate #1"
+"""Caption of the loop's calibration pairs figure."""
 SCAN_VOLTAGE = 5.0
 """Drive of the deflection scan [V peak across the ceramics]."""
 
@@ -70,7 +72,7 @@ def build_and_measure(context: RunContext, plate: Plate, name: str, scan: bool) 
     from instruments.simulator.bench import built_bench_settings
     from workflow.models.builtplate import PlateDeviations
     from workflow.pipeline.builtplate import built_plate_model, read_scan, scan_mac
-    from workflow.pipeline.steps import bench_settings, built_plate_deviations
+    from workflow.pipeline.domain import bench_settings, built_plate_deviations
 
     loop = context.config["loop"]
     model = built_plate_model(plate, built_plate_deviations(context.config), cache=context.cache)
@@ -100,16 +102,15 @@ def build_and_measure(context: RunContext, plate: Plate, name: str, scan: bool) 
 def calibration_model(context: RunContext):
     """(FEM model, its conditions) of the loop's calibration: the run's Q and voltage, the survey accuracy
     (:data:`~workflow.models.fem.accuracy.SURVEY_ACCURACY` when [fem] survey_accuracy is 0: a fixed mesh)."""
-    from workflow.models.fem.accuracy import SURVEY_ACCURACY, FemAccuracy
-    from workflow.optimise.fem_model import FemModel
+    from workflow.models.fem.accuracy import SURVEY_ACCURACY
+    from workflow.pipeline.calibration_files import calibration_accuracy
+    from workflow.pipeline.domain import fem_model
 
     design = context.config["design"]
     accuracy = context.config["fem"]["survey_accuracy"] or SURVEY_ACCURACY
     fem = {"q": design["q"], "voltage_v": design["voltage_v"], "accuracy": accuracy,
            "piezo": context.config["fem"]["piezo"]}
-    model = FemModel(q=fem["q"], voltage=fem["voltage_v"], settings=FemAccuracy(target=fem["accuracy"], piezo=fem["piezo"]),
-                     cache=context.cache, scheduler=context.scheduler, progress=True)
-    return model, fem
+    return fem_model(context, settings=calibration_accuracy(fem)), fem
 
 
 def first_plate(context: RunContext) -> BuiltMeasurement | None:
@@ -127,12 +128,18 @@ def first_plate(context: RunContext) -> BuiltMeasurement | None:
 def first_plate_figures(context: RunContext, measured: BuiltMeasurement | None) -> None:
     from workflow.pipeline.builtplate import built_plate_model, read_scan
     from workflow.pipeline.figures.scan import scan_figure
-    from workflow.pipeline.steps import save_figure
 
     if measured is None or measured.scan_log is None:
         return
     nominal = built_plate_model(measured.plate, cache=context.cache)
-    save_figure(scan_figure(read_scan(measured.scan_log), nominal, measured.mac), context.figure_path("loop_scan.png"))
+    context.save_figure(scan_figure(read_scan(measured.scan_log), nominal, measured.mac), "loop_scan.png",
+                        scan_caption(context, measured))
+
+
+def scan_caption(context: RunContext, measured: BuiltMeasurement) -> str:
+    """The caption of plate #1's scan figure: the scan grid and the MAC against the nominal FEM."""
+    grid = " × ".join(map(str, context.config["loop"]["scan_grid"]))
+    return f"Plate #1 as built, scanned on a {grid} grid, beside the nominal FEM's map: MAC {measured.mac:.4f}"
 
 
 def loop_calibration(context: RunContext):
@@ -156,12 +163,12 @@ def loop_calibration(context: RunContext):
 
 def loop_calibration_files(context: RunContext, result) -> None:
     """``loop/calibration.json`` and the pairs figure."""
-    from workflow.pipeline.calibration_files import PAIRS_FIGURE, write_calibration
+    from workflow.pipeline.calibration_files import write_calibration
 
     if result is None:
         return
-    write_calibration(result[0], loop_folder(context))
-    context.figures[f"{LOOP_FOLDER}/{PAIRS_FIGURE}"] = f"{LOOP_FOLDER}/{PAIRS_FIGURE}"
+    for path in write_calibration(result[0], loop_folder(context))["figures"]:
+        context.record_figure(Path(path).relative_to(context.out).as_posix(), PAIRS_CAPTION)
 
 
 def redesign(context: RunContext):

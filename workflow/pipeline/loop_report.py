@@ -1,5 +1,7 @@
 """The report's sections on the loop of ``tactile run`` and on the published plates (:mod:`workflow.pipeline.loop`)."""
 
+from workflow.pipeline.loop import LOOP_FOLDER
+from workflow.pipeline.markdown import step_figures, table
 from workflow.pipeline.runner import RunContext
 from workflow.units import KHZ, MM
 
@@ -16,9 +18,6 @@ def _geometry(plate) -> str:
 
 def loop_section(context: RunContext, second) -> str:
     """"Closing the loop on a built plate": each stage's f_r, the scan and the calibration's pairs."""
-    from workflow.pipeline.loop import LOOP_FOLDER
-    from workflow.pipeline.report import figure, table
-
     if second is None:
         return ""
     first = context.results["loop_first_plate"]
@@ -58,17 +57,12 @@ def loop_section(context: RunContext, second) -> str:
         + "\n\n"
         f"The simulator's truth for plate #1 as built: {first.built_frequency / KHZ:.3f} kHz; for the re-designed "
         f"plate: {second.built_frequency / KHZ:.3f} kHz.\n\n"
-        + figure(context, "loop_scan.png", f"Plate #1 as built, scanned on a {' × '.join(map(str, context.config['loop']['scan_grid']))} "
-                 f"grid, beside the nominal FEM's map: MAC {first.mac:.4f}")
-        + "\n\n"
-        + figure(context, f"{LOOP_FOLDER}/calibration_pairs.png", "Posterior of the calibration on plate #1")
+        + "\n\n".join(filter(None, (step_figures(context, "loop_first_plate"), step_figures(context, "loop_calibration"))))
     )
 
 
 def case_study_section(context: RunContext, directions) -> str:
     """"Case study: the published plates": calibrate on one, predict the other."""
-    from workflow.pipeline.report import table
-
     if directions is None:
         return ""
     rows = [

@@ -154,3 +154,19 @@ def _update_record(folder: Path, patterns, before: dict, record: dict) -> None:
     temporary = folder / f"{RECORD}.tmp"
     temporary.write_text(text, encoding="utf-8")
     os.replace(temporary, folder / RECORD)
+
+
+def save_figure(figure, path, dpi: int = 120, tight: bool = False) -> str:
+    """Write a matplotlib figure as PNG, release it and return its path; an unwritable path is one clear error.
+
+    ``tight``: crop the canvas to the drawn artists (``bbox_inches="tight"``).
+    """
+    import matplotlib.pyplot as plt
+
+    try:
+        figure.savefig(path, dpi=dpi, **({"bbox_inches": "tight"} if tight else {}))
+    except OSError as error:
+        raise InputFileError(f"cannot write the figure {path}: {error.strerror or error}") from None
+    finally:
+        plt.close(figure)
+    return str(path)

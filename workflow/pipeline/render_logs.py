@@ -21,7 +21,8 @@ from workflow import logformat
 from workflow.damping.envelope import envelope_at
 from workflow.damping.laws import law_parameters
 from workflow.damping.mode_shape import BeamMode, measurement_factor
-from workflow.pipeline.rendering import PlateEnvelope, modulated_drive, save_figure
+from workflow.pipeline.outputs import save_figure
+from workflow.pipeline.rendering import PlateEnvelope, modulated_drive
 from workflow.rendering.metrics import contrast_per_period, envelope_error, median_time, transition_times
 from workflow.rendering.synthesis import render
 from workflow.rendering.textures import wanted_deflection

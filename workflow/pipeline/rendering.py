@@ -26,6 +26,7 @@ from workflow.damping.laws import ConstantQ, law_parameters
 from workflow.damping.posterior import load_posterior
 from workflow.errors import InputFileError
 from workflow.models import analytical
+from workflow.pipeline.outputs import save_figure
 from workflow.rendering.textures import TextureError
 from workflow.serialise import jsonable
 from workflow.units import MM, UM
@@ -151,17 +152,3 @@ def write_rendering(folder: Path, rendering, amplifier: PowerAmplifier, summary:
     files["summary"].write_text(json.dumps({**summary, "files": paths}, indent=2, default=jsonable) + "\n",
                                 encoding="utf-8")
     return paths
-
-
-def save_figure(figure, path) -> None:
-    """Write a figure as PNG and release it; an unwritable path is one clear error."""
-    import matplotlib.pyplot as plt
-
-    try:
-        figure.savefig(path, dpi=120)
-    except OSError as error:
-        raise InputFileError(f"cannot write the figure {path}: {error.strerror or error}") from None
-    finally:
-        plt.close(figure)
-
-

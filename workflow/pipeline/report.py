@@ -7,6 +7,7 @@ import numpy as np
 from workflow.models.analytical import BEAM_CALIBRATION
 from workflow.optimise.maps import TRANSVERSE_THRESHOLD
 from workflow.pipeline.loop_report import case_study_section, loop_section
+from workflow.pipeline.markdown import relative_link, step_figures, table
 from workflow.pipeline.runner import RunContext
 from workflow.units import KHZ, MM, UM
 
@@ -23,18 +24,6 @@ def write_report(context: RunContext) -> Path:
     path = context.out / "report.md"
     path.write_text("\n\n".join(s.strip() for s in sections if s) + "\n", encoding="utf-8")
     return path
-
-
-def table(header, rows) -> str:
-    """A markdown table."""
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(str(cell) for cell in row) + " |" for row in rows]
-    return "\n".join(lines)
-
-
-def figure(context: RunContext, name: str, caption: str) -> str:
-    """A markdown image link to a figure written by a step."""
-    return f"![{caption}]({context.figures[name]})\n\n*{caption}*"
 
 
 def _title(context: RunContext) -> str:
@@ -56,7 +45,7 @@ def _recommended_design(context: RunContext, recommendation) -> str:
     if not section or fit is None:
         return section
     section += "\n\n" + _basis(recommendation, fit.log.velocity, simulated=not context.logs)
-    if "admittance.png" in context.figures:
+    if context.figures_of("recommended_design"):
         section += "\n\n" + _electrical(context, recommendation)
     return section
 
@@ -75,7 +64,7 @@ def _electrical(context: RunContext, recommendation) -> str:
             "plate. The resonance f_r (short circuit, maximum |Y|) is the working frequency; the antiresonance f_a "
             "(open circuit, minimum |Y|) and the effective coupling k_eff² = (f_a² − f_r²)/f_a² follow.",
             table(["h_p [mm]", "f_r [kHz]", "f_a [kHz]", "k_eff"], rows),
-            figure(context, "admittance.png", "Admittance |Y| and phase of the recommended designs, with the plate's Q"),
+            step_figures(context, "recommended_design"),
         ]
     )
 
@@ -327,7 +316,7 @@ def _texture_rendering(context: RunContext, renderings) -> str:
         table(("h_p [mm]", "carrier [kHz]", f"time constant at {low / UM:g} / {high / UM:g} µm [ms]",
                f"period [mm], pre-compensated, at {speeds} mm/s", f"period [mm], plain switching, at {speeds} mm/s"),
               rows),
-        figure(context, "rendering_periods.png", "Envelope error of gratings against their period in time, per design"),
+        step_figures(context, "texture_rendering"),
         "**Amplifier** (coupled piezoelectric FEM's admittance Y at its resonance with the fitted Q(v) at the working "
         f"amplitude, {high / UM:g} µm at the voltage it needs): current amplitude |Y| V, real power Re(Y) V²/2 and "
         f"apparent power |Y| V²/2; a pre-compensated rise drives up to {first.voltage_limit:g} V, which the peak "
@@ -388,18 +377,9 @@ def _analytical_optima(context: RunContext, optima) -> str:
 
 
 def _logs(context: RunContext, logs) -> str:
-    names = ", ".join(f"[{Path(p).name}]({_relative(context, p)})" for p in logs)
+    names = ", ".join(f"[{Path(p).name}]({relative_link(context, p)})" for p in logs)
     origin = "simulated on the bench simulator for the original plate" if not context.logs else "given with --logs"
     return f"## Interferometer logs\n\nFitted logs ({origin}): {names}."
-
-
-def _relative(context: RunContext, path) -> str:
-    """A link target relative to the report (absolute when outside the output folder)."""
-    path = Path(path).resolve()
-    try:
-        return path.relative_to(context.out.resolve()).as_posix()
-    except ValueError:
-        return path.as_uri()
 
 
 def _damping_fit(context: RunContext, fit) -> str:
@@ -447,7 +427,6 @@ def _damping_fit(context: RunContext, fit) -> str:
         "fallback": "the flexible law, because the preferred law failed its misfit checks",
     }[summary["selection"]]
     warning = f"**Warning: {summary['warning']}.**\n\n" if summary["warning"] else ""
-    figures = [figure(context, name, caption) for name, caption in _DAMPING_FIGURES if name in context.figures]
     return (
         "## Damping: Q(v) fitted to the logs\n\n"
         + warning
@@ -471,7 +450,7 @@ def _damping_fit(context: RunContext, fit) -> str:
         f"**{'converged' if d['converged'] else 'NOT converged'}** (rule: {d['rule']}). "
         "Posterior samples the design uses: [damping/posterior.npz](damping/posterior.npz); the preferred law as "
         "ArviZ InferenceData: [damping/posterior.nc](damping/posterior.nc); summary: [damping/fit.json](damping/fit.json).\n\n"
-        + "\n\n".join(figures)
+        + step_figures(context, "damping_fit")
     )
 
 
@@ -524,21 +503,6 @@ def _ringdowns(summary: dict) -> str:
             + table(["antinode v [m/s]", "Q from the sweeps", "Q from the ring-downs", "z"], compared) + "\n\n")
 
 
-_DAMPING_FIGURES = [
-    ("damping/q_of_v.png", "Q(v) with its 90 % credible band and the per-sweep half-power estimate"),
-    ("damping/resonance_curves.png", "resonance curves: data and posterior prediction"),
-    ("damping/ringdown.png", "ring-downs: envelopes with the law's decay, and the model-free Q from the decays"),
-    ("damping/corner_quadratic.png", "posterior of the quadratic law (corner plot)"),
-    ("damping/trace_quadratic.png", "chains of the quadratic law (trace plot)"),
-    ("damping/corner_linear.png", "posterior of the linear law (corner plot)"),
-    ("damping/trace_linear.png", "chains of the linear law (trace plot)"),
-    ("damping/corner_threshold.png", "posterior of the threshold law (corner plot)"),
-    ("damping/trace_threshold.png", "chains of the threshold law (trace plot)"),
-    ("damping/corner_flexible.png", "posterior of the flexible law (corner plot)"),
-    ("damping/trace_flexible.png", "chains of the flexible law (trace plot)"),
-]
-
-
 def _damped_design(context: RunContext, result) -> str:
     from workflow.optimise.damped import design_summary
 
@@ -563,15 +527,6 @@ def _damped_design(context: RunContext, result) -> str:
             )
         )
     original = summary["original_plate"]
-    maps = [
-        figure(context, name, caption)
-        for hp in design.optima
-        for name, caption in (
-            (f"qv_deflection_hp{hp / MM:g}mm.png", f"beam model: deflection with Q(v) at the design voltage, h_p = {hp / MM:g} mm"),
-            (f"qv_voltage_hp{hp / MM:g}mm.png", f"beam model: voltage needed for {summary['target_um']:g} µm with Q(v), h_p = {hp / MM:g} mm"),
-        )
-        if name in context.figures
-    ]
     return (
         "## Design with Q(v)\n\n"
         f"The constant Q is replaced by the fitted {summary['law']} law and the deflection is solved "
@@ -592,7 +547,7 @@ def _damped_design(context: RunContext, result) -> str:
         + "\n\n"
         f"Original plate (beam model) with Q(v) at the design voltage: w = {spread(original['w_dyn_um'])} µm; "
         f"voltage for {summary['target_um']:g} µm: {spread(original['required_voltage_v'], 2)} V.\n\n"
-        + "\n\n".join(maps)
+        + step_figures(context, "damped_design")
     )
 
 
@@ -619,7 +574,7 @@ def _fem_original(context: RunContext, result) -> str:
         f"variance across the width (0: a clean longitudinal mode). {accuracy_sentence(result.error)}\n\n"
         + table(["mode", "f [kHz]", "mean deflection [µm]", "transverse indicator", ""], rows)
         + "\n\n"
-        + figure(context, "fem_modes_original.png", "deflection and transverse indicator of the evaluated modes")
+        + step_figures(context, "fem_original")
     )
 
 
@@ -662,9 +617,7 @@ def _fem_responses(context: RunContext, responses) -> str:
         "## Responses of the original plate\n\n"
         f"Switched on at resonance ({transient.frequency / KHZ:.3f} kHz), the envelope rises with the time constant "
         f"{transient.time_constant * 1e3:.3f} ms; Q/(pi f_r) = {transient.expected_time_constant * 1e3:.3f} ms.\n\n"
-        + figure(context, "fem_frequency_response.png", "frequency response |w|(f) around the working mode")
-        + "\n\n"
-        + figure(context, "fem_transient.png", "deflection after a sine at resonance is switched on")
+        + step_figures(context, "fem_responses")
     )
 
 
@@ -725,7 +678,7 @@ def _fem_optima(context: RunContext, optima) -> str:
             rows,
         )
         + "\n\n"
-        + figure(context, "space_mapping_trajectories.png", "FEM points of each space-mapping search, numbered in order")
+        + step_figures(context, "fem_optima")
     )
 
 
@@ -733,17 +686,13 @@ def _maps(context: RunContext, maps) -> str:
     model = next(iter(maps.values())).model if maps else ""
     title = {"analytical": "Analytical maps", "fem": "FEM maps"}.get(model, "Maps")
     grid = context.config["maps"]["grid" if model == "analytical" else "fem_grid"]
-    figures = [
-        figure(context, f"map_{m.model}_hp{hp / MM:g}mm.png", f"{m.model} model, h_p = {hp / MM:g} mm: w_dyn and f_r")
-        for hp, m in maps.items()
-    ]
     return (
         f"## {title}\n\n"
         f"Deflection at the design voltage and resonance over a {grid} x {grid} (λ, h_i) grid; the white line is "
         f"f_r = {context.config['design']['min_frequency_khz']:g} kHz, the dashed line h_i = "
         f"{context.config['design']['hi_min_mm']:g} mm, the star the constrained optimum."
         + (f" {_survey_accuracy(context)}" if model == "fem" else "")
-        + "\n\n" + "\n\n".join(figures)
+        + "\n\n" + step_figures(context, f"{model}_maps")
     )
 
 
@@ -771,7 +720,7 @@ def _width_sweep(context: RunContext, sweep) -> str:
         + "\n\n"
         + table(["b [mm]", "w_dyn [µm]", "f_r [kHz]", "transverse indicator", ""], rows)
         + "\n\n"
-        + figure(context, "width_sweep_fem.png", "w(b) and f(b); transverse-mixed widths marked")
+        + step_figures(context, "width_sweep")
     )
 
 

@@ -18,6 +18,7 @@ import workflow
 from workflow.errors import TactileError
 from workflow.execution.cache import EvaluationCache, content_key, package_directory, source_version
 from workflow.inputfiles import MAX_LOG_BYTES, read_input
+from workflow.pipeline.outputs import save_figure
 from workflow.progress import format_duration
 
 
@@ -34,9 +35,19 @@ class StepTiming:
     cached: bool = False
 
 
+@dataclass(frozen=True)
+class FigureFile:
+    """A figure a step wrote: its path relative to the output folder, its caption and the key of the step."""
+
+    name: str
+    caption: str
+    step: str
+
+
 @dataclass
 class RunContext:
-    """What the steps share: the configuration, the output folder, the results so far."""
+    """What the steps share: the configuration, the output folder, the results so far, the figures written
+    (path relative to the output folder -> :class:`FigureFile`, in the order written) and the step running."""
 
     config: dict
     out: Path
@@ -44,14 +55,25 @@ class RunContext:
     logs: List[Path] = field(default_factory=list)
     results: Dict[str, Any] = field(default_factory=dict)
     timings: List[StepTiming] = field(default_factory=list)
-    figures: Dict[str, str] = field(default_factory=dict)
+    figures: Dict[str, FigureFile] = field(default_factory=dict)
     cache: Optional[EvaluationCache] = None
     calibration: Optional[Path] = None
+    step: str = ""
 
-    def figure_path(self, name: str) -> Path:
-        """Where the figure ``name`` (a PNG file name) is written; recorded for the report."""
-        self.figures[name] = name
-        return self.out / name
+    def save_figure(self, figure, name: str, caption: str) -> Path:
+        """Write a matplotlib figure as the PNG ``name`` (relative to the output folder), recorded for the report with
+        its caption."""
+        path = Path(save_figure(figure, self.out / name, tight=True))
+        self.record_figure(name, caption)
+        return path
+
+    def record_figure(self, name: str, caption: str) -> None:
+        """Record a figure the running step wrote into the output folder (``name`` relative to it) for the report."""
+        self.figures[name] = FigureFile(name, caption, self.step)
+
+    def figures_of(self, step: str) -> List[FigureFile]:
+        """The figures the step ``step`` (its key) wrote, in the order it wrote them."""
+        return [figure for figure in self.figures.values() if figure.step == step]
 
 
 @dataclass(frozen=True)
@@ -118,6 +140,7 @@ def run_steps(context: RunContext, steps: List[Step], stream=None) -> RunContext
     for number, step in enumerate(steps, start=1):
         print(f"[{number}/{len(steps)}] {step.title} ...", file=stream, flush=True)
         start = time.perf_counter()
+        context.step = step.key
         try:
             result, cached = _compute(context, step)
             context.results[step.key] = result

@@ -13,86 +13,18 @@ from typing import Any, Dict, List, Optional
 import numpy as np
 
 from workflow.errors import InputFileError, TactileError
-from workflow.optimise.problem import DesignProblem, optimise_analytical
+from workflow.optimise.problem import optimise_analytical
 from workflow.pipeline import loop
 from workflow.pipeline.damping_files import FIT_OUTPUTS, stated_noise, write_fit
+from workflow.pipeline.domain import bench_settings, build_plate, design_problems, fem_model, fem_settings
 from workflow.pipeline.runner import RunContext, Step
 from workflow.units import KHZ, MM, UM
-
-
-def build_plate(config: dict):
-    """The original plate made of the [design] section's ceramic, resonator and bond."""
-    from workflow.models import materials
-    from workflow.models.plate import ORIGINAL_PLATE
-
-    design = config["design"]
-    try:
-        return ORIGINAL_PLATE.with_(
-            ceramic=materials.ceramic(design["ceramic"]),
-            resonator=materials.resonator(design["resonator"]),
-            glue_thickness=design["glue_um"] * UM,
-        )
-    except TactileError as error:
-        raise TactileError(f"configuration [design]: {error}") from None
-
-
-def design_problems(config: dict, thicknesses_mm=None) -> Dict[float, DesignProblem]:
-    """One :class:`DesignProblem` per h_p (default: those of the [design] section), keyed by h_p [m]."""
-    design = config["design"]
-    thicknesses_mm = design["ceramic_thicknesses_mm"] if thicknesses_mm is None else thicknesses_mm
-    return {
-        thickness * MM: DesignProblem(
-            ceramic_thickness=thickness * MM,
-            width=design["width_mm"] * MM,
-            voltage=design["voltage_v"],
-            min_frequency=design["min_frequency_khz"] * KHZ,
-            min_resonator_thickness=design["hi_min_mm"] * MM,
-            max_resonator_thickness=design["hi_max_mm"] * MM,
-            wavelength_range=(design["wavelength_min_mm"] * MM, design["wavelength_max_mm"] * MM),
-            build=build_plate(config),
-        )
-        for thickness in thicknesses_mm
-    }
 
 
 def analytical_optima(context: RunContext):
     """The beam-model optimum with constant Q for every h_p."""
     q = context.config["design"]["q"]
     return {hp: optimise_analytical(problem, q=q) for hp, problem in design_problems(context.config).items()}
-
-
-def bench_settings(config: dict):
-    """The simulated bench of the [simulator] section (original plate)."""
-    from instruments.simulator.bench import default_bench_settings
-    from instruments.simulator.physics import default_law
-
-    simulator = config["simulator"]
-    law = default_law(low_velocity_q=simulator["low_velocity_q"], working_q=simulator["working_q"])
-    return default_bench_settings(
-        law=law,
-        drift_rate=simulator["drift_hz_per_s"],
-        softening=simulator["softening_s2_m2"],
-        amplifier_gain=simulator["amplifier_gain"],
-        ceramic_voltage_limit=simulator["ceramic_voltage_limit_v"],
-        relative_noise=simulator["relative_noise"],
-        floor_fraction=simulator["floor_fraction"],
-        phase_noise=simulator["phase_noise_deg"],
-        seed=config["campaign"]["seed"],
-    )
-
-
-def built_plate_deviations(config: dict):
-    """The hidden deviations of the simulated built plate: the ``built_*`` keys of the [simulator] section."""
-    from workflow.models.builtplate import PlateDeviations
-
-    simulator = config["simulator"]
-    return PlateDeviations(
-        glue_thickness=simulator["built_glue_um"] * UM,
-        ceramic_modulus_factor=simulator["built_ceramic_factor"],
-        resonator_modulus_factor=simulator["built_resonator_factor"],
-        resonator_thickness_offset=simulator["built_hi_offset_um"] * UM,
-        ceramic_offset=simulator["built_ceramic_offset_mm"] * MM,
-    )
 
 
 def campaign_logs(context: RunContext) -> List[Path]:
@@ -173,11 +105,13 @@ def run_forward_model(damping: dict, log):
 
 def damping_fit_files(context: RunContext, fit) -> None:
     """The posterior, ``fit.json`` and the fit's figures under ``damping/``."""
+    from workflow.pipeline.figures.damping import fit_figures
+
     protect = {Path(path).resolve() for path in context.results["logs"]}
     files = write_fit(fit, context.out / "damping", figures=True, protect=protect)
+    captions = {name: caption for name, (caption, _) in fit_figures(fit).items()}
     for path in files["figures"]:
-        name = Path(path).relative_to(context.out).as_posix()
-        context.figures[name] = name
+        context.record_figure(Path(path).relative_to(context.out).as_posix(), captions[Path(path).name])
 
 
 def damped_design(context: RunContext):
@@ -221,45 +155,13 @@ def damped_design_figures(context: RunContext, result) -> None:
         "design_voltage": context.config["design"]["voltage_v"],
         "voltage_limit": context.config["simulator"]["ceramic_voltage_limit_v"],
     }
+    target = context.config["design"]["target_deflection_um"]
+    captions = {"deflection": "beam model: deflection with Q(v) at the design voltage, h_p = {hp:g} mm",
+                "voltage": f"beam model: voltage needed for {target:g} µm with Q(v), h_p = {{hp:g}} mm"}
     for hp, hp_maps in maps.items():
-        for quantity in ("deflection", "voltage"):
+        for quantity, caption in captions.items():
             figure = design_map_figure(hp_maps, quantity, **marks)
-            save_figure(figure, context.figure_path(f"qv_{quantity}_hp{hp / MM:g}mm.png"))
-
-
-def save_figure(figure, path: Path) -> None:
-    """Write a matplotlib figure as PNG and release it."""
-    import matplotlib.pyplot as plt
-
-    figure.savefig(path, dpi=120, bbox_inches="tight")
-    plt.close(figure)
-
-
-def fem_settings(config: dict, key: str = "accuracy"):
-    """The FEM settings of the [fem] section: the accuracy ``key`` (``accuracy`` for designs,
-    ``survey_accuracy`` for maps and the width sweep), or the fixed mesh of the mesh keys when it is 0."""
-    from workflow.models.fem import FemSettings
-    from workflow.models.fem.accuracy import FemAccuracy
-
-    names = FemSettings().as_dict()
-    mesh = FemSettings(**{name: config["fem"][name] for name in names})
-    target = config["fem"][key]
-    return FemAccuracy(target=target, n_modes=mesh.n_modes, piezo=mesh.piezo) if target > 0 else mesh
-
-
-def fem_model(context: RunContext, q: Optional[float] = None, accuracy: str = "accuracy"):
-    """The cached, parallel FEM plate model of the run (``accuracy``: the [fem] key of its target)."""
-    from workflow.optimise.fem_model import FemModel
-
-    design = context.config["design"]
-    return FemModel(
-        q=design["q"] if q is None else q,
-        voltage=design["voltage_v"],
-        settings=fem_settings(context.config, accuracy),
-        cache=context.cache,
-        scheduler=context.scheduler,
-        progress=True,
-    )
+            context.save_figure(figure, f"qv_{quantity}_hp{hp / MM:g}mm.png", caption.format(hp=hp / MM))
 
 
 def fem_original(context: RunContext):
@@ -270,7 +172,8 @@ def fem_original(context: RunContext):
 def fem_original_figures(context: RunContext, result) -> None:
     from workflow.pipeline.figures.fem_responses import modes_figure
 
-    save_figure(modes_figure(result), context.figure_path("fem_modes_original.png"))
+    context.save_figure(modes_figure(result), "fem_modes_original.png",
+                        "deflection and transverse indicator of the evaluated modes")
 
 
 def fem_responses(context: RunContext):
@@ -285,8 +188,9 @@ def fem_responses_figures(context: RunContext, responses) -> None:
     from workflow.pipeline.figures.fem_responses import frequency_response_figure, transient_figure
 
     frequency, transient = responses
-    save_figure(frequency_response_figure(frequency), context.figure_path("fem_frequency_response.png"))
-    save_figure(transient_figure(transient), context.figure_path("fem_transient.png"))
+    context.save_figure(frequency_response_figure(frequency), "fem_frequency_response.png",
+                        "frequency response |w|(f) around the working mode")
+    context.save_figure(transient_figure(transient), "fem_transient.png", "deflection after a sine at resonance is switched on")
 
 
 @dataclass(frozen=True)
@@ -322,7 +226,8 @@ def fem_optima_figures(context: RunContext, optima) -> None:
         return
     searches = {hp: (record.space_mapping, record.direct) for hp, record in optima.items()}
     minimum = context.config["design"]["min_frequency_khz"] * KHZ
-    save_figure(trajectory_figure(searches, minimum), context.figure_path("space_mapping_trajectories.png"))
+    context.save_figure(trajectory_figure(searches, minimum), "space_mapping_trajectories.png",
+                        "FEM points of each space-mapping search, numbered in order")
 
 
 def recommended_design(context: RunContext):
@@ -377,7 +282,8 @@ def recommended_design_figures(context: RunContext, recommendation) -> None:
         if design.admittance is not None
     }
     if curves:
-        save_figure(admittance_figure(curves), context.figure_path("admittance.png"))
+        context.save_figure(admittance_figure(curves), "admittance.png",
+                            "Admittance |Y| and phase of the recommended designs, with the plate's Q")
 
 
 def texture_rendering(context: RunContext) -> dict:
@@ -392,7 +298,6 @@ def texture_rendering(context: RunContext) -> dict:
 
     from workflow.damping.fit import parameter_summary
     from workflow.models.materials import MIN_USEFUL_DEFLECTION
-    from workflow.optimise.fem_model import FemModel
     from workflow.pipeline.design_rendering import design_rendering
 
     config = context.config
@@ -400,9 +305,7 @@ def texture_rendering(context: RunContext) -> dict:
     law = fit.answer.median_law()
     softening = parameter_summary(fit.best).get("kappa", {}).get("median", 0.0)
     accuracy = "accuracy" if config["fem"]["piezo"] == "coupled" else "survey_accuracy"
-    coupled = FemModel(q=config["design"]["q"], voltage=config["design"]["voltage_v"],
-                       settings=replace(fem_settings(config, accuracy), piezo="coupled"), cache=context.cache,
-                       scheduler=context.scheduler, progress=True)
+    coupled = fem_model(context, settings=replace(fem_settings(config, accuracy), piezo="coupled"))
     designs = context.results["recommended_design"].designs
     results = coupled.evaluate_plates([design.plate for design in designs.values()])
     levels = (MIN_USEFUL_DEFLECTION, config["design"]["target_deflection_um"] * UM)
@@ -415,22 +318,22 @@ def texture_rendering_figures(context: RunContext, renderings: dict) -> None:
     """Envelope error of gratings against their period, per design."""
     from workflow.pipeline.figures.rendering import period_error_figure
 
-    save_figure(period_error_figure(renderings), context.figure_path("rendering_periods.png"))
+    context.save_figure(period_error_figure(renderings), "rendering_periods.png",
+                        "Envelope error of gratings against their period in time, per design")
 
 
 def calibrated_designs(context: RunContext) -> dict:
     """The recommended designs' f_r and w_dyn as the calibration (``--calibration``) predicts them, with 90 %
     intervals (docs/calibration.md); empty without a calibration.  Q and voltage are the run's."""
-    from workflow.models.fem.accuracy import FemAccuracy
-    from workflow.optimise.fem_model import FemModel
-    from workflow.pipeline.calibration_files import calibrated_record, load_calibration
+    from dataclasses import replace
+
+    from workflow.pipeline.calibration_files import calibrated_record, calibration_accuracy, load_calibration
 
     if context.calibration is None:
         return {}
     calibration = load_calibration(context.calibration)
-    design = context.config["design"]
-    model = FemModel(q=design["q"], voltage=design["voltage_v"], cache=context.cache, scheduler="synchronous",
-                     settings=FemAccuracy(target=calibration.fem["accuracy"], piezo=calibration.fem["piezo"]))
+    model = replace(fem_model(context, settings=calibration_accuracy(calibration.fem)), scheduler="synchronous",
+                    progress=False)
     designs = context.results["recommended_design"].designs
     return {hp: {"nominal_f_r_khz": d.frequency / KHZ,
                  **calibrated_record(calibration, d.plate, model.evaluate_plates, str(context.calibration))}
@@ -474,7 +377,8 @@ def maps_figures(context: RunContext, maps) -> None:
     from workflow.pipeline.figures.maps import map_figure
 
     for hp, design_map in maps.items():
-        save_figure(map_figure(design_map), context.figure_path(f"map_{design_map.model}_hp{hp / MM:g}mm.png"))
+        context.save_figure(map_figure(design_map), f"map_{design_map.model}_hp{hp / MM:g}mm.png",
+                            f"{design_map.model} model, h_p = {hp / MM:g} mm: w_dyn and f_r")
 
 
 def sweep_widths(fem: dict, plate_width: float) -> np.ndarray:
@@ -507,7 +411,8 @@ def width_sweep_figures(context: RunContext, sweep) -> None:
     from workflow.pipeline.figures.maps import width_sweep_figure
 
     design_width = context.config["design"]["width_mm"] * MM
-    save_figure(width_sweep_figure(sweep, design_width=design_width), context.figure_path("width_sweep_fem.png"))
+    context.save_figure(width_sweep_figure(sweep, design_width=design_width), "width_sweep_fem.png",
+                        "w(b) and f(b); transverse-mixed widths marked")
 
 
 RUN_OUTPUTS = ("report.md", "simulated_campaign.csv", "simulated_ringdown.csv", "*.png", *(f"damping/{pattern}" for pattern in FIT_OUTPUTS),

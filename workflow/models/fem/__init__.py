@@ -6,7 +6,8 @@ modal superposition.  ``evaluate_fem`` is the cost function (eigenstrain drive);
 ``evaluate_fem_coupled`` the coupled piezoelectric model.
 """
 
-from workflow.models.fem.evaluate import FemResult, ModeResult, evaluate_fem
+from workflow.models.fem.evaluate import evaluate_fem
+from workflow.models.fem.result import FemResult, ModeResult
 from workflow.models.fem.piezoelectric import evaluate_fem_coupled
 from workflow.models.fem.settings import FemSettings
 

@@ -94,6 +94,12 @@ class FemAccuracy:
         """Plain dict (content hashing and JSON)."""
         return {"kind": "accuracy", **asdict(self)}
 
+    def evaluated(self, plate: Plate, evaluate_mesh: Callable, start=None, keep_solution: bool = False):
+        """The FEM result of ``plate`` to this accuracy (:func:`evaluate_to_accuracy`; ``start`` unused: each level
+        starts from the one below).  A :class:`~workflow.models.fem.settings.FemSettings` answers the same call on its
+        fixed mesh, so an evaluation takes either without asking which it has."""
+        return evaluate_to_accuracy(plate, self, evaluate_mesh, keep_solution)
+
 
 @dataclass(frozen=True)
 class ErrorEstimate:

@@ -30,12 +30,12 @@ from scipy.optimize import brentq
 
 from workflow.models import analytical
 from workflow.models.fem.assembly import PlateSystem, assemble_system, element_dofs, reduce_system
-from workflow.models.fem.evaluate import QUARTERS, FemResult, fem_result
 from workflow.models.fem.harmonic import ModalSolution, modal_solution
 from workflow.models.fem.mesh import CERAMIC, BrickMesh, quarter_plate_mesh
 from workflow.models.fem.modes import ShiftedModes, shift_invert_modes
 from workflow.models.fem.probes import antinode_probe_points, probe_matrix
 from workflow.models.fem.prolongation import start_vector
+from workflow.models.fem.result import QUARTERS, FemResult, fem_result
 from workflow.models.fem.solvers import factorise
 from workflow.models.fem.settings import DEFAULT_SETTINGS, FemSettings
 from workflow.models.materials import PiezoMaterial

@@ -23,7 +23,7 @@ from skfem.helpers import ddot, dot, sym_grad
 from workflow.models import analytical
 from workflow.models.fem.assembly import PlateSystem
 from workflow.models.fem.elements import VOIGT
-from workflow.models.fem.evaluate import FemResult, ModeResult
+from workflow.models.fem.result import FemResult, ModeResult
 from workflow.models.fem.mesh import CERAMIC, BrickMesh, quarter_plate_mesh
 from workflow.models.fem.probes import antinode_probe_points, mean_deflection, transverse_indicator
 from workflow.models.fem.settings import DEFAULT_SETTINGS, FemSettings

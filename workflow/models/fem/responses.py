@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from workflow.models.fem.evaluate import FemResult
+from workflow.models.fem.result import FemResult
 from workflow.models.fem.probes import mean_deflection
 
 

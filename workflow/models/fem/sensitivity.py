@@ -41,7 +41,8 @@ from workflow.models.fem.assembly import (
     scatter_matrices,
 )
 from workflow.models.fem.accuracy import FemAccuracy, mesh_for_level
-from workflow.models.fem.evaluate import FemResult, discretise, evaluate_fem, fem_result, working_modes
+from workflow.models.fem.evaluate import discretise, evaluate_fem, working_modes
+from workflow.models.fem.result import FemResult, fem_result
 from workflow.models.fem.harmonic import ProbeModalModel, probe_modal_model, shifted_residual
 from workflow.models.fem.mesh import BrickMesh, quarter_plate_mesh
 from workflow.models.fem.modes import ShiftedModes

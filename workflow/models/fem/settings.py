@@ -69,6 +69,12 @@ class FemSettings:
         """The settings as a plain dict (for content hashing and JSON)."""
         return asdict(self)
 
+    def evaluated(self, plate, evaluate_mesh, start=None, keep_solution: bool = False):
+        """The FEM result of ``plate`` on this mesh: ``evaluate_mesh(self, start)`` (the counterpart of
+        :meth:`~workflow.models.fem.accuracy.FemAccuracy.evaluated`; ``plate`` and ``keep_solution`` unused: one
+        evaluation, its solution kept)."""
+        return evaluate_mesh(self, start)
+
     def refined(self, factor: int) -> "FemSettings":
         """Every element count multiplied by ``factor`` (for convergence studies)."""
         return FemSettings(

@@ -14,8 +14,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from workflow.models.fem.accuracy import FemAccuracy, evaluate_to_accuracy
-from workflow.models.fem.evaluate import FemResult, evaluate_fem
+from workflow.models.fem.accuracy import FemAccuracy
+from workflow.models.fem.evaluate import evaluate_on_mesh
+from workflow.models.fem.result import FemResult
 from workflow.models.fem.harmonic import ProbeModalModel
 from workflow.models.fem.mesh import top_face
 from workflow.models.fem.probes import probe_matrix
@@ -120,11 +121,8 @@ def evaluate_surface(plate: Plate, q: float, voltage: float, settings: FemSettin
     settings : FemSettings or FemAccuracy
     """
     settings = replace(settings, piezo="eigenstrain")
-    if isinstance(settings, FemAccuracy):
-        evaluate_mesh = lambda mesh, lower: evaluate_fem(plate, q, voltage, mesh, lower)  # noqa: E731
-        result = evaluate_to_accuracy(plate, settings, evaluate_mesh, keep_solution=True)
-    else:
-        result = evaluate_fem(plate, q, voltage, settings)
+    result = settings.evaluated(plate, lambda mesh, lower: evaluate_on_mesh(plate, q, voltage, mesh, lower),
+                                keep_solution=True)
     solution = result.solution
     x, y = surface_grid(plate)
     xx, yy = np.meshgrid(x, y, indexing="ij")

@@ -5,6 +5,7 @@ They take the result objects of :mod:`workflow.damping.fit` and
 """
 
 import dataclasses
+from functools import partial
 
 import matplotlib
 
@@ -251,22 +252,24 @@ def trace_figure(law_fit: LawFit):
 
 
 FIT_FIGURES = {
-    "q_of_v.png": q_of_v_figure,
-    "resonance_curves.png": resonance_curves_figure,
+    "q_of_v.png": ("Q(v) with its 90 % credible band and the per-sweep half-power estimate", q_of_v_figure),
+    "resonance_curves.png": ("resonance curves: data and posterior prediction", resonance_curves_figure),
 }
-"""File name -> figure function taking a :class:`DampingFit`."""
+"""File name -> (caption, figure function taking a :class:`DampingFit`) of a fit with sweeps."""
 
 
 def fit_figures(fit: DampingFit) -> dict:
-    """File name -> Figure for a fit: Q(v), resonance curves, and corner and trace plots of each law."""
+    """File name -> (caption, function drawing the Figure) of every figure of a fit, in order: Q(v), resonance curves,
+    ring-downs, and corner and trace plots of each law (drawn only when called: the captions cost nothing)."""
     from workflow.pipeline.figures.ringdown import ringdown_figure
 
-    figures = {name: function(fit) for name, function in FIT_FIGURES.items() if fit.log.n_sweeps}
+    figures = {name: (caption, partial(draw, fit)) for name, (caption, draw) in FIT_FIGURES.items() if fit.log.n_sweeps}
     if fit.log.ringdown is not None:
-        figures["ringdown.png"] = ringdown_figure(fit)
+        figures["ringdown.png"] = ("ring-downs: envelopes with the law's decay, and the model-free Q from the decays",
+                                   partial(ringdown_figure, fit))
     for law_name, law_fit in fit.fits.items():
-        figures[f"corner_{law_name}.png"] = corner_figure(law_fit)
-        figures[f"trace_{law_name}.png"] = trace_figure(law_fit)
+        figures[f"corner_{law_name}.png"] = (f"posterior of the {law_name} law (corner plot)", partial(corner_figure, law_fit))
+        figures[f"trace_{law_name}.png"] = (f"chains of the {law_name} law (trace plot)", partial(trace_figure, law_fit))
     return figures
 
 
