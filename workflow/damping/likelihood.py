@@ -18,7 +18,7 @@ in the antinode's peak velocity.  A ring-down sample at time t after burst j rea
 Parameters, in the order of :attr:`ParameterLayout.names`:
 
 - the law's parameters: ``ln_q0`` = ln Q0, ``alpha`` (>= 0) for the velocity-dependent laws,
-  ``v_t`` [m/s] for the threshold law, ``d1`` .. ``d8`` (>= 0) for the flexible law (whose
+  ``v_t`` [m/s] and ``ln_onset`` (ln of the onset width over v_t) for the threshold law, ``d1`` .. ``d8`` (>= 0) for the flexible law (whose
   knots are fixed by the data, :func:`spline_knots`, :attr:`ParameterLayout.fixed`);
 - with sweeps: ``ln_gain`` (ln g, g the quasi-static deflection per volt [m/V]) and
   ``f_r_<k>``, one resonance frequency per sweep [Hz] (drift between sweeps is free);
@@ -53,8 +53,9 @@ from workflow.damping.logs import CampaignLog
 from workflow.damping.ringdown import burst_decays, decay_quality_factors
 from workflow.errors import InputFileError
 
-SAMPLED_LAW_PARAMETERS = {"q0": "ln_q0", "alpha": "alpha", "v_t": "v_t", **{d: d for d in MonotoneSpline.INCREMENTS}}
-"""Law parameter -> the coordinate it is sampled in (Q0 in log, the others linear)."""
+SAMPLED_LAW_PARAMETERS = {"q0": "ln_q0", "alpha": "alpha", "v_t": "v_t", "onset": "ln_onset",
+                          **{d: d for d in MonotoneSpline.INCREMENTS}}
+"""Law parameter -> the coordinate it is sampled in (Q0 and the threshold's onset width in log, the others linear)."""
 
 
 @dataclass(frozen=True)
@@ -71,6 +72,13 @@ class ForwardModel:
 
     softening: bool = False
     drift: bool = False
+
+
+def default_forward_model(log: CampaignLog) -> ForwardModel:
+    """The effects fitted unless the caller says otherwise: softening whenever the logs have sweeps, drift whenever
+    they also have ``timestamp_s`` (issue 29: a fit that left them out blamed the law for their mark on the curves,
+    and its band missed the truth).  Each prior includes the effect's absence (kappa = 0, beta = 0)."""
+    return ForwardModel(softening=log.n_sweeps > 0, drift=log.n_sweeps > 0 and log.timestamp is not None)
 
 
 Q0_RANGE = (1.0, 1e5)
@@ -275,6 +283,7 @@ def fit_data(log: CampaignLog, law_name: str, forward: ForwardModel = ForwardMod
         onset = (1 - THRESHOLD_RANGE[1]) * v_max
         bounds["alpha"] = (0.0, 1.0 / MIN_Q_AT_MAX_VELOCITY / onset**2)
         bounds["v_t"] = tuple(np.asarray(THRESHOLD_RANGE) * v_max)
+        bounds["ln_onset"] = tuple(np.log(ThresholdLoss.ONSET_RANGE))
     for name in MonotoneSpline.INCREMENTS:
         bounds[name] = (0.0, MAX_INCREMENT)
     for k in range(log.n_sweeps):

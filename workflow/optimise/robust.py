@@ -7,7 +7,8 @@ For each stock resonator thickness h_i (docs/calibration.md, "Robust design"):
    posterior's central 99 % and three manufacturing standard deviations, lambda around the
    beam model's estimate;
 2. Monte Carlo draws: posterior samples plus manufacturing scatter (normal, standard deviations
-   :class:`Tolerances`) plus the surrogate's and the FEM's errors; lambda is solved so that
+   :class:`Tolerances`) plus the surrogate's and the FEM's errors and the calibration's model discrepancy;
+   lambda is solved so that
    the quantile of f_r at level (1 - reliability) minus :data:`SOLVE_MARGIN_SE` Monte Carlo
    standard errors equals f_min (conservative by the solve's own sampling error);
 3. the achieved probability from fresh draws (its Monte Carlo standard error given), and one FEM
@@ -16,7 +17,7 @@ For each stock resonator thickness h_i (docs/calibration.md, "Robust design"):
 The candidate with the largest median deflection whose modes are separated is the optimum.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
@@ -115,6 +116,12 @@ class RobustCandidate:
         FEM evaluations for this candidate [-].
     lambda_at_edge : bool
         The solved lambda sits at the edge of the surrogate's box (the result is then an extrapolation).
+    result : FemResult
+        The FEM of the design at the posterior median (modes, deflection per unit Q).
+    deflection_ratios : numpy.ndarray
+        Draws of w over its median under posterior and scatter [-] (:class:`AchievedSpread`).
+    surrogate : RobustSurrogate
+        The surrogate the design was solved on (to weigh the design under another calibration).
     """
 
     plate: Plate
@@ -130,6 +137,9 @@ class RobustCandidate:
     surrogate_error: float
     evaluations: int
     lambda_at_edge: bool
+    result: object = field(repr=False, default=None)
+    deflection_ratios: np.ndarray = field(repr=False, default=None)
+    surrogate: "RobustSurrogate" = field(repr=False, default=None)
 
 
 @dataclass(frozen=True)
@@ -162,15 +172,18 @@ def posterior_columns(calibration: Calibration, plate: Plate) -> np.ndarray:
 
 
 def scattered_draws(calibration: Calibration, plate: Plate, tolerances: Tolerances, n: int, seed: int) -> np.ndarray:
-    """(n, 1 + k + 1) draws of (ln lambda deviation, parameters, h_p offset) [SI]: posterior plus scatter."""
+    """(n, 1 + k + 1 + 2) draws of (ln lambda deviation, parameters, h_p offset) [SI] and the model discrepancy of
+    ln f_r and ln w [-]: posterior plus scatter plus, for each drawn posterior sample, a normal draw of its
+    discrepancy terms (:mod:`workflow.calibration.posterior`)."""
     rng = np.random.default_rng(seed)
     names = robust_inputs(calibration)
-    theta = posterior_columns(calibration, plate)[rng.integers(0, len(calibration.samples), n)]
+    chosen = rng.integers(0, len(calibration.samples), n)
+    theta = posterior_columns(calibration, plate)[chosen]
     theta[:, names.index("glue_um")] = np.abs(theta[:, names.index("glue_um")] + rng.normal(0, tolerances.glue_thickness, n))
     theta[:, names.index("resonator_offset_um")] += rng.normal(0, tolerances.resonator_thickness, n)
     log_lambda = rng.normal(0, tolerances.wavelength / float(plate.wavelength), n)
     offset = rng.normal(0, tolerances.ceramic_thickness, n)
-    return np.column_stack([log_lambda, theta, offset])
+    return np.column_stack([log_lambda, theta, offset, rng.normal(0, calibration.discrepancy[chosen])])
 
 
 def _robust_plate(plate: Plate, names: Sequence[str], point) -> Plate:
@@ -217,14 +230,14 @@ class RobustSurrogate:
     evaluations: int
 
     def sample(self, log_lambda: float, draws: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
-        """ln f_r and ln w of ``draws`` (deviations, :func:`scattered_draws`) about the design ln lambda, each
-        with its surrogate's error drawn from ``seed``."""
+        """ln f_r and ln w of ``draws`` (deviations and discrepancies, :func:`scattered_draws`) about the design
+        ln lambda, each with its surrogate's error drawn from ``seed`` and its discrepancy added."""
         rng = np.random.default_rng(seed)
-        shifted = draws.copy()
+        shifted, discrepancy = draws[:, :-2].copy(), draws[:, -2:]
         shifted[:, 0] += log_lambda
         inside = np.clip(shifted, self.bounds[:, 0], self.bounds[:, 1])
-        return (self.log_frequency(inside) + rng.normal(0, self.frequency_sigma, len(draws)),
-                self.log_deflection(inside) + rng.normal(0, self.log_deflection.loo_rms, len(draws)))
+        return (self.log_frequency(inside) + rng.normal(0, self.frequency_sigma, len(draws)) + discrepancy[:, 0],
+                self.log_deflection(inside) + rng.normal(0, self.log_deflection.loo_rms, len(draws)) + discrepancy[:, 1])
 
 
 def robust_surrogate(calibration: Calibration, plate: Plate, settings: RobustSettings, evaluate: Evaluate) -> RobustSurrogate:
@@ -269,29 +282,75 @@ def robust_candidate(calibration: Calibration, plate: Plate, settings: RobustSet
     low, high = surrogate.bounds[0]
     too_low, too_high = shortfall(low) < 0, shortfall(high) > 0
     log_lambda = low if too_low else high if too_high else brentq(shortfall, low, high, xtol=1e-8)
-    check = scattered_draws(calibration, plate, settings.tolerances, CHECK_DRAWS, settings.seed + 1)
-    log_f, log_w = surrogate.sample(log_lambda, check, settings.seed + 1)
-    frequencies, deflections = np.exp(log_f), np.exp(log_w)
-    probability = float(np.mean(frequencies >= settings.min_frequency))
     design = plate.with_(wavelength=float(np.exp(log_lambda)))
+    achieved = achieved_spread(surrogate, calibration, design, settings)
     median = deviated_plate(design, robust_inputs(calibration), np.median(posterior_columns(calibration, plate), axis=0))
     (result,) = evaluate([median])
     nearest, separated = mode_separation(result, settings)
     probes = np.abs(result.probe_model.response(result.frequency, q))
     return RobustCandidate(
         plate=design,
-        frequency=tuple(float(x) for x in np.percentile(frequencies, [5, 50, 95])),
-        deflection=tuple(float(x) for x in np.percentile(deflections, [5, 50, 95])),
-        probability=probability,
-        probability_error=float(np.sqrt(probability * (1 - probability) / CHECK_DRAWS)),
+        frequency=achieved.frequency,
+        deflection=achieved.deflection,
+        probability=achieved.probability,
+        probability_error=achieved.probability_error,
         draws=CHECK_DRAWS,
-        margin=float(np.percentile(frequencies, 5) - settings.min_frequency),
+        margin=achieved.margin,
         nearest_transverse=nearest,
         separated=separated,
         homogeneity=float(np.std(probes) / np.mean(probes)),
         surrogate_error=surrogate.log_frequency.loo_rms,
         evaluations=surrogate.evaluations + 1,
         lambda_at_edge=bool(too_low or too_high),
+        result=result,
+        deflection_ratios=achieved.deflection_ratios,
+        surrogate=surrogate,
+    )
+
+
+@dataclass(frozen=True)
+class AchievedSpread:
+    """A design's f_r and w under a calibration's posterior, the manufacturing tolerances and the model's errors.
+
+    Attributes
+    ----------
+    frequency, deflection : tuple of float
+        (p05, p50, p95) of f_r [Hz] and w [m] (constant Q, the FEM's drive).
+    probability, probability_error : float
+        P(f_r >= f_min) and its Monte Carlo standard error [-].
+    margin : float
+        p05 of f_r minus f_min [Hz].
+    deflection_ratios : numpy.ndarray
+        :data:`RATIO_DRAWS` draws of w over its median [-], for pairing with draws of Q(v).
+    """
+
+    frequency: tuple
+    deflection: tuple
+    probability: float
+    probability_error: float
+    margin: float
+    deflection_ratios: np.ndarray
+
+
+RATIO_DRAWS = 1000
+"""Draws of the deflection's spread a candidate keeps [-]."""
+
+
+def achieved_spread(surrogate: RobustSurrogate, calibration: Calibration, design: Plate, settings: RobustSettings) -> AchievedSpread:
+    """:class:`AchievedSpread` of the nominal ``design`` (its lambda inside ``surrogate``'s box) under ``calibration`` and
+    the tolerances, from :data:`CHECK_DRAWS` fresh draws (the module's step 3); the calibration may be another than the
+    one the surrogate was built for (its posterior is then clipped to the surrogate's box)."""
+    check = scattered_draws(calibration, design, settings.tolerances, CHECK_DRAWS, settings.seed + 1)
+    log_f, log_w = surrogate.sample(float(np.log(design.wavelength)), check, settings.seed + 1)
+    frequencies, deflections = np.exp(log_f), np.exp(log_w)
+    probability = float(np.mean(frequencies >= settings.min_frequency))
+    return AchievedSpread(
+        frequency=tuple(float(x) for x in np.percentile(frequencies, [5, 50, 95])),
+        deflection=tuple(float(x) for x in np.percentile(deflections, [5, 50, 95])),
+        probability=probability,
+        probability_error=float(np.sqrt(probability * (1 - probability) / CHECK_DRAWS)),
+        margin=float(np.percentile(frequencies, 5) - settings.min_frequency),
+        deflection_ratios=deflections[:RATIO_DRAWS] / np.median(deflections),
     )
 
 

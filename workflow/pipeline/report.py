@@ -440,10 +440,11 @@ def _damping_fit(context: RunContext, fit) -> str:
         for name, c in summary["checks"].items()
     ]
     choice = {
-        "best": f"the preferred law alone (every other law is more than {CLOSE_DSE:g} dse behind)",
-        "stacking": "the stacking-weighted mixture of the laws (a law is within "
-        f"{CLOSE_DSE:g} dse of the preferred one), weights "
-        + ", ".join(f"{name} {w:.2f}" for name, w in summary["weights"].items()),
+        "best": f"the preferred law alone (every other law is more than {CLOSE_DSE:g} dse behind, or fails its checks)",
+        "mixture": f"the laws the data do not tell apart (PSIS-LOO within {CLOSE_DSE:g} dse of the preferred one, misfit "
+        "checks passed) in equal shares, "
+        + ", ".join(f"{name} {w:.2f}" for name, w in summary["shares"].items())
+        + ", so that where they disagree on Q(v) the band covers each",
         "fallback": "the flexible law, because the preferred law failed its misfit checks",
     }[summary["selection"]]
     warning = f"**Warning: {summary['warning']}.**\n\n" if summary["warning"] else ""
@@ -482,17 +483,20 @@ def _interval_text(p: dict, digits: int = 4) -> str:
 
 
 def _effects(summary: dict) -> str:
-    """The softening and drift of the resonance fitted beyond Q(v), in words (empty when neither was fitted)."""
-    forward, parameters = summary["forward_model"], summary["parameters"]
+    """The softening and drift of the resonance fitted beyond Q(v), in words, whether the logs show them, and what the
+    band of Q(v) contains."""
+    effects, parameters = summary["effects"], summary["parameters"]
     parts = []
-    if forward["softening"]:
-        parts.append(f"amplitude softening f_r(v) = f_r0 (1 − κ v²), κ = {_interval_text(parameters['kappa'])}")
-    if forward["drift"]:
-        parts.append(f"drift of the resonance within a sweep β = {_interval_text(parameters['drift_rate'], 3)}")
-    if not parts:
-        return ""
-    return ("Fitted beyond Q(v) (median [90 % interval]; docs/damping.md#softening-and-drift-within-a-sweep): "
-            + "; ".join(parts) + ".\n\n")
+    for name, text, key, digits in (("softening", "amplitude softening f_r(v) = f_r0 (1 − κ v²), κ", "kappa", 4),
+                                    ("drift", "drift of the resonance within a sweep β", "drift_rate", 3)):
+        if effects[name]["fitted"]:
+            shown = "shown by the logs" if effects[name]["detected"] else "not resolved by the logs"
+            parts.append(f"{text} = {_interval_text(parameters[key], digits)} ({shown}: {effects[name]['rule']})")
+    interval = summary["q_of_v"]["interval"]
+    fitted = ("Fitted beyond Q(v) (median [90 % interval]; docs/damping.md#softening-and-drift-within-a-sweep): "
+              + "; ".join(parts) + ".\n\n") if parts else ""
+    return (fitted + "What the 90 % band of Q(v) (the figure's, and the draws the design uses) contains: "
+            + "; ".join(interval["contains"]) + ". It does not contain: " + "; ".join(interval["does_not_contain"]) + ".\n\n")
 
 
 def _ringdowns(summary: dict) -> str:
