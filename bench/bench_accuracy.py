@@ -6,11 +6,13 @@ extrapolated from the three highest levels with the rate fitted to them
 (:func:`~workflow.models.fem.accuracy.extrapolated_limit`: independent of the estimator's assumed rate),
 and for each level its true relative error against that limit beside the estimate accuracy control gives
 it (from the level below).  Prints one JSON object; ``--write-references FILE`` also stores the limits,
-the converged values bench/bench_fem.py measures both discretisations against.  Slow (the level-6
+the converged values bench/bench_fem.py measures both discretisations against; ``--references FILE``
+measures the levels against stored limits instead (e.g. lower levels of another mesh rule against the limits
+of a run to degree 6).  Slow (the level-6
 meshes have 10^5 unknowns and more): run it on purpose.
 
     python bench/bench_accuracy.py [--levels 2 3 4 5 6] [--piezo eigenstrain|coupled] [--plates NAME ...]
-                                   [--memory-gib 16] [--write-references bench/fem_references.json]
+                                   [--memory-gib 16] [--write-references FILE | --references FILE]
 
 The degree-6 meshes of the thin plates take more than the 8 GiB an evaluation may use by default
 (:data:`~workflow.models.fem.mesh.MEMORY_BUDGET`, about 11 GiB for P2); ``--memory-gib`` raises it for
@@ -48,13 +50,17 @@ def limit(results: dict, levels, name: str) -> float | None:
         return None
 
 
-def study(plate: Plate, levels, piezo: str) -> dict:
+def study(plate: Plate, levels, piezo: str, reference: dict | None = None) -> dict:
     results, seconds = {}, {}
     for level in levels:
         start = time.perf_counter()
         results[level] = evaluate_fem(plate, 54.0, 15.0, mesh_for_level(plate, level, piezo=piezo))
         seconds[level] = time.perf_counter() - start
-    f_converged, w_converged = limit(results, levels, "frequency"), limit(results, levels, "deflection")
+    if reference is None:
+        f_converged, w_converged = limit(results, levels, "frequency"), limit(results, levels, "deflection")
+    else:
+        f_converged = reference["f_converged_hz"]
+        w_converged = None if reference["w_converged_um"] is None else reference["w_converged_um"] * 1e-6
     rows = []
     for previous, level in zip(levels[:-1], levels[1:]):
         estimate = estimate_error(results[level], results[previous], level, previous)
@@ -87,12 +93,15 @@ def main() -> None:
     parser.add_argument("--piezo", choices=("eigenstrain", "coupled"), default="eigenstrain")
     parser.add_argument("--plates", nargs="+", choices=sorted(PLATES), default=sorted(PLATES))
     parser.add_argument("--write-references", type=Path, help="store the converged values in this JSON file")
+    parser.add_argument("--references", type=Path, help="measure the levels against the converged values of this file")
     parser.add_argument("--memory-gib", type=float, help="memory budget of one evaluation for this study [GiB]")
     args = parser.parse_args()
     if args.memory_gib:
         mesh.MEMORY_BUDGET = args.memory_gib * 2**30
     figures = {"piezo": args.piezo, "cpu_load_1min": os.getloadavg()[0]}
-    figures.update({name: study(PLATES[name], sorted(args.levels), args.piezo) for name in args.plates})
+    stored = json.loads(args.references.read_text()) if args.references else {}
+    figures.update({name: study(PLATES[name], sorted(args.levels), args.piezo, stored.get(name, {}).get(args.piezo))
+                    for name in args.plates})
     if args.write_references:
         stored = json.loads(args.write_references.read_text()) if args.write_references.is_file() else {}
         for name in args.plates:

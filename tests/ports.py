@@ -25,6 +25,10 @@ class ReplayPort:
         self.pending = rest
         return line + found
 
+    def read(self, size=1):
+        head, self.pending = self.pending[:size], self.pending[size:]
+        return head
+
     def reset_input_buffer(self):
         self.pending = b""
 

@@ -69,7 +69,7 @@ def assert_safe_state(port: str) -> None:
 
 def campaign(ports: dict, out, *extra: str) -> list[str]:
     return TACTILE + ["measure", "campaign", "--generator", ports["generator"], "--vibrometer", ports["vibrometer"],
-                      "--center-hz", "31000", "--out", str(out), *extra]
+                      "--lockin", ports["lockin"], "--center-hz", "31000", "--out", str(out), *extra]
 
 
 def data_rows(path) -> int:
@@ -107,9 +107,9 @@ def test_a_normal_end_leaves_the_output_off_at_the_lowest_amplitude(pty_bench, t
 
 
 def test_an_instrument_error_leaves_the_output_off_at_the_lowest_amplitude(pty_bench, tmp_path):
-    # the generator was left on by someone; the vibrometer does not speak its protocol (a loopback)
+    # the generator was left on by someone; the lock-in does not speak its protocol (a loopback)
     ask(pty_bench["generator"], "VOLT 1", "OUTP 1")
-    ports = {"generator": pty_bench["generator"], "vibrometer": "loop://"}
+    ports = {**pty_bench, "lockin": "loop://"}
     done = subprocess.run(campaign(ports, tmp_path / "c.csv", "--retries", "0", "--timeout", "0.2"),
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 2 and "error" in done.stderr
@@ -216,7 +216,7 @@ def test_a_limit_that_is_not_a_finite_positive_number_is_refused(limit):
     with pytest.raises(ValueError, match="finite number of volts > 0"):
         FunctionGenerator(DevicePort(GeneratorDevice(DEVICE_LIMIT)), max_peak_voltage=limit)
     with pytest.raises(ValueError, match="finite number of volts > 0"):
-        Station(None, None, None, voltage_limit=limit)
+        Station(None, None, None, None, voltage_limit=limit)
 
 
 def _exit_status(argv) -> int:

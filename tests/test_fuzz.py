@@ -291,8 +291,9 @@ def test_split_program_returns_header_and_argument_pairs(line):
         assert header and ";" not in header + argument
 
 
-VIBROMETER_WORDS = ("Get", "GetDevInfo", "Set", "Controller", "VeloDec", "LockIn", "0", "1", "Name", "Version",
-                    "Ranges", "Range", "Velocity", "5mm/s/V", "100MM/S/V", "3mm/s/V", "mm/s/V", "")
+VIBROMETER_WORDS = ("Get", "GetDevInfo", "Set", "Controller", "VeloDec", "SensorHead", "Interface", "SignalLevel", "0",
+                    "1", "Name", "Version", "Range", "SignalDelay", "Value", "Acknowledge", "On", "Off", "5mm/s/V",
+                    "100MM/S/V", "3mm/s/V", "mm/s/V", "")
 vibrometer_lines = st.one_of(
     st.lists(st.one_of(st.sampled_from(VIBROMETER_WORDS), st.text(max_size=6)), max_size=7).flatmap(
         lambda words: st.sampled_from([",", ", ", ";"]).map(lambda separator: separator.join(words))),
@@ -300,13 +301,48 @@ vibrometer_lines = st.one_of(
 )
 
 
-@fuzz(lines=st.lists(vibrometer_lines, max_size=12), amplitude=st.floats(min_value=0, max_value=1e3))
-def test_the_simulated_vibrometer_answers_every_line_with_one_line(lines, amplitude):
-    """Any sequence of lines: one printable reply line each (an error reply for what it does not know)."""
-    device = VibrometerDevice(lambda: (amplitude, 0.0), np.random.default_rng(0), 0.01, 1e-3, 0.1)
+@fuzz(lines=st.lists(vibrometer_lines, max_size=12))
+def test_the_simulated_vibrometer_answers_every_query_with_one_line(lines):
+    """Any sequence of lines: one printable reply line to each that is no ``Set`` (an error reply for what it does not
+    know); a ``Set`` answers only with acknowledge on, and only the value in effect; the range stays one of its own."""
+    device = VibrometerDevice()
     for line in lines:
+        acknowledge = device.acknowledge
         reply = device.handle_line(line)
+        fields = [field.strip() for field in line.strip().split(",")]
+        if fields[0] == "Set" and len(fields) == 5 and reply is None:
+            continue
+        if fields[0] == "Set" and len(fields) == 5 and not reply.startswith("Error,"):
+            assert acknowledge or device.acknowledge, (line, reply)
         assert isinstance(reply, str) and reply and reply.isprintable() and reply.isascii(), reply
+        assert device.decoder_range in device.ranges
+
+
+LOCKIN_WORDS = ("*IDN?", "*RST", "*CLS", "*ESR?", "RSRC", "RSRC?", "OFLT", "OFLT?", "SCAL", "SCAL?", "IRNG", "OFSL",
+                "FREQ", "FREQ?", "OUTP?", "SNAP?", "CUROVLDSTAT?", "LIAS?", "OAUX?", "CAPTURECFG", "CAPTURELEN",
+                "CAPTURERATE", "CAPTURERATE?", "CAPTURESTART", "CAPTURESTOP", "CAPTURESTAT?", "CAPTUREGET?",
+                "CAPTUREVAL?", "ONE", "TRIG", "IMM", "R", "THeta", "0", "2", "3", "21", "99", "-1", "1e9", "nan", "")
+lockin_lines = st.one_of(
+    st.lists(st.one_of(st.sampled_from(LOCKIN_WORDS), st.text(max_size=5)), max_size=5).map(
+        lambda words: (words[0] + " " + ",".join(words[1:])) if words else ""),
+    st.text(max_size=100),
+)
+
+
+@fuzz(lines=st.lists(lockin_lines, max_size=10), step=st.floats(min_value=0, max_value=10))
+def test_the_simulated_lockin_answers_any_line_with_a_reply_or_a_status_bit(lines, step):
+    """Any line: a printable ASCII reply, a binary block, or nothing (a refused command sets *ESR? bits); its state
+    stays within the SR860's settings; nothing raises."""
+    from instruments.simulator.bench import Bench
+
+    bench = Bench(default_bench_settings())
+    for line in lines:
+        bench.sleep(step)
+        reply = bench.lockin.handle_line(line)
+        assert reply is None or (isinstance(reply, bytes) and reply.startswith(b"#")) or (
+            isinstance(reply, str) and reply.isascii() and reply.isprintable()), reply
+    state = bench.lockin.state
+    assert 0 <= state["time_constant"] <= 21 and 0 <= state["sensitivity"] <= 27 and 0 <= state["slope"] <= 3
 
 
 # --- the generator driver's limit over the simulated generator -----------------------------------

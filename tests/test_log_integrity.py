@@ -41,8 +41,9 @@ def test_a_second_procedure_on_a_log_in_use_fails_at_once_and_the_first_complete
     def held_sleep(seconds):
         started.set()
         release.wait(10)
+        bench.sleep(seconds)  # the lock-in settles in bench time
 
-    station, _ = simulated_station(default_bench_settings(), settle_time=0.001, sleep=held_sleep)
+    station, bench = simulated_station(default_bench_settings(), settle_time=0.001, sleep=held_sleep)
     outcome = {}
     first = threading.Thread(target=lambda: outcome.setdefault("first", q_campaign(station, path, SMALL, fsync=False)))
     first.start()

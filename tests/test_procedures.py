@@ -187,8 +187,12 @@ def test_cli_safety_limit_refuses_with_one_line(tmp_path, capsys):
 
 def test_cli_bad_port_and_garbled_replies_are_one_line_errors(tmp_path, capsys):
     code, _, err = run_cli(capsys, "measure", "resonance", "--generator", "/dev/nonexistent-tty",
-                           "--vibrometer", "/dev/nonexistent-tty2", "--out", str(tmp_path / "r.csv"))
+                           "--vibrometer", "/dev/nonexistent-tty2", "--lockin", "/dev/nonexistent-tty3",
+                           "--out", str(tmp_path / "r.csv"))
     assert code == 2 and err.startswith("tactile measure: error: cannot open --generator /dev/nonexistent-tty")
+    code, _, err = run_cli(capsys, "measure", "resonance", "--generator", "/dev/nonexistent-tty",
+                           "--vibrometer", "/dev/nonexistent-tty2", "--out", str(tmp_path / "r.csv"))
+    assert code == 2 and "need --generator PORT, --vibrometer PORT and --lockin PORT" in err
     code, _, err = run_cli(capsys, "measure", "resonance", "--simulate", "--garble-rate", "0.9", "--retries", "1",
                            "--out", str(tmp_path / "g.csv"))
     assert code == 2 and "garbled" in err and err.count("\n") == 1

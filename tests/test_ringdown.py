@@ -3,14 +3,14 @@ procedure and its CLI, the closed-form decays, and Q(v) recovered from ring-down
 
 import numpy as np
 import pytest
-import serial
 from ports import ReplayPort
 
 from instruments.drivers.errors import ConnectionLost, SafetyLimitError
 from instruments.drivers.generator import FunctionGenerator
 from instruments.procedures.ringdown import RingdownPlan, ringdown
-from instruments.procedures.simulated import simulate_campaign, simulate_ringdown, simulated_station
-from instruments.procedures.sweeps import open_station
+from instruments.procedures.logwriter import format_value
+from instruments.procedures.simulated import reopened_station, simulate_campaign, simulate_ringdown, simulated_station
+from workflow import logformat
 from instruments.simulator import FaultSettings, default_bench_settings
 from instruments.simulator.generator import GeneratorDevice
 from workflow.cli import main
@@ -96,12 +96,11 @@ def test_ringdown_resumes_after_a_disconnect_and_records_a_burst_cut_short_again
         ringdown(station, path, plan, fsync=False)
     partial = read_logs([path]).ringdown.n_bursts
     assert 1 <= partial < 3
+    first, second = (format_value(logformat.DECAY_TIME, t) for t in plan.decay_times()[:2])
     with open(path, "a") as file:  # a burst cut short: two of its rows, then half a row
-        file.write("2,9.000,0,32126,12,0.1,22\n2,9.000,5e-05,32126,12,0.09,22\n2,9.0")
+        file.write(f"2,9.000,{first},32126,12,0.1,22\n2,9.000,{second},32126,12,0.09,22\n2,9.0")
     before = path.read_bytes()
-    ports = [serial.serial_for_url(p.port.port, timeout=1) for p in (station.generator, station.vibrometer)]
-    again = open_station(*ports, station.amplifier, station.voltage_limit, clock=bench.clock, sleep=bench.sleep)
-    result = ringdown(again, path, plan, fsync=False)
+    result = ringdown(reopened_station(station, bench), path, plan, fsync=False)
     assert result.resumed == 20 * partial + 2 and result.measured == 20 * (3 - partial)
     assert result.truncated_bytes == len("2,9.0") and "kept as a comment" in result.warnings[0]
     after = path.read_bytes()  # nothing deleted: the half row became a comment line, the burst was recorded again

@@ -22,6 +22,25 @@ def _run(context: RunContext, keys) -> dict:
     return run_steps(context, [step for step in STEPS if step.key in keys]).results
 
 
+def test_fem_evaluations_on_a_dask_cluster_equal_the_local_ones(monkeypatch):
+    """The distribution itself, quickly: a batch of plates on a local pool and on a Dask cluster (SuperLU)."""
+    distributed = pytest.importorskip("distributed")
+    from workflow.models.fem import FemSettings
+    from workflow.models.plate import ORIGINAL_PLATE
+    from workflow.optimise.fem_model import FemModel
+
+    monkeypatch.setenv("TACTILE_SPARSE_SOLVER", "superlu")
+    mesh = FemSettings(elements_per_ceramic=2, elements_per_layer=1, elements_across_half_width=2, n_modes=3)
+    plates = [ORIGINAL_PLATE.with_(wavelength=w) for w in (22e-3, 24e-3, 26e-3)]
+    local = FemModel(settings=mesh, scheduler=None).evaluate_plates(plates)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        remote = FemModel(settings=mesh, scheduler=cluster.scheduler_address).evaluate_plates(plates)
+    for a, b in zip(local, remote):
+        np.testing.assert_array_equal(a.probe_model.eigenvalues, b.probe_model.eigenvalues)
+        assert a.deflection == b.deflection
+
+
+@pytest.mark.slow
 def test_local_and_dask_runs_give_identical_numbers(tmp_path, monkeypatch):
     """Bit-identical with SuperLU (PARDISO's threaded factorisation differs in the last bits between process layouts).
 

@@ -2,6 +2,8 @@
 
 import json
 import subprocess
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -16,7 +18,10 @@ from instruments.simulator import (
     register_bench,
     register_url_handler,
 )
+from instruments.drivers.lockin import OVERLOAD_INPUT, OVERLOAD_OUTPUT, OVERLOAD_UNLOCKED, settle_time
+from instruments.simulator.bench import INSTRUMENTS
 from instruments.simulator.generator import GeneratorDevice
+from instruments.simulator.vibrometer import DECODER_DELAY
 from instruments.simulator.physics import DEFAULT_LOW_VELOCITY_Q, plate_response, working_point_velocity
 from workflow.models import analytical
 from workflow.models.materials import DESIGN_VOLTAGE, PLATE_Q
@@ -27,7 +32,7 @@ def open_bench(**changes):
     register_url_handler()
     bench = Bench(default_bench_settings(**changes))
     name = register_bench(bench)
-    ports = [serial.serial_for_url(bench_url(name, i), timeout=1) for i in ("generator", "vibrometer")]
+    ports = [serial.serial_for_url(bench_url(name, i), timeout=1) for i in INSTRUMENTS]
     return bench, *ports
 
 
@@ -127,27 +132,82 @@ def test_resonance_curve_peak_and_half_power_bandwidth_at_low_drive():
     assert f_r / (above[-1] - above[0]) < PLATE_Q + 1
 
 
-def test_simulated_instruments_measure_the_model_with_drift_and_noise():
-    bench, generator, vibrometer = open_bench(relative_noise=0.0, floor_fraction=0.0, phase_noise=0.0)
+def ask(port, line: str) -> str:
+    port.write(line.encode() + b"\n")
+    return port.readline().decode().strip()
+
+
+def test_the_lockin_reads_the_decoder_output_once_settled_and_not_before():
+    """The chain: velocity at the spot -> decoder (velocity / range, delayed) -> lock-in R [V rms] and theta; a reading
+    right after a step is not settled, one after the settling time of its time constant and slope is."""
+    bench, generator, vibrometer, lockin = open_bench(relative_noise=0.0, floor_fraction=0.0, phase_noise=0.0,
+                                                     heating=False)
     f_r = bench.settings.response.resonance_frequency
-    generator.write(f"OUTP:LOAD INF;:FREQ {f_r};:VOLT 3;:OUTP 1\nSet,VeloDec,1,Range,50mm/s/V\n".encode())
-    vibrometer.write(b"Set,VeloDec,1,Range,50mm/s/V\n")
-    assert vibrometer.readline() == b"50mm/s/V\n"
-    vibrometer.write(b"Get,LockIn,0,Velocity\n")
-    amplitude, phase, status = vibrometer.readline().decode().strip().split(",")
-    expected, _ = bench.settings.response.velocity(f_r, 15.0, bench.time)
-    assert float(amplitude) == pytest.approx(expected, rel=1e-6) and status == "OK"
-    assert bench.time == bench.settings.measurement_time
-    assert bench.settings.response.resonance_at(100.0) < f_r  # the plate warms: f_r drifts down
+    vibrometer.write(b"Set,VeloDec,1,Range,500mm/s/V\n")
+    assert ask(vibrometer, "Get,VeloDec,1,Range") == "500mm/s/V"
+    lockin.write(b"RSRC 1;RTRG 1;OFLT 9;OFSL 3;IRNG 0;SCAL 0\n")  # 30 ms, 24 dB/oct
+    generator.write(f"OUTP:LOAD INF;:FREQ {f_r};:VOLT 3;:OUTP 1\n".encode())
+    early = float(ask(lockin, "OUTP? 2"))
+    velocity, phase = bench.settings.response.velocity(f_r, 15.0, bench.time)
+    expected = velocity / 0.5 / np.sqrt(2)
+    assert early < 0.01 * expected  # the filter has barely moved
+    bench.sleep(settle_time(0.03, 4) - 0.05)
+    assert abs(float(ask(lockin, "OUTP? 2")) / expected - 1) > 2e-3  # still settling
+    bench.sleep(0.05)
+    magnitude, theta = (float(x) for x in ask(lockin, "SNAP? 2,3").split(","))
+    assert magnitude == pytest.approx(expected, rel=2e-3)
+    assert theta == pytest.approx(float(phase) - 360 * f_r * DECODER_DELAY, abs=0.2)
+    assert ask(lockin, "CUROVLDSTAT?") == "0"
 
 
-def test_over_range_is_reported_not_clipped_silently():
-    bench, generator, vibrometer = open_bench()
+def test_overloads_are_reported_not_clipped_silently():
+    """A decoder range too small drives the lock-in's input past its range: CUROVLDSTAT? bit 4 (and LIAS?, latched);
+    R is what the clipped input gives, below the truth.  R past the sensitivity sets the output bits."""
+    bench, generator, vibrometer, lockin = open_bench(relative_noise=0.0, floor_fraction=0.0, phase_noise=0.0)
+    lockin.write(b"RSRC 1;OFLT 9;OFSL 3;SCAL 0\n")
     generator.write(f"OUTP:LOAD INF;:FREQ {bench.settings.response.resonance_frequency};:VOLT 3;:OUTP 1\n".encode())
-    vibrometer.write(b"Set,VeloDec,1,Range,1mm/s/V\nGet,LockIn,0,Velocity\n")
-    vibrometer.readline()
-    amplitude, _, status = vibrometer.readline().decode().strip().split(",")
-    assert status == "OVER" and float(amplitude) == pytest.approx(0.01)
+    vibrometer.write(b"Set,VeloDec,1,Range,100mm/s/V\n")  # 0.216 m/s -> 2.2 V at the input: over its 1 V range
+    bench.sleep(1.0)
+    assert int(ask(lockin, "CUROVLDSTAT?")) & OVERLOAD_INPUT
+    truth = bench.steady()[1] / 0.1 / np.sqrt(2)
+    assert float(ask(lockin, "OUTP? 2")) < 0.6 * abs(truth)  # the clipped sine's fundamental: far from the truth
+    vibrometer.write(b"Set,VeloDec,1,Range,500mm/s/V\n")
+    bench.sleep(1.0)
+    assert int(ask(lockin, "CUROVLDSTAT?")) == 0 and int(ask(lockin, "LIAS?")) & OVERLOAD_INPUT  # latched until read
+    assert int(ask(lockin, "LIAS?")) == 0
+    lockin.write(b"SCAL 6\n")  # 10 mV full scale, R ~ 0.3 V
+    assert int(ask(lockin, "CUROVLDSTAT?")) & OVERLOAD_OUTPUT
+    generator.write(b"BURS:STAT ON\n")  # a bursting generator's sync is no reference
+    assert int(ask(lockin, "CUROVLDSTAT?")) & OVERLOAD_UNLOCKED
+
+
+def test_the_lockin_refuses_what_it_does_not_know_in_its_status_register():
+    bench, _, _, lockin = open_bench()
+    lockin.write(b"OFLT 99;BOGUS 3\n")
+    assert ask(lockin, "*ESR?") == str(1 << 4)  # execution error; the line stops at the bad command
+    lockin.write(b"BOGUS 3\n")
+    assert ask(lockin, "*ESR?") == str(1 << 5) and ask(lockin, "*ESR?") == "0"
+    assert ask(lockin, "OFLT?") == "10"  # after power-on: 100 ms, untouched
+
+
+def test_the_plate_warms_with_the_power_it_dissipates_and_its_resonance_falls():
+    bench, generator, _, _ = open_bench(drift_rate=0.0)
+    thermal = bench.settings.response.thermal
+    f_r = bench.settings.response.resonance_frequency
+    generator.write(f"OUTP:LOAD INF;:FREQ {f_r};:VOLT 3;:OUTP 1\n".encode())
+    velocity, _ = bench.steady()
+    power = thermal.dissipated_power(f_r, velocity, bench.settings.response.law.quality_factor(velocity))
+    assert 4.0 < power < 4.7  # ~4.4 W at the working point
+    bench.sleep(thermal.time_constant)
+    generator.write(b"*OPC?\n")
+    rise = bench.heating()
+    assert 0.55 * power / thermal.conductance < rise < 0.65 * power / thermal.conductance  # 1 - 1/e, the drive detunes
+    assert bench.resonance() == pytest.approx(f_r * (1 + thermal.frequency_coefficient * rise))
+    assert bench.temperature() == pytest.approx(22.0 + rise)
+    generator.write(b"OUTP 0\n")
+    bench.sleep(5 * thermal.time_constant)
+    generator.write(b"*OPC?\n")
+    assert bench.heating() < 0.01 * rise  # cools to the ambient with the output off
 
 
 def idn_replies(generator, count):
@@ -160,7 +220,7 @@ def idn_replies(generator, count):
 
 def test_faults_are_seeded_and_disconnect_once():
     faults = FaultSettings(drop_rate=0.3, garble_rate=0.3, disconnect_at=50, seed=4)
-    bench, generator, _ = open_bench(faults=faults)
+    bench, generator, _, _ = open_bench(faults=faults)
     replies = idn_replies(generator, 49)
     assert replies == idn_replies(open_bench(faults=faults)[1], 49)
     assert b"" in replies and any(not set(r.strip()) <= set(range(32, 127)) for r in replies)
@@ -179,7 +239,7 @@ def test_pymeasure_agilent33500_client_drives_the_simulator_unchanged():
     from pymeasure.adapters import SerialAdapter
     from pymeasure.instruments.agilent import Agilent33500
 
-    bench, port, _ = open_bench()
+    bench, port, _, _ = open_bench()
     client = Agilent33500(SerialAdapter(port, write_termination="\n", read_termination="\n"))
     assert "33521A" in client.id
     client.shape = "SIN"
@@ -208,7 +268,7 @@ def test_pty_server_end_to_end():
     )
     try:
         ports = json.loads(process.stdout.readline())
-        assert set(ports) == {"generator", "vibrometer"}
+        assert set(ports) == {"generator", "vibrometer", "lockin"}
         how_to_stop = process.stderr.readline()
         assert "Ctrl-C" in how_to_stop and f"kill {process.pid}" in how_to_stop and ports["generator"] in how_to_stop
         generator = serial.Serial(ports["generator"], timeout=5)
@@ -218,10 +278,15 @@ def test_pty_server_end_to_end():
         generator.write(b"FREQ 32126\nVOLT 40\nSYST:ERR?\n")  # 200 V: refused
         assert generator.readline().startswith(b"-222")
         generator.write(b"OUTP:LOAD INF\nVOLT 3\nOUTP ON\n")
-        vibrometer.write(b"Set,VeloDec,1,Range,50mm/s/V\nGet,LockIn,0,Velocity\n")
-        assert vibrometer.readline() == b"50mm/s/V\n"
-        amplitude, _, status = vibrometer.readline().decode().strip().split(",")
-        assert 0.19 < float(amplitude) < 0.24 and status == "OK"
+        vibrometer.write(b"Set,VeloDec,1,Range,500mm/s/V\nGet,VeloDec,1,Range\n")
+        assert vibrometer.readline() == b"500mm/s/V\n"
+        lockin = serial.Serial(ports["lockin"], timeout=5)
+        lockin.write(b"RSRC 1;OFLT 6;OFSL 3\n")  # 1 ms: settled well within a second of wall clock
+        time.sleep(0.2)
+        lockin.write(b"SNAP? 2,3\n")
+        magnitude, _ = (float(x) for x in lockin.readline().split(b","))
+        assert 0.19 < magnitude * np.sqrt(2) * 0.5 < 0.24
+        lockin.close()
         pymeasure = pytest.importorskip("pymeasure.instruments.agilent")
         from pymeasure.adapters import SerialAdapter
 
@@ -233,3 +298,47 @@ def test_pty_server_end_to_end():
     finally:
         process.terminate()
         assert process.wait(timeout=10) == 0
+
+
+def test_pymeasure_sr860_client_drives_the_simulated_lockin_unchanged_over_a_pty():
+    """PyMeasure's own ``SR860`` class on a pseudo-terminal served by the simulator (as a user's script would)."""
+    pytest.importorskip("pymeasure")
+    from pymeasure.adapters import SerialAdapter
+    from pymeasure.instruments.srs import SR860
+
+    from instruments.simulator.ptyserver import open_ptys, serve
+
+    bench = Bench(default_bench_settings(relative_noise=0.0, floor_fraction=0.0, phase_noise=0.0))
+    ptys, stop = open_ptys(), threading.Event()
+    server = threading.Thread(target=serve, args=(bench, ptys), kwargs={"poll": 0.02, "should_stop": stop.is_set},
+                              daemon=True)
+    server.start()
+    try:
+        ports = {name: serial.Serial(pair.path, timeout=5) for name, pair in ptys.items()}
+        client = SR860(SerialAdapter(ports["lockin"], write_termination="\n", read_termination="\n"))
+        assert client.ask("*IDN?").startswith("Stanford_Research_Systems,SR860,")
+        client.reference_source = "EXT"
+        client.time_constant = 1e-3
+        client.filter_slope = 3
+        client.sensitivity = 1.0
+        client.input_range = "1V"
+        assert (client.reference_source, client.time_constant, client.sensitivity) == ("EXT", 1e-3, 1.0)
+        f_r = bench.settings.response.resonance_frequency
+        ports["generator"].write(f"OUTP:LOAD INF;:FREQ {f_r};:VOLT 3;:OUTP 1\n".encode())
+        ports["vibrometer"].write(b"Set,VeloDec,1,Range,500mm/s/V\n")
+        time.sleep(0.1)  # 10 ms settles a 1 ms, 24 dB/oct filter: the bench follows the wall clock
+        velocity, phase = bench.settings.response.velocity(f_r, 15.0, bench.time)
+        expected = float(velocity) / 0.5 / np.sqrt(2)
+        assert client.magnitude == pytest.approx(expected, rel=0.01)
+        assert client.frequency == pytest.approx(f_r)
+        magnitude, theta = client.snap("R", "THeta")
+        assert magnitude == pytest.approx(expected, rel=0.01)
+        assert theta == pytest.approx(float(phase) - 360 * f_r * DECODER_DELAY, abs=1.0)
+        assert client.x ** 2 + client.y ** 2 == pytest.approx(expected ** 2, rel=0.02)
+        for port in ports.values():
+            port.close()
+    finally:
+        stop.set()
+        server.join(timeout=5)
+        for pair in ptys.values():
+            pair.close()

@@ -59,6 +59,11 @@ PREDICTED_VELOCITY = "predicted_velocity_m_s"
 RENDER_COLUMNS = (SWEEP, TIMESTAMP, RENDER_TIME, FREQUENCY, DRIVE_VOLTAGE, VELOCITY, WANTED_VELOCITY, PREDICTED_VELOCITY)
 """The columns of a render log (``sweep`` is the playback id; ``drive_voltage_v`` the drive envelope then)."""
 
+HOLD_TIME = "hold_time_s"
+"""Hold logs: the planned time of the sample since the hold's start [s]; its presence makes a log a hold log."""
+HOLD_COLUMNS = (SWEEP, TIMESTAMP, HOLD_TIME, FREQUENCY, DRIVE_VOLTAGE, VELOCITY, PHASE, TEMPERATURE)
+"""The columns of a hold log (``tactile measure hold``: resonance and amplitude held in closed loop), in this order."""
+
 LAMBDA_MM = "lambda_mm"
 """Metadata: the built plate's nominal wavelength [mm]."""
 HI_MM = "h_i_mm"

@@ -1,23 +1,24 @@
-"""Driver for the laser vibrometer: Polytec-style ``Get``/``Set`` lines plus the lock-in readout.
+"""Driver for a Polytec OFV-5000 vibrometer controller over RS-232: ``Get``/``Set``/``GetDevInfo`` lines.
 
-Protocol in ``docs/instruments.md``.  Decoder ranges travel as ``<n>mm/s/V``; the driver
-speaks SI (m/s per volt).  An over-range readout is returned flagged, never as a value.
+Protocol in ``docs/instruments.md``.  The controller sets the decoder's range and tells the decoder's
+signal delay; the velocity itself leaves on its analog output (read by the lock-in,
+:mod:`.lockin`).  Ranges travel as ``<n>mm/s/V``, delays as ``<n>us``; the driver speaks SI.  A
+``Set`` is acknowledged only when the controller's acknowledge is on, so the driver switches it off
+and reads every setting back with its ``Get``: a setting the controller ignored (an invalid value) is
+an :class:`InstrumentError` naming both values.
 """
 
 import re
-from dataclasses import dataclass
 
-import numpy as np
+from instruments.drivers.base import LineInstrument, control, measurement
+from instruments.drivers.errors import InstrumentError
 
-from instruments.drivers.base import LineInstrument, control, measurement, parse_with
-from instruments.drivers.errors import GarbledReply, InstrumentError
-
-FULL_SCALE_OUTPUT = 10.0
-"""Decoder analog output at full scale [V]: full-scale velocity = range x 10 V."""
 _RANGE = re.compile(r"(\d+(?:\.\d+)?)mm/s/V", re.IGNORECASE)
-_STATUS = {"OK": False, "OVER": True}
+_DELAY = re.compile(r"(\d+(?:\.\d+)?)\s*us", re.IGNORECASE)
 _MM = 1e-3
 """One millimetre [m]: positions travel in mm."""
+ACKNOWLEDGE_LINES = 2
+"""Lines read at most while switching acknowledge off (the old setting may acknowledge the command itself)."""
 
 
 def parse_range(text: str) -> float:
@@ -33,9 +34,17 @@ def format_range(m_s_v: float) -> str:
     return f"{m_s_v * 1e3:g}mm/s/V"
 
 
-def full_scale(decoder_range: float) -> float:
-    """Largest readable velocity amplitude [m/s] on ``decoder_range`` [m/s/V]."""
-    return decoder_range * FULL_SCALE_OUTPUT
+def parse_delay(text: str) -> float:
+    """``8.16us`` (or ``8.16 us``) -> 8.16e-6 [s]."""
+    match = _DELAY.fullmatch(text.strip())
+    if not match:
+        raise ValueError(text)
+    return float(match.group(1)) * 1e-6
+
+
+def format_delay(seconds: float) -> str:
+    """8.16e-6 [s] -> ``8.16us``."""
+    return f"{seconds * 1e6:g}us"
 
 
 def parse_position(text: str) -> float:
@@ -56,73 +65,18 @@ def parse_scan_range(reply: str) -> tuple[float, float, float, float]:
     return values
 
 
-@dataclass(frozen=True)
-class VelocityReading:
-    """One lock-in readout at the drive frequency.
-
-    Attributes
-    ----------
-    amplitude : float
-        Peak velocity amplitude [m/s] (the full-scale value when ``over_range``).
-    phase_deg : float
-        Phase of the velocity relative to the drive [deg].
-    over_range : bool
-        The velocity exceeded the decoder range: ``amplitude`` is not a measurement.
-    """
-
-    amplitude: float
-    phase_deg: float
-    over_range: bool
-
-
-@dataclass(frozen=True)
-class EnvelopeRecord:
-    """The velocity envelope recorded after a burst's end (``Get,Record,0,Envelope``).
-
-    Attributes
-    ----------
-    time : numpy.ndarray
-        Time of each sample since the end of the burst [s].
-    amplitude : numpy.ndarray
-        Envelope (peak velocity) [m/s]; the full-scale value where over range.
-    over_range : bool
-        Some sample exceeded the decoder range.
-    """
-
-    time: np.ndarray
-    amplitude: np.ndarray
-    over_range: bool
-
-
-def _parse_record(reply: str) -> EnvelopeRecord:
-    status, interval_us, count, values = reply.split(",", 3)
-    amplitude = np.array([float(v) for v in values.split(";")])
-    if len(amplitude) != int(count) or not np.all(amplitude >= 0) or not int(interval_us) > 0:
-        raise ValueError(reply)
-    return EnvelopeRecord(int(interval_us) * 1e-6 * np.arange(len(amplitude)), amplitude, _STATUS[status.strip().upper()])
-
-
-def _parse_reading(reply: str) -> VelocityReading:
-    amplitude, phase, status = reply.split(",")
-    reading = VelocityReading(float(amplitude), float(phase), _STATUS[status.strip().upper()])
-    if not reading.amplitude >= 0:
-        raise ValueError(reply)
-    return reading
-
-
 class Vibrometer(LineInstrument):
-    """A vibrometer controller with velocity decoder 1 and the lock-in readout, on an open serial port."""
-
-    READOUT = "Get,LockIn,0,Velocity"
+    """An OFV-5000-class controller with velocity decoder 1 (and, on the simulated bench, a scanning head)."""
 
     def __init__(self, port):
         super().__init__(port, "vibrometer")
 
     controller = measurement("GetDevInfo,Controller,0,Name", "Controller name (str).")
     version = measurement("GetDevInfo,Controller,0,Version", "Controller firmware (str).")
+    sensor_head = measurement("GetDevInfo,SensorHead,0,Name", "Sensor head name (str).")
     decoder = measurement("GetDevInfo,VeloDec,1,Name", "Velocity decoder name (str).")
     ranges = measurement(
-        "GetDevInfo,VeloDec,1,Ranges",
+        "GetDevInfo,VeloDec,1,Range",
         "Available decoder ranges [m/s/V], ascending (list of float).",
         parse=lambda reply: sorted(parse_range(item) for item in reply.split(";")),
     )
@@ -130,6 +84,10 @@ class Vibrometer(LineInstrument):
         "Get,VeloDec,1,Range", "Set,VeloDec,1,Range,{}", "Velocity decoder range [m/s/V] (float).",
         parse=parse_range, format=format_range,
     )
+    signal_delay = measurement("Get,VeloDec,1,SignalDelay", "Decoder signal transit time [s] (float).",
+                               parse=parse_delay)
+    signal_level = measurement("Get,SignalLevel,0,Value", "Signal level of the laser spot (str, as the controller "
+                               "states it).")
 
     scan_range = measurement(
         "GetDevInfo,Scanner,0,Range",
@@ -153,35 +111,25 @@ class Vibrometer(LineInstrument):
             raise InstrumentError(f"{self._where()} answered {reply!r} to {command!r}")
         return reply
 
+    def acknowledge_off(self) -> None:
+        """``Set,Interface,0,Acknowledge,Off``, dropping its acknowledgement if the controller had acknowledge on."""
+        self.write("Set,Interface,0,Acknowledge,Off")
+        for _ in range(ACKNOWLEDGE_LINES):
+            if self.query("Get,Interface,0,Acknowledge") == "Off":
+                return
+        raise InstrumentError(f"{self._where()}: acknowledge still on after Set,Interface,0,Acknowledge,Off")
+
     def set(self, command: str) -> None:
-        """Send a ``Set`` line and check that the acknowledged value is the one sent."""
-        sent = command.rsplit(",", 1)[1]
-        reply = self.query(command)
-        if reply.strip().lower() != sent.lower():
-            raise GarbledReply(f"{self._where()}: acknowledged {reply!r} to {command!r}")
+        """Send a ``Set`` line and read the setting back: an ignored setting is an :class:`InstrumentError`."""
+        verb, device, index, name, sent = command.split(",")
+        self.write(command)
+        now = self.query(f"Get,{device},{index},{name}")
+        if now.strip().lower() != sent.strip().lower():
+            raise InstrumentError(f"{self._where()} kept {name} at {now!r} after {command!r} (a value it refuses)")
 
-    record_samples = control("Get,Record,0,Samples", "Set,Record,0,Samples,{}", "Samples of an envelope record (int).",
-                             parse=int, format=lambda n: f"{int(n):d}")
-    record_interval = control("Get,Record,0,Interval", "Set,Record,0,Interval,{}",
-                              "Time between envelope record samples [s] (float; sent in whole microseconds).",
-                              parse=lambda reply: int(reply) * 1e-6, format=lambda seconds: f"{round(seconds * 1e6):d}")
-
-    RECORD = "Get,Record,0,Envelope"
-    TEMPERATURE = "Get,Sensor,0,Temperature"
-
-    def read_record(self) -> EnvelopeRecord:
-        """The envelope recorded from the end of the latest burst (the generator's trigger output arms it)."""
-        return parse_with(_parse_record, self.RECORD, self.query(self.RECORD), self._where())
-
-    def read_temperature(self) -> float | None:
-        """Plate temperature from the controller's sensor input [deg C], or None if it has none."""
-        try:
-            return parse_with(float, self.TEMPERATURE, self.query(self.TEMPERATURE), self._where())
-        except InstrumentError as error:
-            if "Unknown command" in str(error):
-                return None
-            raise
-
-    def read_velocity(self) -> VelocityReading:
-        """Velocity amplitude and phase at the drive frequency, flagged when over range."""
-        return parse_with(_parse_reading, self.READOUT, self.query(self.READOUT), self._where())
+    def settings(self) -> dict:
+        """Identity and decoder facts for a log's metadata."""
+        return {"vibrometer": f"{self.controller} {self.version}, sensor head {self.sensor_head}, decoder {self.decoder}",
+                "vibrometer_decoder_ranges_mm_s_v": [round(r * 1e3, 6) for r in self.ranges],
+                "vibrometer_signal_delay_us": self.signal_delay * 1e6,
+                "vibrometer_signal_level": self.signal_level}

@@ -50,10 +50,14 @@ _FORMATS = {
     logformat.RENDER_TIME: "{:.9g}",
     logformat.WANTED_VELOCITY: "{:.7g}",
     logformat.PREDICTED_VELOCITY: "{:.7g}",
+    logformat.HOLD_TIME: "{:.9g}",
 }
 KEY_COLUMNS = (logformat.SWEEP, logformat.FREQUENCY, logformat.DRIVE_VOLTAGE, logformat.X_POSITION, logformat.Y_POSITION,
-               logformat.DECAY_TIME, logformat.RENDER_TIME)
-"""The columns that identify a planned point (those a log has)."""
+               logformat.DECAY_TIME, logformat.RENDER_TIME, logformat.HOLD_TIME)
+"""The columns that identify a planned point (those a log has; a hold's frequency and drive are measured, its key is
+:data:`HOLD_KEY_COLUMNS`)."""
+HOLD_KEY_COLUMNS = (logformat.SWEEP, logformat.HOLD_TIME)
+"""The key of a hold log's rows: its samples are planned in time, frequency and drive are what the loop set."""
 REQUIRED = (logformat.SWEEP, logformat.FREQUENCY, logformat.DRIVE_VOLTAGE, logformat.VELOCITY) + KEY_COLUMNS[3:]
 """Columns every row of ours fills (the others may be empty)."""
 INCOMPLETE_ROW = "# incomplete row (a write cut short), kept as a comment by the resume: "
@@ -65,15 +69,15 @@ def format_value(column: str, value) -> str:
     return _FORMATS[column].format(value + 0 if column != logformat.SWEEP else int(value))
 
 
-def point_key(values: dict) -> tuple:
-    """Identity of a planned point: its :data:`KEY_COLUMNS` values (column -> number, those it has) as the log
-    writes them, so that rows and points match by value at the log's precision."""
-    return tuple(format_value(column, values[column]) for column in KEY_COLUMNS if column in values)
+def point_key(values: dict, keys: tuple = KEY_COLUMNS) -> tuple:
+    """Identity of a planned point: its ``keys`` values (column -> number, those it has) as the log writes them, so
+    that rows and points match by value at the log's precision."""
+    return tuple(format_value(column, values[column]) for column in keys if column in values)
 
 
-def row_key(row: dict) -> tuple:
+def row_key(row: dict, keys: tuple = KEY_COLUMNS) -> tuple:
     """The :func:`point_key` of a logged row (column -> text, already normalised by :func:`read_log`)."""
-    return tuple(row[column] for column in KEY_COLUMNS if column in row)
+    return tuple(row[column] for column in keys if column in row)
 
 
 def _metadata_text(value) -> str:
@@ -315,6 +319,8 @@ class LogWriter:
         fsync after every row (durable against power loss, not only against crashes).
     columns : tuple of str
         The header (:data:`workflow.logformat.COLUMNS`, ``SCAN_COLUMNS`` for a scan, ``RINGDOWN_COLUMNS`` for a ring-down).
+    keys : tuple of str
+        The columns that identify a planned point (:data:`KEY_COLUMNS`; :data:`HOLD_KEY_COLUMNS` for a hold).
 
     Attributes
     ----------
@@ -328,9 +334,11 @@ class LogWriter:
         Length of an unterminated last line found on resuming [bytes] (kept: see the module's docstring).
     """
 
-    def __init__(self, path, metadata: dict, restart: bool = False, fsync: bool = True, columns: tuple = logformat.COLUMNS):
+    def __init__(self, path, metadata: dict, restart: bool = False, fsync: bool = True, columns: tuple = logformat.COLUMNS,
+                 keys: tuple = KEY_COLUMNS):
         self.path = Path(path)
         self.columns = columns
+        self.key_columns = keys
         self.fsync = fsync
         self.metadata = {"format_version": logformat.FORMAT_VERSION, **metadata}
         self.rows: list[dict] = []
@@ -346,7 +354,7 @@ class LogWriter:
         self.keys = {}
         repeats = []
         for row, line in zip(self.rows, self.lines):
-            first = self.keys.setdefault(row_key(row), line)
+            first = self.keys.setdefault(row_key(row, keys), line)
             if first != line:
                 repeats.append((line, first))
         if repeats:
@@ -392,8 +400,8 @@ class LogWriter:
         """
         names = {str(sweep) for sweep in sweeps}
         for row, line in zip(self.rows, self.lines):
-            if row[logformat.SWEEP] in names and row_key(row) not in keys:
-                shown = ", ".join(f"{column} {row[column]}" for column in KEY_COLUMNS if column in row)
+            if row[logformat.SWEEP] in names and row_key(row, self.key_columns) not in keys:
+                shown = ", ".join(f"{column} {row[column]}" for column in self.key_columns if column in row)
                 raise InputFileError(f"{self.path}, line {line}: this row ({shown}) is no point of the plan being "
                                      "resumed (edited by hand, or pasted from another log?); not resuming: fix or "
                                      "remove the line, or choose another --out")
@@ -437,7 +445,11 @@ class LogWriter:
         for text in texts:
             self.rows.append(text)
             self.lines.append(0)
-            self.keys.setdefault(row_key(text), 0)
+            self.keys.setdefault(row_key(text, self.key_columns), 0)
+
+    def append_comment(self, text: str) -> None:
+        """Write a ``# text`` line after the rows (readers skip it): why a procedure stopped."""
+        self._write(f"# {' '.join(text.split())}\n")
 
     def close(self) -> None:
         """Close the log and release its lock."""

@@ -3,9 +3,9 @@
 For each playback of the plan (e.g. plain switching, then the pre-compensated drive) the
 generator is switched off, loaded with the drive's arbitrary waveform and set to modulate the
 carrier with it (:meth:`~instruments.drivers.generator.FunctionGenerator.play_modulated`), and
-switched on; after ``settle`` seconds of looping the envelope is captured from the start of a
-period of the waveform by the procedure-level capture (:func:`.ringdown.capture_envelope`,
-over range stepping the decoder up).  Each playback's samples are appended in one write, with
+switched on; after ``settle`` seconds of looping the lock-in's capture records the envelope from the
+start of a period of the waveform (:mod:`.capture`, an input overload stepping the decoder up); the
+capture times account for the lock-in filter's delay.  Each playback's samples are appended in one write, with
 the drive envelope, and the wanted and model-predicted envelopes at the same times that the plan
 carries (docs/log-format.md, render logs).  A resumed log skips the playbacks whose every sample
 it holds (matched by value: playback, carrier, drive, time); a playback cut short is played again in
@@ -17,11 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from instruments.drivers.arbitrary import ModulatedDrive, drive_of_codes
-from instruments.drivers.errors import InstrumentError
+from instruments.procedures.capture import CaptureWindow, capture_envelope, prepare_capture
 from instruments.procedures.logwriter import LogWriter, point_key
-from instruments.procedures.ringdown import capture_envelope, prepare_capture
-from instruments.procedures.sweeps import PlanError, ProcedureResult, Station, check_frequencies
-from instruments.simulator.vibrometer import RECORD_INTERVAL_US_RANGE, RECORD_SAMPLES_RANGE
+from instruments.procedures.sweeps import PlanError, ProcedureResult, Station, check_frequencies, note_readout
 from workflow import logformat
 from workflow.progress import Progress
 
@@ -58,7 +56,7 @@ class RenderPlan:
     samples : int
         Envelope samples captured per playback.
     interval : float
-        Time between samples [s] (whole microseconds).
+        Time between samples [s]: a capture interval of the lock-in, 2^k x 0.8 us.
     settle : float
         Looping time before the capture [s].
     """
@@ -71,20 +69,22 @@ class RenderPlan:
     def __post_init__(self):
         if not self.playbacks:
             raise PlanError("render plan: at least one playback")
-        low, high = RECORD_SAMPLES_RANGE
-        if not low <= self.samples <= high:
-            raise PlanError(f"render plan: samples must be {low} to {high}, got {self.samples}")
-        low, high = RECORD_INTERVAL_US_RANGE
-        if not low <= round(self.interval * 1e6) <= high:
-            raise PlanError(f"render plan: interval must be {low} to {high} us, got {self.interval * 1e6:g} us")
+        try:
+            self.window()
+        except PlanError as error:
+            raise PlanError(f"render plan: {error}") from None
         for playback in self.playbacks:
             check_frequencies(playback.drive.carrier_frequency, playback.drive.carrier_frequency, "render plan")
             if not len(playback.wanted) == len(playback.predicted) == self.samples:
                 raise PlanError(f"render plan: playback {playback.name} needs {self.samples} wanted and predicted values")
 
+    def window(self) -> CaptureWindow:
+        """The capture samples kept: from the trigger (a loop's start) on, delay-corrected times from 0."""
+        return CaptureWindow.after(self.interval, 0.0, self.samples)
+
     def capture_times(self) -> np.ndarray:
-        """Time of each captured sample from the start of a loop [s] (whole microseconds apart)."""
-        return round(self.interval * 1e6) * 1e-6 * np.arange(self.samples)
+        """Time of each captured sample from the start of a loop [s]."""
+        return self.window().times()
 
     def sample_keys(self, playback: int, full_scale: float) -> list:
         """The log keys (:func:`~.logwriter.point_key`) of the samples of ``playback`` whose drive reaches ``full_scale``
@@ -105,8 +105,8 @@ class RenderPlan:
         return keys
 
 
-def play_and_capture(station: Station, drive: ModulatedDrive, settle: float):
-    """Play ``drive`` looping from the output off, wait ``settle`` [s], capture the envelope record.
+def play_and_capture(station: Station, drive: ModulatedDrive, window: CaptureWindow, settle: float):
+    """Play ``drive`` looping from the output off, wait ``settle`` [s], capture ``window`` of its envelope.
 
     The carrier's peak across the ceramics is checked against the station's limit before anything
     is sent; the generator's error queue after loading the drive.
@@ -114,11 +114,12 @@ def play_and_capture(station: Station, drive: ModulatedDrive, settle: float):
     station.check_voltage(station.amplifier.ceramic_voltage(drive.amplitude_vpp))
     generator = station.generator
     generator.output = False
+    exponent = prepare_capture(station, window, drive.carrier_frequency)
     generator.play_modulated(drive)
     generator.check_errors(f"loading the modulated drive ({len(drive.codes)} samples at {drive.sample_rate:.6g} Sa/s)")
     generator.output = True
     station.sleep(settle)
-    return capture_envelope(station)
+    return capture_envelope(station, window, exponent)
 
 
 def drive_at(drive: ModulatedDrive, full_scale: float, time) -> np.ndarray:
@@ -143,16 +144,11 @@ def render_playback(station: Station, path, plan: RenderPlan, metadata: dict | N
         todo = [j for j, keys in samples.items() if any(key not in log.keys for key in keys)]
         station.prepare()
         try:
-            station.retry(lambda: prepare_capture(station, plan.samples, plan.interval),
-                          "preparing the vibrometer's envelope record")
             with Progress(len(todo), "render", unit="playbacks", enabled=bool(todo)) as bar:
                 for j in todo:
                     playback = plan.playbacks[j]
-                    record = station.retry(lambda: play_and_capture(station, playback.drive, plan.settle),
+                    record = station.retry(lambda: play_and_capture(station, playback.drive, plan.window(), plan.settle),
                                            f"playing the {playback.name} drive")
-                    if record.time.shape != (plan.samples,) or not np.allclose(record.time, plan.capture_times()):
-                        raise InstrumentError(f"the vibrometer's record of the {playback.name} drive is not the one set "
-                                              f"({plan.samples} samples {plan.interval * 1e6:g} us apart); not logged")
                     drive = drive_at(playback.drive, full_scale[j], record.time)
                     stamp = station.clock()
                     log.append_rows([
@@ -166,6 +162,7 @@ def render_playback(station: Station, path, plan: RenderPlan, metadata: dict | N
                     bar.update()
         finally:
             station.shutdown()
+            note_readout(log, station)
     playbacks = [{"playback": j, "name": p.name, "carrier_hz": p.drive.carrier_frequency,
                   "peak_drive_v": float(station.amplifier.ceramic_voltage(p.drive.amplitude_vpp))}
                  for j, p in enumerate(plan.playbacks)]

@@ -1,12 +1,13 @@
 """Ring-down procedure: bursts at resonance, and the free decay of the velocity envelope after each.
 
 For each burst level the generator is put in triggered burst mode (``BURS:MODE TRIG``,
-``BURS:NCYC``, ``TRIG:SOUR BUS``, ``BURS:STAT ON``) at the plan's frequency and amplitude,
-fires one burst (``*TRG``), and the vibrometer's envelope record (``Get,Record,0,Envelope``,
-docs/instruments.md) gives the velocity from the burst's end on.  An over-range record steps
-the decoder range up and fires again.  :func:`prepare_capture` and :func:`capture_envelope` are the
-one place an envelope is captured (the texture rendering's playback uses them too).  Each burst's
-samples are appended in one write with the plate temperature where the bench reports it
+``BURS:NCYC``, ``TRIG:SOUR BUS``, ``BURS:STAT ON``) at the plan's frequency and amplitude, the
+lock-in's capture is armed on its TRIG IN, one burst fires (``*TRG``) and the capture gives the
+velocity envelope from the burst's end on (:mod:`.capture`: the one place an envelope is captured;
+the texture rendering's playback uses it too).  An input overload steps the decoder range up and
+fires again.  The samples kept start once the lock-in's filter has forgotten the burst's end (10
+time constants); their decay times, since the burst's end, account for the filter's delay.  Each
+burst's samples are appended in one write with the plate temperature where the bench reports it
 (docs/log-format.md, ring-down logs).  A resumed log skips the bursts whose every sample it holds
 (matched by value: burst, frequency, level, decay time); a burst cut short is recorded again in full
 after its rows, which are kept (a decay is one record: its missing samples cannot be measured alone).
@@ -16,11 +17,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from instruments.drivers.errors import InstrumentError
-from instruments.drivers.vibrometer import EnvelopeRecord
+from instruments.drivers.lockin import capture_interval
+from instruments.procedures.capture import CaptureWindow, EnvelopeRecord, capture_envelope, prepare_capture
 from instruments.procedures.logwriter import LogWriter, point_key, row_key
-from instruments.procedures.sweeps import PlanError, ProcedureResult, Station, check_frequencies, check_sizes
-from instruments.simulator.vibrometer import RECORD_INTERVAL_US_RANGE, RECORD_SAMPLES_RANGE
+from instruments.procedures.sweeps import PlanError, ProcedureResult, Station, check_frequencies, check_sizes, note_readout
 from workflow import logformat
 from workflow.progress import Progress
 
@@ -43,14 +43,15 @@ class RingdownPlan:
     samples : int
         Envelope samples recorded after each burst.
     interval : float
-        Time between samples [s] (whole microseconds).
+        Time between samples [s]: a capture interval of the lock-in, 2^k x 0.8 us (:func:`capture_interval`
+        gives the nearest to any).
     """
 
     frequency: float
     voltages: tuple = (5.0, 10.0, 15.0)
     cycles: int = 2000
     samples: int = 100
-    interval: float = 50e-6
+    interval: float = capture_interval(50e-6)
 
     def __post_init__(self):
         check_frequencies(self.frequency, self.frequency, "ring-down plan")
@@ -59,16 +60,23 @@ class RingdownPlan:
             raise PlanError(f"ring-down plan: 1 to {MAX_BURSTS} burst levels, got {len(self.voltages)}")
         if not (isinstance(self.cycles, int) and 1 <= self.cycles <= 100_000_000):
             raise PlanError(f"ring-down plan: cycles must be an integer from 1 to 100000000, got {self.cycles!r}")
-        low, high = RECORD_SAMPLES_RANGE
-        if not low <= self.samples <= high:
-            raise PlanError(f"ring-down plan: samples must be {low} to {high}, got {self.samples}")
-        low, high = RECORD_INTERVAL_US_RANGE
-        if not low <= round(self.interval * 1e6) <= high:
-            raise PlanError(f"ring-down plan: interval must be {low} to {high} us, got {self.interval * 1e6:g} us")
+        try:
+            self.window()
+        except PlanError as error:
+            raise PlanError(f"ring-down plan: {error}") from None
+
+    @property
+    def burst_duration(self) -> float:
+        """[s]"""
+        return self.cycles / self.frequency
+
+    def window(self) -> CaptureWindow:
+        """The capture samples kept: from the trigger (the burst's start), once the filter forgot the burst's end."""
+        return CaptureWindow.after_kink(self.interval, self.burst_duration, self.samples)
 
     def decay_times(self) -> np.ndarray:
-        """Time of each envelope sample after the burst's end [s] (whole microseconds apart)."""
-        return round(self.interval * 1e6) * 1e-6 * np.arange(self.samples)
+        """Time of each envelope sample after the burst's end [s]."""
+        return self.window().times() - self.burst_duration
 
     def sample_keys(self, burst: int) -> list:
         """The log keys (:func:`~.logwriter.point_key`) of the samples of burst ``burst``, in time order."""
@@ -76,42 +84,21 @@ class RingdownPlan:
         return [point_key({**base, logformat.DECAY_TIME: t}) for t in self.decay_times()]
 
 
-def record_ringdown(station: Station, frequency: float, voltage: float, cycles: int) -> EnvelopeRecord:
-    """Fire one burst of ``cycles`` at ``frequency`` [Hz] and ``voltage`` [V peak across the ceramics]; its decay record.
+def record_ringdown(station: Station, plan: RingdownPlan, voltage: float, exponent: int) -> EnvelopeRecord:
+    """Fire one burst of the plan at ``voltage`` [V peak across the ceramics]; its decay, captured.
 
     The limit is checked before anything is sent; the generator's error queue after the setup.
-    Over range steps the decoder range up and fires again.
+    An input overload steps the decoder range up and fires again.
     """
     station.check_voltage(voltage)
-    generator = station.generator
+    generator, frequency, cycles = station.generator, plan.frequency, plan.cycles
     generator.output = False
     generator.frequency = frequency
     generator.amplitude_vpp = station.amplifier.generator_vpp(voltage)
     generator.configure_burst(cycles)
     generator.check_errors(f"configuring a burst of {cycles} cycles at {frequency:.12g} Hz, {voltage:g} V")
     generator.output = True
-    return capture_envelope(station, generator.trigger)
-
-
-def prepare_capture(station: Station, samples: int, interval: float) -> None:
-    """Set the envelope record's ``samples`` and ``interval`` [s] (whole microseconds)."""
-    station.vibrometer.record_samples = samples
-    station.vibrometer.record_interval = interval
-
-
-def capture_envelope(station: Station, arm=None) -> EnvelopeRecord:
-    """The vibrometer's envelope record, ``arm()`` (e.g. firing a burst) before each attempt; over range steps
-    the decoder range up and captures again."""
-    while True:
-        if arm is not None:
-            arm()
-        record = station.vibrometer.read_record()
-        if not record.over_range:
-            return record
-        larger = [r for r in station.vibrometer.ranges if r > station.vibrometer.decoder_range]
-        if not larger:
-            raise InstrumentError("vibrometer over range on its largest range during an envelope record")
-        station.vibrometer.decoder_range = larger[0]
+    return capture_envelope(station, plan.window(), exponent, generator.trigger, plan.burst_duration)
 
 
 def ringdown(station: Station, path, plan: RingdownPlan, metadata: dict | None = None, restart: bool = False,
@@ -136,18 +123,14 @@ def ringdown(station: Station, path, plan: RingdownPlan, metadata: dict | None =
         todo = [j for j, keys in samples.items() if any(key not in log.keys for key in keys)]
         station.prepare()
         try:
-            station.retry(lambda: prepare_capture(station, plan.samples, plan.interval),
-                          "preparing the vibrometer's envelope record")
+            exponent = station.retry(lambda: prepare_capture(station, plan.window(), plan.frequency),
+                                     "preparing the lock-in's capture")
             with Progress(len(todo), "ringdown", unit="bursts", enabled=bool(todo)) as bar:
                 for j in todo:
                     voltage = plan.voltages[j]
-                    record = station.retry(lambda: record_ringdown(station, plan.frequency, voltage, plan.cycles),
+                    record = station.retry(lambda: record_ringdown(station, plan, voltage, exponent),
                                            f"ring-down at {voltage:g} V")
-                    if record.time.shape != (plan.samples,) or not np.allclose(record.time, plan.decay_times()):
-                        raise InstrumentError(f"the vibrometer's record after the burst at {voltage:g} V is not the one "
-                                              f"set ({plan.samples} samples {plan.interval * 1e6:g} us apart); that burst "
-                                              "is not logged")
-                    temperature = station.retry(station.vibrometer.read_temperature, "reading the plate temperature")
+                    temperature = station.retry(station.read_temperature, "reading the plate temperature")
                     stamp = station.clock()
                     log.append_rows([
                         {logformat.SWEEP: j, logformat.TIMESTAMP: stamp, logformat.DECAY_TIME: t,
@@ -158,6 +141,7 @@ def ringdown(station: Station, path, plan: RingdownPlan, metadata: dict | None =
                     bar.update()
         finally:
             station.shutdown()
+            note_readout(log, station)
         rows = log.rows
     bursts = []
     for j, voltage in enumerate(plan.voltages):

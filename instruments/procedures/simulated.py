@@ -9,9 +9,10 @@ from dataclasses import replace
 import serial
 
 from instruments.drivers.amplifier import PowerAmplifier
+from instruments.drivers.lockin import capture_interval
 from instruments.procedures.ringdown import RingdownPlan, ringdown
 from instruments.procedures.sweeps import CampaignPlan, ProcedureResult, Station, open_station, q_campaign
-from instruments.simulator.bench import Bench, BenchSettings, default_bench_settings, register_bench
+from instruments.simulator.bench import INSTRUMENTS, TEMPERATURE_AUX, Bench, BenchSettings, default_bench_settings, register_bench
 from instruments.simulator.urlhandler import bench_url, register_url_handler
 
 SIMULATED_NOTE = "SIMULATED data from the tactile bench simulator, not a measurement"
@@ -27,23 +28,27 @@ def simulated_station(settings: BenchSettings, voltage_limit: float | None = Non
         The station's (and driver's) safety limit [V peak across the ceramics]; by
         default the bench's own limit.
     options
-        Passed to :class:`Station` (``retries``, ``settle_time``).
+        Passed to :class:`Station` (``retries``, ``settle_time``, ``time_constant``); the plate's temperature
+        sensor is on the lock-in's Aux In 1.
     """
     register_url_handler()
     bench = Bench(settings)
     name = register_bench(bench)
     # reads on a simulated port never wait: the timeout is nominal
-    ports = [serial.serial_for_url(bench_url(name, instrument), timeout=1.0) for instrument in ("generator", "vibrometer")]
+    ports = [serial.serial_for_url(bench_url(name, instrument), timeout=1.0) for instrument in INSTRUMENTS]
     limit = settings.ceramic_voltage_limit if voltage_limit is None else voltage_limit
-    options = {"clock": bench.clock, "sleep": bench.sleep, **options}
+    options = {"clock": bench.clock, "sleep": bench.sleep, "temperature_aux": TEMPERATURE_AUX + 1, **options}
     return open_station(*ports, PowerAmplifier(settings.amplifier_gain), limit, **options), bench
 
 
 def reopened_station(station: Station, bench: Bench) -> Station:
     """A new station on the ports of ``station``'s simulated bench, reopened (as after an unplugged cable)."""
-    ports = [serial.serial_for_url(driver.port.port, timeout=1.0) for driver in (station.generator, station.vibrometer)]
+    drivers = (station.generator, station.vibrometer, station.lockin)
+    ports = [serial.serial_for_url(driver.port.port, timeout=1.0) for driver in drivers]
+    readout = station.readout
     return open_station(*ports, station.amplifier, station.voltage_limit, clock=bench.clock, sleep=bench.sleep,
-                        settle_time=station.settle_time, retries=station.retries)
+                        settle_time=station.settle_time, retries=station.retries, time_constant=readout.time_constant,
+                        temperature_aux=readout.temperature_aux)
 
 
 def simulation_metadata(settings: BenchSettings) -> dict:
@@ -111,13 +116,13 @@ def simulate_ringdown(
 ) -> ProcedureResult:
     """Ring-downs on a simulated bench at its resonance (time 0, rounded to 1 Hz), logged to ``path``.
 
-    Parameters as :class:`~instruments.procedures.ringdown.RingdownPlan`; ``settings``, ``seed``
-    and ``restart`` as :func:`simulate_campaign`.
+    Parameters as :class:`~instruments.procedures.ringdown.RingdownPlan` (``interval`` [s] taken to the lock-in's
+    nearest capture interval); ``settings``, ``seed`` and ``restart`` as :func:`simulate_campaign`.
     """
     settings = settings or default_bench_settings()
     if seed is not None:
         settings = replace(settings, seed=seed)
     plan = RingdownPlan(round(settings.response.resonance_frequency), tuple(float(v) for v in voltages), cycles, samples,
-                        interval)
+                        capture_interval(interval))
     station, _ = simulated_station(settings, settle_time=0.0)
     return ringdown(station, path, plan, metadata=simulation_metadata(settings), restart=restart, fsync=False)

@@ -8,7 +8,9 @@ resume.  The generator is left in its safe state (output off, lowest amplitude, 
 at the end, also after an error or an exception raised by a signal (:meth:`Station.shutdown`).
 
 Voltages are peak volts across the ceramics; the station converts them through the
-amplifier gain and refuses anything above its safety limit before sending it.
+amplifier gain and refuses anything above its safety limit before sending it.  Velocities come from
+the vibrometer's analog output read by the lock-in (:mod:`.readout`): each reading waits for the
+lock-in to settle, ranges, and converts volts to m/s through the decoder range in effect.
 """
 
 import math
@@ -22,8 +24,10 @@ import numpy as np
 from instruments.drivers.amplifier import PowerAmplifier
 from instruments.drivers.errors import CommunicationError, InstrumentError, SafetyLimitError
 from instruments.drivers.generator import FunctionGenerator, check_voltage_limit
-from instruments.drivers.vibrometer import VelocityReading, Vibrometer, full_scale
+from instruments.drivers.lockin import LockIn
+from instruments.drivers.vibrometer import Vibrometer
 from instruments.procedures.logwriter import LogWriter, point_key
+from instruments.procedures.readout import DEFAULT_TIME_CONSTANT, Readout, VelocityReading
 from instruments.simulator.generator import FREQUENCY_RANGE
 from workflow import logformat
 from workflow.errors import InputFileError, TactileError
@@ -32,10 +36,8 @@ from workflow.units import MM
 
 DEFAULT_RETRIES = 3
 """Retries of one point after a timeout or a garbled reply."""
-DEFAULT_SETTLE_TIME = 0.3
-"""Wait after changing the drive before reading the velocity [s] (Q/(pi f) is ~2 ms; the lock-in needs longer)."""
-RANGE_HEADROOM = 1.25
-"""A decoder range is used only if its full scale exceeds the last reading by this factor [-]."""
+DEFAULT_SETTLE_TIME = 0.0
+"""Wait after changing the drive on top of the lock-in's settling [s] (the plate's own, Q/(pi f) ~ 2 ms, is far shorter)."""
 MIN_POINTS_PER_SWEEP = 3
 """Fewest points of a frequency sweep (a peak needs neighbours)."""
 MAX_POINTS_PER_SWEEP = 10_000
@@ -99,7 +101,7 @@ class PlannedPoint:
 
 
 class Station:
-    """The generator, amplifier and vibrometer of one bench, with the safety limit.
+    """The generator, amplifier, vibrometer controller and lock-in of one bench, with the safety limit.
 
     Parameters
     ----------
@@ -107,39 +109,48 @@ class Station:
         Its ``max_peak_voltage`` should be the limit translated through the gain (see
         :func:`open_station`); the station checks the limit itself as well.
     vibrometer : Vibrometer
+    lockin : LockIn
     amplifier : PowerAmplifier
     voltage_limit : float
         Safety limit on the peak voltage across the ceramics [V]: finite and > 0 (ValueError otherwise).
     retries : int
         Retries of a point after a timeout or garbled reply.
     settle_time : float
-        Wait after changing the drive [s].
+        Wait after changing the drive on top of the lock-in's settling [s].
     clock, sleep : callable
         Time source [s] and wait function (a simulated bench passes its own).
+    time_constant : float
+        The lock-in's time constant for the readout [s].
+    temperature_aux : int or None
+        The lock-in's Aux In (1-4) carrying the plate's temperature sensor, or None.
     """
 
     def __init__(
         self,
         generator: FunctionGenerator,
         vibrometer: Vibrometer,
+        lockin: LockIn,
         amplifier: PowerAmplifier,
         voltage_limit: float,
         retries: int = DEFAULT_RETRIES,
         settle_time: float = DEFAULT_SETTLE_TIME,
         clock: Callable[[], float] = time.monotonic,
         sleep: Callable[[float], None] = time.sleep,
+        time_constant: float = DEFAULT_TIME_CONSTANT,
+        temperature_aux: int | None = None,
     ):
         self.generator = generator
         self.vibrometer = vibrometer
+        self.lockin = lockin
         self.amplifier = amplifier
         self.voltage_limit = check_voltage_limit(voltage_limit)
         self.retries = retries
         self.settle_time = settle_time
         self.clock = clock
         self.sleep = sleep
+        self.readout = Readout(vibrometer, lockin, time_constant, temperature_aux)
         self._voltage = None
-        self._ranges: list[float] = []
-        self._range = None
+        self._frequency = None
 
     def check_voltage(self, voltage: float) -> None:
         """Raise :class:`SafetyLimitError` if ``voltage`` [V peak across the ceramics] exceeds the limit."""
@@ -155,21 +166,18 @@ class Station:
                 return action()
             except CommunicationError as error:
                 last = error
-                self.generator.discard_input()
-                self.vibrometer.discard_input()
+                for instrument in (self.generator, self.vibrometer, self.lockin):
+                    instrument.discard_input()
         raise InstrumentError(f"{what}: giving up after {self.retries + 1} attempts; last: {last}")
 
     def identify(self) -> dict:
-        """Instrument ids for the log header."""
+        """Instrument identities and the readout's settings, for the log header."""
         generator = self.retry(lambda: self.generator.identity, "identifying the generator")
-        vibrometer = self.retry(
-            lambda: f"{self.vibrometer.controller} {self.vibrometer.version}, decoder {self.vibrometer.decoder}",
-            "identifying the vibrometer",
-        )
-        return {"generator": generator, "vibrometer": vibrometer}
+        readout = self.retry(self.readout.describe, "identifying the vibrometer and the lock-in")
+        return {"generator": generator, **readout}
 
     def prepare(self) -> None:
-        """Sine, no offset, output off, no queued errors; decoder on its most sensitive range."""
+        """Sine, no offset, output off, no queued errors; the readout configured, the decoder on its most sensitive range."""
 
         def configure():
             self.generator.output = False
@@ -178,9 +186,7 @@ class Station:
             self.generator.function = "SIN"
             self.generator.offset = 0.0
             self.generator.check_errors("configuring the output")
-            self._ranges = self.vibrometer.ranges
-            self._range = self._ranges[0]
-            self.vibrometer.decoder_range = self._range
+            self.readout.prepare()
 
         self.retry(configure, "preparing the instruments")
         self._voltage = None
@@ -194,6 +200,7 @@ class Station:
         self.check_voltage(voltage)
         self.generator.frequency = frequency
         self.generator.check_errors(f"setting {frequency:.12g} Hz; that point is not logged")
+        self._frequency = frequency
         if voltage != self._voltage:
             self.generator.amplitude_vpp = self.amplifier.generator_vpp(voltage)
             self.generator.check_errors(f"setting {voltage:g} V across the ceramics")
@@ -203,23 +210,12 @@ class Station:
         self.sleep(self.settle_time)
 
     def read_velocity(self) -> VelocityReading:
-        """A readout on a decoder range that holds it: over range steps up and measures again."""
-        while True:
-            reading = self.vibrometer.read_velocity()
-            if not reading.over_range:
-                break
-            larger = [r for r in self._ranges if r > self._range]
-            if not larger:
-                raise InstrumentError(f"vibrometer over range on its largest range {self._range * 1e3:g} mm/s/V")
-            self._set_range(larger[0])
-        holding = [r for r in self._ranges if full_scale(r) > RANGE_HEADROOM * reading.amplitude]
-        if holding and holding[0] < self._range:
-            self._set_range(holding[0])
-        return reading
+        """A settled, ranged reading at the frequency last driven (:meth:`.readout.Readout.read`)."""
+        return self.readout.read(self._frequency, self.sleep)
 
-    def _set_range(self, decoder_range: float) -> None:
-        self.vibrometer.decoder_range = decoder_range
-        self._range = decoder_range
+    def read_temperature(self) -> float | None:
+        """Plate temperature [deg C] from the sensor on the lock-in's Aux In, or None without one."""
+        return self.readout.read_temperature()
 
     def measure(self, point: PlannedPoint) -> VelocityReading:
         """Drive and read one point, with retries."""
@@ -347,8 +343,16 @@ def run_procedure(station: Station, path, procedure: str, plan: dict, voltages, 
                 measured += _measure_points(station, log, points, procedure)
         finally:
             station.shutdown()
+            note_readout(log, station)
         return log.rows, dict(path=Path(path), procedure=procedure, planned=planned, measured=measured,
                               resumed=resumed, truncated_bytes=log.truncated_bytes, warnings=tuple(log.warnings))
+
+
+def note_readout(log: LogWriter, station: Station) -> None:
+    """After a run's rows, a ``#`` line with the decoder ranges and sensitivities its readings used (none: nothing)."""
+    used = station.readout.usage()
+    if used:
+        log.append_comment(used)
 
 
 def _sweep_rows(rows: list[dict], sweep: int) -> tuple[np.ndarray, np.ndarray]:
@@ -551,7 +555,8 @@ def voltage_sweep(station: Station, path, plan: VoltageSweepPlan, metadata: dict
     return ProcedureResult(**counts, summary={"voltage_v": voltage, "deflection_um": deflection})
 
 
-def open_station(generator_port, vibrometer_port, amplifier: PowerAmplifier, voltage_limit: float, **options) -> Station:
-    """A station on two open ports; the generator driver's limit is ``voltage_limit`` through the gain."""
+def open_station(generator_port, vibrometer_port, lockin_port, amplifier: PowerAmplifier, voltage_limit: float,
+                 **options) -> Station:
+    """A station on three open ports; the generator driver's limit is ``voltage_limit`` through the gain."""
     generator = FunctionGenerator(generator_port, amplifier.generator_peak_limit(voltage_limit))
-    return Station(generator, Vibrometer(vibrometer_port), amplifier, voltage_limit, **options)
+    return Station(generator, Vibrometer(vibrometer_port), LockIn(lockin_port), amplifier, voltage_limit, **options)

@@ -1,4 +1,4 @@
-"""The bench simulator: one simulated plate shared by a simulated generator and vibrometer.
+"""The bench simulator: one simulated plate shared by a simulated generator, vibrometer controller and lock-in.
 
 Reach it through pyserial (``serial.serial_for_url("tactile-sim://NAME/generator")``,
 after importing :mod:`instruments.simulator.urlhandler` or calling :func:`register_url_handler`)

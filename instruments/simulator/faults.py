@@ -30,12 +30,15 @@ class FaultSettings:
         once; a reopened port works again.
     seed : int
         Seed of the fault generator, separate from the measurement noise.
+    instruments : tuple of str or None
+        The instruments whose replies are dropped or garbled (None: all).
     """
 
     drop_rate: float = 0.0
     garble_rate: float = 0.0
     disconnect_at: int | None = None
     seed: int = 0
+    instruments: tuple | None = None
 
     def __post_init__(self):
         for name in ("drop_rate", "garble_rate"):
@@ -54,13 +57,15 @@ class FaultInjector:
         self.disconnected = False
         self._rng = np.random.default_rng(settings.seed)
 
-    def next_fault(self) -> Fault:
-        """The fault for the next command (counted)."""
+    def next_fault(self, instrument: str | None = None) -> Fault:
+        """The fault for the next command (counted) to ``instrument``."""
         self.commands += 1
         if not self.disconnected and self.commands == self.settings.disconnect_at:
             self.disconnected = True
             return Fault.DISCONNECT
         draw = self._rng.random()
+        if self.settings.instruments is not None and instrument not in self.settings.instruments:
+            return Fault.NONE
         if draw < self.settings.drop_rate:
             return Fault.DROP
         if draw < self.settings.drop_rate + self.settings.garble_rate:

@@ -14,7 +14,9 @@ displacement lag atan2(r/Q, 1 - r^2).
 After a burst of N cycles at f the plate rings down from v0 = v_ss (1 - exp(-pi N / Q(v_ss)))
 (v_ss the steady velocity at f; the build-up of a linear mode with the steady state's Q),
 following dv/dt = -pi f_r v / Q(v) (:func:`workflow.damping.ringdown.decay_velocity`).
-The plate's temperature rises with the drift: T = T_0 + (f_r(t) - f_r(0)) / (df_r/dT).
+The plate warms with the power it dissipates (:mod:`.thermal`): with a rise theta over the ambient,
+f_r(t, theta) = (f_r + drift_rate t) (1 + beta theta); the linear drift reads as a slow warming of
+the ambient, T = T_amb + theta + drift_rate t / (beta f_r).
 
 Under an amplitude-modulated drive the envelope follows the driven envelope equation of
 :mod:`workflow.damping.envelope` with this plate's own law, softening and resonance
@@ -25,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from instruments.simulator.thermal import AMBIENT_TEMPERATURE, FREQUENCY_COEFFICIENT, ThermalModel, thermal_model
 from workflow.damping.envelope import EnvelopeModel
 from workflow.damping.harmonic import self_consistent_amplitude, softened_amplitudes
 from workflow.damping.ringdown import decay_velocity
@@ -33,10 +36,6 @@ from workflow.models import analytical
 from workflow.models.materials import DESIGN_VOLTAGE, PLATE_Q
 from workflow.models.plate import ORIGINAL_PLATE, Plate
 
-AMBIENT_TEMPERATURE = 22.0
-"""Plate temperature when the bench starts [deg C]."""
-FREQUENCY_PER_KELVIN = -5.0
-"""df_r/dT of the simulated plate [Hz/K]: CuBe's modulus falls about 3.5e-4 per kelvin, f_r half as fast."""
 DEFAULT_LOW_VELOCITY_Q = 150.0
 """Q(v -> 0) of the default simulated plate [-]: glued plates damp well below the ceramic's Q."""
 
@@ -57,6 +56,10 @@ class PlateResponse:
         Thermal drift of the resonance, d f_r / d t [Hz/s].
     softening : float
         kappa in f_r(v) = f_r(t) (1 - kappa v^2), v the antinode velocity [s^2/m^2] (0: none).
+    thermal : ThermalModel or None
+        The plate's heating by the power it dissipates (:mod:`.thermal`); None: it does not warm.
+
+    The methods take ``heating``, the plate's temperature rise over the ambient [K] (the bench's state).
     """
 
     resonance_frequency: float
@@ -64,16 +67,29 @@ class PlateResponse:
     law: object
     drift_rate: float = 0.0
     softening: float = 0.0
+    thermal: ThermalModel | None = None
 
-    def resonance_at(self, time):
-        """f_r(t) = f_r + drift_rate t [Hz] at ``time`` [s] (small amplitude)."""
-        return self.resonance_frequency + self.drift_rate * np.asarray(time)
+    @property
+    def frequency_coefficient(self) -> float:
+        """beta = (df_r / dT) / f_r [1/K] (the thermal model's, else the literature value)."""
+        return FREQUENCY_COEFFICIENT if self.thermal is None else self.thermal.frequency_coefficient
 
-    def temperature_at(self, time):
-        """Plate temperature [deg C] at ``time`` [s]: the drift read through df_r/dT."""
-        return AMBIENT_TEMPERATURE + self.drift_rate * np.asarray(time) / FREQUENCY_PER_KELVIN
+    def resonance_at(self, time, heating=0.0):
+        """f_r(t, theta) = (f_r + drift_rate t) (1 + beta theta) [Hz] at ``time`` [s], ``heating`` theta [K] (small amplitude)."""
+        return (self.resonance_frequency + self.drift_rate * np.asarray(time)) * (1 + self.frequency_coefficient * heating)
 
-    def deflection(self, frequency, ceramic_voltage, time=0.0, previous=None):
+    def temperature_at(self, time, heating=0.0):
+        """Plate temperature [deg C] at ``time`` [s]: the ambient, the drift read through beta, plus ``heating`` [K]."""
+        drift = self.drift_rate * np.asarray(time) / (self.frequency_coefficient * self.resonance_frequency)
+        return AMBIENT_TEMPERATURE + drift + heating
+
+    def dissipated_power(self, frequency, velocity) -> float:
+        """Power the plate dissipates [W] at antinode ``velocity`` [m/s] and drive ``frequency`` [Hz] (0 without a thermal model)."""
+        if self.thermal is None:
+            return 0.0
+        return float(self.thermal.dissipated_power(frequency, velocity, self.law.quality_factor(velocity)))
+
+    def deflection(self, frequency, ceramic_voltage, time=0.0, previous=None, heating=0.0):
         """Antinode deflection amplitude w [m] at drive ``frequency`` [Hz], ``ceramic_voltage`` [V peak].
 
         Without softening the root is unique and arrays are solved elementwise.  With it the points
@@ -81,7 +97,7 @@ class PlateResponse:
         from ``previous``, the deflection before it [m] (default: the small-amplitude response).
         """
         static = self.deflection_per_volt * np.abs(np.asarray(ceramic_voltage, dtype=float))
-        resonance = self.resonance_at(time)
+        resonance = self.resonance_at(time, heating)
         if not self.softening:
             return self_consistent_amplitude(static, frequency, resonance, self.law.quality_factor)
         if not np.any(static):
@@ -90,7 +106,7 @@ class PlateResponse:
         points = (np.atleast_1d(x) for x in (static, frequency, resonance))
         return softened_amplitudes(*points, self.softening, self.law.quality_factor, start=previous).reshape(shape)
 
-    def velocity(self, frequency, ceramic_voltage, time=0.0, previous=None):
+    def velocity(self, frequency, ceramic_voltage, time=0.0, previous=None, heating=0.0):
         """Antinode velocity amplitude [m/s] and its phase relative to the drive [deg].
 
         Parameters
@@ -103,26 +119,29 @@ class PlateResponse:
             Time since the bench started [s] (drift).
         previous : float, optional
             Deflection before this point [m] (see :meth:`deflection`).
+        heating : float
+            Temperature rise over the ambient [K].
         """
         frequency = np.asarray(frequency, dtype=float)
-        w = self.deflection(frequency, ceramic_voltage, time, previous)
+        w = self.deflection(frequency, ceramic_voltage, time, previous, heating)
         v = 2 * np.pi * frequency * w
-        r = frequency / (self.resonance_at(time) * (1 - self.softening * v**2))
+        r = frequency / (self.resonance_at(time, heating) * (1 - self.softening * v**2))
         lag = np.degrees(np.arctan2(r / self.law.quality_factor(v), 1 - r**2))
         return v, 90.0 - lag
 
-    def burst_velocity(self, frequency, ceramic_voltage, cycles, time):
-        """Antinode velocity at the end of a burst of ``cycles`` cycles [m/s] (build-up of the module docstring)."""
-        steady, _ = self.velocity(frequency, ceramic_voltage, time)
-        return float(steady * (1 - np.exp(-np.pi * cycles / self.law.quality_factor(steady))))
+    def burst_build_up(self, frequency, ceramic_voltage, elapsed, time, heating=0.0):
+        """Antinode velocity ``elapsed`` [s] into a burst from rest [m/s]: v_ss (1 - exp(-pi f t / Q(v_ss)))."""
+        steady, _ = self.velocity(frequency, ceramic_voltage, time, heating=heating)
+        return steady * (1 - np.exp(-np.pi * frequency * np.asarray(elapsed) / self.law.quality_factor(steady)))
 
-    def envelope_model(self, frequency: float, time: float) -> EnvelopeModel:
+    def envelope_model(self, frequency: float, time: float, heating=0.0) -> EnvelopeModel:
         """The plate's envelope dynamics under a carrier at ``frequency`` [Hz], with the resonance at ``time`` [s]."""
-        return EnvelopeModel(float(self.resonance_at(time)), self.deflection_per_volt, self.law, self.softening, frequency)
+        return EnvelopeModel(float(self.resonance_at(time, heating)), self.deflection_per_volt, self.law, self.softening,
+                             frequency)
 
-    def ringdown(self, initial_velocity, decay_time, time):
+    def ringdown(self, initial_velocity, decay_time, time, heating=0.0):
         """Antinode velocity envelope ``decay_time`` [s] after a burst that ended at ``time`` [s] with ``initial_velocity`` [m/s]."""
-        return decay_velocity(self.law, self.resonance_at(time), initial_velocity, decay_time)
+        return decay_velocity(self.law, self.resonance_at(time, heating), initial_velocity, decay_time)
 
 
 def working_point_velocity(plate: Plate = ORIGINAL_PLATE, q: float = PLATE_Q, voltage: float = DESIGN_VOLTAGE) -> float:
@@ -146,11 +165,13 @@ def default_law(
     return quadratic_law_through(low_velocity_q, working_q, working_point_velocity(plate, working_q, working_voltage))
 
 
-def plate_response(plate: Plate = ORIGINAL_PLATE, law=None, drift_rate: float = 0.0, softening: float = 0.0) -> PlateResponse:
+def plate_response(plate: Plate = ORIGINAL_PLATE, law=None, drift_rate: float = 0.0, softening: float = 0.0,
+                   heating: bool = True) -> PlateResponse:
     """The simulated response of ``plate``: f_r and w_s / V from the beam model (:mod:`workflow.models.analytical`).
 
     The quasi-static gain is the calibrated beam model's deflection per volt per unit Q,
-    so that Q = 54 at 15 V reproduces the beam model's deflection.
+    so that Q = 54 at 15 V reproduces the beam model's deflection.  With ``heating`` the plate warms with
+    the power it dissipates (:func:`.thermal.thermal_model`).
     """
     return PlateResponse(
         resonance_frequency=float(analytical.resonance_frequency(plate)),
@@ -158,4 +179,5 @@ def plate_response(plate: Plate = ORIGINAL_PLATE, law=None, drift_rate: float = 
         law=default_law(plate) if law is None else law,
         drift_rate=drift_rate,
         softening=softening,
+        thermal=thermal_model(plate) if heating else None,
     )

@@ -7,6 +7,7 @@ cannot unplug a pty: the command is lost and its client sees a timeout.
 
 import os
 import select
+import time
 import tty
 from functools import partial
 
@@ -35,7 +36,7 @@ def open_ptys() -> dict[str, PtyPair]:
 
 
 def serve(bench: Bench, ptys: dict[str, PtyPair], poll: float = 0.2, should_stop=lambda: False) -> None:
-    """Answer commands on ``ptys`` until ``should_stop()`` or an interrupt.
+    """Answer commands on ``ptys`` until ``should_stop()`` or an interrupt, the bench's time following the wall clock.
 
     Reads and writes never block, so each port is served on its own: a client that sends
     without reading only fills its instrument's output queue (see :mod:`.buffers`).
@@ -43,7 +44,9 @@ def serve(bench: Bench, ptys: dict[str, PtyPair], poll: float = 0.2, should_stop
     by_fd = {pair.master: name for name, pair in ptys.items()}
     for fd in by_fd:
         os.set_blocking(fd, False)
+    start = time.monotonic() - bench.time
     while not should_stop():
+        bench.catch_up(time.monotonic() - start)
         waiting = [fd for fd, name in by_fd.items() if bench.output[name]]
         readable, writable, _ = select.select(list(by_fd), waiting, [], poll)
         for fd in readable:
@@ -51,6 +54,7 @@ def serve(bench: Bench, ptys: dict[str, PtyPair], poll: float = 0.2, should_stop
                 data = os.read(fd, READ_SIZE)
             except OSError:
                 continue
+            bench.catch_up(time.monotonic() - start)
             try:
                 bench.receive(by_fd[fd], data)
             except SimulatedDisconnect:

@@ -1,129 +1,107 @@
-"""Simulated laser vibrometer: Polytec-style ``Get``/``Set`` lines and a lock-in velocity readout.
+"""Simulated laser vibrometer controller, OFV-5000-like: RS-232 settings lines and an analog velocity output.
 
-The protocol is documented in ``docs/instruments.md``.  Every command line gets exactly
-one reply line (``Set`` replies with the value now in effect, as Polytec controllers do
-with acknowledge on).  The readout is over-range when the velocity exceeds the decoder's
-full scale; it is then reported as ``OVER`` with the full-scale value, never clipped silently.
+The controller is configured over RS-232 (``Get``/``Set``/``GetDevInfo`` lines on ``Controller``,
+``SensorHead``, ``VeloDec``, ``Interface``, ``SignalLevel``; docs/instruments.md); it measures nothing
+over the line.  The velocity leaves as an analog voltage, velocity / range [V], which the bench feeds
+to the lock-in: the decoder clips it at +-10 V (its overload).  A ``Get`` answers one line; a ``Set``
+answers the value in effect only with acknowledge on (``Set,Interface,0,Acknowledge,On``; off after
+power-on), and an invalid setting is ignored.  The laser spot is moved by a scanner when the bench
+plays a built plate (``Scanner`` lines: the simulator's scanning head, an extension).
 """
 
-from collections.abc import Callable
+from instruments.drivers.vibrometer import format_delay, format_position, format_range
 
-import numpy as np
-
-from instruments.drivers.vibrometer import format_position, format_range, full_scale
-from workflow.models.limits import LIMITS
-
-CONTROLLER_NAME = "OFV-5000 tactile-sim"
-CONTROLLER_VERSION = "1.0-sim"
+CONTROLLER_NAME = "OFV-5000"
+CONTROLLER_VERSION = "tactile-sim 1.0"
+SENSOR_HEAD_NAME = "OFV-505"
+SENSOR_HEAD_VERSION = "tactile-sim 1.0"
 DECODER_NAME = "VD-09"
-DECODER_RANGES = tuple(mm_s_v * 1e-3 for mm_s_v in (1, 2, 5, 10, 20, 50, 100))
-"""Velocity decoder ranges [m/s per volt of analog output]."""
-RECORD_SAMPLES_RANGE = LIMITS["campaign.ringdown_samples"]
-"""Samples of one envelope record (its reply line stays under the 4 kB output buffer) [-]."""
-RECORD_INTERVAL_US_RANGE = LIMITS["campaign.ringdown_interval_us"]
-"""Time between record samples [us]."""
-DEFAULT_RECORD_SAMPLES = 100
-DEFAULT_RECORD_INTERVAL_US = 50
+DECODER_RANGES = tuple(mm_s_v * 1e-3 for mm_s_v in (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000))
+"""The simulated decoder's ranges [m/s per volt of analog output]."""
+DECODER_FULL_SCALE_OUTPUT = 10.0
+"""The decoder's analog output clips at this peak voltage [V] (its overload)."""
+DECODER_DELAY = 8.16e-6
+"""Signal transit time of the simulated decoder [s] (``Get,VeloDec,1,SignalDelay``): the output lags the surface."""
+SIGNAL_LEVEL = 85
+"""``Get,SignalLevel,0,Value`` of a focused spot on the simulated plate [%]."""
+BAUD_RATE = 115200
+"""The controller's RS-232 rate [baud] (its default)."""
+ERROR_UNKNOWN = "Error,1,Unknown command"
 
 
 class VibrometerDevice:
-    """The vibrometer's command interpreter.
+    """The controller's command interpreter.
 
     Parameters
     ----------
-    signal : callable
-        () -> (velocity amplitude [m/s], phase [deg]) of the true surface velocity at the
-        drive frequency; called once per readout (it may advance the bench clock).
-    rng : numpy.random.Generator
-        Measurement noise.
-    relative_noise : float
-        Standard deviation of the relative amplitude error [-].
-    floor_fraction : float
-        Standard deviation of the additive noise, as a fraction of the range's full scale [-].
-    phase_noise : float
-        Standard deviation of the phase error [deg].
-    record : callable, optional
-        (samples, interval [s]) -> true velocity envelope [m/s] after the latest burst, or None
-        when no burst fired since the last record; without it the record commands are unknown.
-    temperature : callable, optional
-        () -> plate temperature [deg C]; without it the temperature command is unknown.
     scanner : tuple of float or None
         (L/2, b/2) [m]: the plate's half extents, within which the laser spot can be positioned
         (``Set,Scanner,0,X|Y,<mm>``); None for a single-point head without a scanner.
+    ranges : tuple of float
+        The decoder's ranges [m/s/V].
 
     Attributes
     ----------
+    decoder_range : float
+        The range in effect [m/s/V] (the largest after power-on).
     position : tuple of float
         Laser spot (x, y) from the plate's centre [m].
     """
 
-    def __init__(self, signal: Callable, rng, relative_noise: float, floor_fraction: float, phase_noise: float,
-                 record: Callable | None = None, temperature: Callable | None = None, scanner: tuple | None = None):
-        self.signal = signal
-        self.record = record
-        self.record_samples = DEFAULT_RECORD_SAMPLES
-        self.record_interval_us = DEFAULT_RECORD_INTERVAL_US
-        self.rng = rng
-        self.relative_noise = relative_noise
-        self.floor_fraction = floor_fraction
-        self.phase_noise = phase_noise
-        self.decoder_range = DECODER_RANGES[-1]
+    def __init__(self, scanner: tuple | None = None, ranges: tuple = DECODER_RANGES):
+        self.ranges = tuple(sorted(ranges))
+        self.decoder_range = self.ranges[-1]
+        self.acknowledge = False
         self.scanner = scanner
         self.position = (0.0, 0.0)
         self._gets = {
             ("GetDevInfo", "Controller", "0", "Name"): lambda: CONTROLLER_NAME,
             ("GetDevInfo", "Controller", "0", "Version"): lambda: CONTROLLER_VERSION,
+            ("GetDevInfo", "SensorHead", "0", "Name"): lambda: SENSOR_HEAD_NAME,
+            ("GetDevInfo", "SensorHead", "0", "Version"): lambda: SENSOR_HEAD_VERSION,
             ("GetDevInfo", "VeloDec", "1", "Name"): lambda: DECODER_NAME,
-            ("GetDevInfo", "VeloDec", "1", "Ranges"): lambda: ";".join(map(format_range, DECODER_RANGES)),
+            ("GetDevInfo", "VeloDec", "1", "Range"): lambda: ";".join(map(format_range, self.ranges)),
             ("Get", "VeloDec", "1", "Range"): lambda: format_range(self.decoder_range),
-            ("Get", "LockIn", "0", "Velocity"): self._readout,
+            ("Get", "VeloDec", "1", "SignalDelay"): lambda: format_delay(DECODER_DELAY),
+            ("Get", "SignalLevel", "0", "Value"): lambda: str(SIGNAL_LEVEL),
+            ("Get", "Interface", "0", "BaudRate"): lambda: str(BAUD_RATE),
+            ("Get", "Interface", "0", "Acknowledge"): lambda: "On" if self.acknowledge else "Off",
         }
-        if record is not None:
-            self._gets[("Get", "Record", "0", "Samples")] = lambda: str(self.record_samples)
-            self._gets[("Get", "Record", "0", "Interval")] = lambda: str(self.record_interval_us)
-            self._gets[("Get", "Record", "0", "Envelope")] = self._record_readout
-        if temperature is not None:
-            self._gets[("Get", "Sensor", "0", "Temperature")] = lambda: f"{temperature():.3f}"
 
-    def handle_line(self, line: str) -> str:
-        """Execute one command line and return its reply line."""
+    @property
+    def output_scale(self) -> float:
+        """Analog output per unit velocity [V/(m/s)] on the range in effect."""
+        return 1.0 / self.decoder_range
+
+    def handle_line(self, line: str) -> str | None:
+        """Execute one command line; its reply line, or None (a ``Set`` without acknowledge, an ignored setting)."""
         fields = tuple(field.strip() for field in line.strip().split(","))
         if fields in self._gets:
             return self._gets[fields]()
         if self.scanner is not None and fields[1:3] == ("Scanner", "0"):
             return self._scanner(fields)
-        if fields[:4] == ("Set", "VeloDec", "1", "Range") and len(fields) == 5:
-            choices = {format_range(r).lower(): r for r in DECODER_RANGES}
-            if fields[4].lower() not in choices:
-                return "Error,2,Invalid value"
-            self.decoder_range = choices[fields[4].lower()]
-            return format_range(self.decoder_range)
-        if self.record is not None and fields[:3] == ("Set", "Record", "0") and len(fields) == 5:
-            return self._set_record(fields[3], fields[4])
-        return "Error,1,Unknown command"
+        if fields[0] != "Set" or len(fields) != 5:
+            return ERROR_UNKNOWN
+        setter = {("VeloDec", "1", "Range"): self._set_range, ("Interface", "0", "Acknowledge"): self._set_acknowledge}
+        if fields[1:4] not in setter:
+            return ERROR_UNKNOWN
+        value = setter[fields[1:4]](fields[4])
+        return value if self.acknowledge and value is not None else None
 
-    def _set_record(self, name: str, text: str) -> str:
-        limits = {"Samples": RECORD_SAMPLES_RANGE, "Interval": RECORD_INTERVAL_US_RANGE}
-        if name not in limits:
-            return "Error,1,Unknown command"
-        if not text.isdigit() or not limits[name][0] <= int(text) <= limits[name][1]:
-            return "Error,2,Invalid value"
-        setattr(self, "record_samples" if name == "Samples" else "record_interval_us", int(text))
-        return str(int(text))
+    def _set_range(self, text: str) -> str | None:
+        choices = {format_range(r).lower(): r for r in self.ranges}
+        if text.lower() not in choices:
+            return None
+        self.decoder_range = choices[text.lower()]
+        return format_range(self.decoder_range)
 
-    def _record_readout(self) -> str:
-        envelope = self.record(self.record_samples, self.record_interval_us * 1e-6)
-        if envelope is None:
-            return "Error,5,No trigger"
-        limit = full_scale(self.decoder_range)
-        noise = self.rng.standard_normal((3, len(envelope)))
-        phasor = envelope * (1 + self.relative_noise * noise[0]) + self.floor_fraction * limit * (noise[1] + 1j * noise[2]) / np.sqrt(2)
-        measured = np.abs(phasor)
-        status = "OVER" if np.any(measured > limit) else "OK"
-        values = ";".join(f"{v:.5E}" for v in np.minimum(measured, limit))
-        return f"{status},{self.record_interval_us},{len(envelope)},{values}"
+    def _set_acknowledge(self, text: str) -> str | None:
+        if text not in ("On", "Off"):
+            return None
+        self.acknowledge = text == "On"
+        return text
 
-    def _scanner(self, fields: tuple) -> str:
+    def _scanner(self, fields: tuple) -> str | None:
         """The positioning commands: range, and the spot's x and y in mm from the plate's centre."""
         half = dict(zip("XY", self.scanner))
         if fields == ("GetDevInfo", "Scanner", "0", "Range"):
@@ -134,14 +112,14 @@ class VibrometerDevice:
             try:
                 value = float(fields[4]) * 1e-3
             except ValueError:
-                return "Error,2,Invalid value"
+                return None
             if not abs(value) <= half[fields[3]] * (1 + 1e-9):
-                return "Error,4,Position off the plate"
+                return None
             position = list(self.position)
             position["XY".index(fields[3])] = value
             self.position = tuple(position)
-            return format_position(value)
-        return "Error,1,Unknown command"
+            return format_position(value) if self.acknowledge else None
+        return ERROR_UNKNOWN
 
     def input_overrun(self) -> str:
         """The reply to a command line that overran the input buffer and was discarded."""
@@ -149,15 +127,3 @@ class VibrometerDevice:
 
     def reply_lost(self) -> None:
         """A reply found the output queue full: the controller has no error queue, the reply is just lost."""
-
-    def _readout(self) -> str:
-        amplitude, phase = self.signal()
-        limit = full_scale(self.decoder_range)
-        noise = self.rng.standard_normal(4)
-        phasor = amplitude * (1 + self.relative_noise * noise[0]) * np.exp(1j * np.radians(phase + self.phase_noise * noise[1]))
-        phasor += self.floor_fraction * limit * (noise[2] + 1j * noise[3]) / np.sqrt(2)
-        measured, measured_phase = abs(phasor), float(np.degrees(np.angle(phasor)))
-        status = "OK"
-        if measured > limit:
-            measured, status = limit, "OVER"
-        return f"{measured:.6E},{measured_phase:+.3f},{status}"

@@ -14,11 +14,14 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from instruments.drivers.amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT, DEFAULT_GAIN
+from instruments.procedures.hold import DEFAULT_START_VOLTAGE
+from instruments.procedures.readout import DEFAULT_TIME_CONSTANT
 from instruments.procedures.scan import DEFAULT_GRID, DEFAULT_MARGIN, DEFAULT_VOLTAGE
 from workflow.cli.options import (
     Stopped,
     StopSignals,
     add_bench_arguments,
+    add_damping_option,
     add_force_option,
     add_built_plate_arguments,
     add_json_flag,
@@ -30,17 +33,21 @@ from workflow.cli.options import (
     built_plate_from_args,
     built_plate_model,
     describe_texture,
+    load_damping,
     rendering_model,
     texture_and_motion,
 )
 from workflow.errors import TactileError
 from workflow.models.limits import LIMITS, point_problem
+from workflow.models.materials import PLATE_Q
 from workflow.pipeline.outputs import output_folder
 from workflow.units import MM
 
 DEFAULT_DATA_DIR = Path("measurements")
 """Folder of the logs when --out is not given, relative to the working directory."""
-PROCEDURES = ("resonance", "campaign", "voltage-sweep", "scan", "ringdown", "render")
+PROCEDURES = ("resonance", "campaign", "voltage-sweep", "scan", "ringdown", "render", "hold")
+INSTRUMENT_BAUD_RATE = 115200
+"""Default serial rate of the vibrometer controller and the lock-in (their factory setting) [baud]."""
 
 
 VOLTAGE = bounded(float, *LIMITS["campaign.voltages_v"], "V")
@@ -58,8 +65,8 @@ def _voltages(text: str) -> tuple:
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
         "measure",
-        help="run a bench procedure (resonance, campaign, voltage-sweep, scan, ringdown, render) and log it",
-        description="Run a measurement procedure against serial ports (--generator/--vibrometer) or the in-process "
+        help="run a bench procedure (resonance, campaign, voltage-sweep, scan, ringdown, render, hold) and log it",
+        description="Run a measurement procedure against serial ports (--generator/--vibrometer/--lockin) or the in-process "
         "simulator (--simulate). Each point is appended to a CSV log (docs/log-format.md) at once, by default "
         f"{DEFAULT_DATA_DIR}/<procedure>.csv in the working directory (a folder git ignores); rerunning the "
         "same command resumes an interrupted log. One process writes a log at a time (a second one is refused, "
@@ -70,10 +77,20 @@ def register(subparsers) -> None:
     common = argparse.ArgumentParser(add_help=False)
     ports = common.add_argument_group("instruments")
     ports.add_argument("--generator", metavar="PORT", help="serial port (or pyserial URL) of the signal generator")
-    ports.add_argument("--vibrometer", metavar="PORT", help="serial port (or pyserial URL) of the vibrometer")
+    ports.add_argument("--vibrometer", metavar="PORT", help="serial port (or pyserial URL) of the vibrometer controller")
+    ports.add_argument("--lockin", metavar="PORT", help="serial port (or pyserial URL) of the lock-in amplifier (SR860)")
     ports.add_argument("--simulate", action="store_true", help="use the in-process bench simulator instead of ports")
     ports.add_argument("--baudrate", type=bounded(int, 50, 4_000_000), default=9600,
-                       help="serial baud rate, 50 to 4000000 (default 9600)")
+                       help="the generator's serial baud rate, 50 to 4000000 (default 9600)")
+    for name in ("vibrometer", "lockin"):
+        ports.add_argument(f"--{name}-baudrate", type=bounded(int, 50, 4_000_000), default=INSTRUMENT_BAUD_RATE,
+                           help=f"the {name}'s serial baud rate (default {INSTRUMENT_BAUD_RATE})")
+    ports.add_argument("--time-constant", type=bounded(float, 1e-6, 30e3, "s"), default=DEFAULT_TIME_CONSTANT,
+                       metavar="SECONDS", help="lock-in time constant of the readings (the nearest SR860 value; each "
+                       f"reading waits for it to settle), 1e-6 to 30000 s (default {DEFAULT_TIME_CONSTANT:g})")
+    ports.add_argument("--temperature-aux", type=int, choices=(1, 2, 3, 4), metavar="N",
+                       help="the lock-in's Aux In carrying the plate's temperature sensor (5 mV/degC), 1 to 4 (default: "
+                       "none on real ports; the simulator's is on 1)")
     ports.add_argument("--timeout", type=bounded(float, 0.001, 3600.0, "s"), default=1.0,
                        help="reply timeout [s], 0.001 to 3600 (default 1)")
     ports.add_argument("--retries", type=bounded(int, 0, 100), default=3,
@@ -117,7 +134,7 @@ def register(subparsers) -> None:
     sweep.add_argument("--frequency-hz", type=float, help="drive frequency [Hz] (default: see above)")
     ring = procedures.add_parser("ringdown", parents=[common], help="free decays after bursts at resonance",
                                  description="One burst per level at the resonance (33500 burst mode, bus trigger), "
-                                 "then the vibrometer's envelope record of the free decay; one row per sample, with "
+                                 "then the lock-in's capture of the free decay; one row per sample, with "
                                  "the plate temperature where the bench reports it (docs/log-format.md). Without "
                                  "--frequency-hz the frequency comes from the log being resumed or from a resonance "
                                  "search logged to <out>-resonance.csv.")
@@ -128,8 +145,9 @@ def register(subparsers) -> None:
                       help="cycles per burst, 1 to 100000000 (default 2000)")
     ring.add_argument("--samples", type=bounded(int, 2, 256), default=100,
                       help="envelope samples after each burst, 2 to 256 (default 100)")
-    ring.add_argument("--interval-us", type=bounded(int, 1, 1_000_000), default=50,
-                      help="time between samples [us], 1 to 1000000 (default 50)")
+    ring.add_argument("--interval-us", type=bounded(float, 0.8, 1_000_000.0, "us"), default=50.0,
+                      help="time between samples [us], taken to the lock-in's nearest capture interval 2^k x 0.8 us "
+                      "(default 50: 51.2)")
     scan = procedures.add_parser(
         "scan", parents=[common], help="deflection map: the laser spot moved over a grid of points at resonance",
         description="Drive the plate at one frequency and voltage and measure the velocity at each point of a grid "
@@ -165,7 +183,34 @@ def register(subparsers) -> None:
     render.add_argument("--settle-s", type=bounded(float, 0.0, 60.0, "s"), default=0.5,
                         help="time the drive loops before each capture [s], 0 to 60 (default 0.5)")
     render.add_argument("--figure", type=Path, help="the comparison figure (default: <out> with .png)")
-    for sub in (resonance, campaign, sweep, scan, ring, render):
+    hold = procedures.add_parser(
+        "hold", parents=[common], help="hold the plate at resonance and at a target amplitude (closed loop)",
+        description="Hold the plate at its resonance and at a target velocity (or deflection) for a given time: a "
+        "phase-locked loop on the lock-in's phase tracks the resonance while the plate warms, a PI loop sets the drive "
+        "(never above --max-voltage), both with gains from the Q(v) law (--damping, else a constant --q). Logs time, "
+        "frequency, drive, velocity, phase and temperature every --interval-s; on a lost lock, an overload or a lost "
+        "connection the output goes off and the log says why. Without --frequency-hz the start frequency comes from "
+        "the log being resumed or from a resonance search logged to <out>-resonance.csv. Writes a figure of the hold.")
+    target = hold.add_mutually_exclusive_group()
+    target.add_argument("--velocity-m-s", type=bounded(float, 1e-6, 10.0, "m/s"),
+                        help="target velocity amplitude at the laser spot [m/s]")
+    target.add_argument("--deflection-um", type=bounded(float, 1e-3, 1000.0, "um"),
+                        help="target deflection amplitude [um] (velocity 2 pi f w at the start frequency; default: the "
+                        "plate's working deflection, the beam model at 15 V with Q 54)")
+    hold.add_argument("--duration-s", type=bounded(float, 1.0, 7 * 86400.0, "s"), default=600.0,
+                      help="hold time [s] (default 600)")
+    hold.add_argument("--interval-s", type=bounded(float, 0.01, 3600.0, "s"), default=1.0,
+                      help="time between logged samples [s], at least the loop period (default 1)")
+    hold.add_argument("--open-loop", action="store_true", help="freeze frequency and drive once locked (the comparison)")
+    hold.add_argument("--start-voltage", type=VOLTAGE, default=DEFAULT_START_VOLTAGE,
+                      help=f"drive the loop starts from, peak volts across the ceramics (default {DEFAULT_START_VOLTAGE:g})")
+    add_damping_option(hold)
+    hold.add_argument("--q", type=bounded(float, *LIMITS["design.q"]), default=PLATE_Q,
+                      help=f"constant quality factor of the gains without --damping (default {PLATE_Q:g})")
+    hold.add_argument("--frequency-hz", type=float, help="start frequency [Hz] (default: see above)")
+    _add_search_flags(hold, 15e3, 101)
+    hold.add_argument("--figure", type=Path, help="the hold's figure (default: <out> with .png)")
+    for sub in (resonance, campaign, sweep, scan, ring, render, hold):
         sub.set_defaults(handler=run)
 
 
@@ -197,21 +242,25 @@ def _open_station(args):
     from instruments.procedures.sweeps import open_station
     from instruments.simulator import register_url_handler
 
-    options = {"retries": args.retries}
+    options = {"retries": args.retries, "time_constant": args.time_constant}
+    if args.temperature_aux is not None:
+        options["temperature_aux"] = args.temperature_aux
     if args.simulate:
-        if args.generator or args.vibrometer:
-            raise TactileError("give either --simulate or --generator/--vibrometer, not both")
+        if args.generator or args.vibrometer or args.lockin:
+            raise TactileError("give either --simulate or --generator/--vibrometer/--lockin, not both")
         settings = bench_settings(args)
         station, _ = simulated_station(settings, args.max_voltage, settle_time=0.0, **options)
         return station, simulation_metadata(settings)
     built = built_plate_from_args(args)
-    if not (args.generator and args.vibrometer):
-        raise TactileError("need --generator PORT and --vibrometer PORT (or --simulate)")
+    if not (args.generator and args.vibrometer and args.lockin):
+        raise TactileError("need --generator PORT, --vibrometer PORT and --lockin PORT (or --simulate)")
     register_url_handler()
     ports = []
-    for flag, name in (("--generator", args.generator), ("--vibrometer", args.vibrometer)):
+    for flag, name, baudrate in (("--generator", args.generator, args.baudrate),
+                                 ("--vibrometer", args.vibrometer, args.vibrometer_baudrate),
+                                 ("--lockin", args.lockin, args.lockin_baudrate)):
         try:
-            ports.append(serial.serial_for_url(name, baudrate=args.baudrate, timeout=args.timeout))
+            ports.append(serial.serial_for_url(name, baudrate=baudrate, timeout=args.timeout))
         except (serial.SerialException, ValueError, OSError) as error:
             raise TactileError(f"cannot open {flag} {name}: {error}") from None
     metadata = {"simulated": "no", **({} if built is None else built.metadata())}
@@ -224,7 +273,8 @@ def _centre(args, station, metadata, out: Path, key: str) -> float:
 
     from instruments.procedures.sweeps import ResonancePlan
 
-    plan = ResonancePlan(args.start_hz, args.stop_hz, args.coarse_points, args.fine_points) if args.procedure in ("scan", "render") else ResonancePlan()
+    searched = ("scan", "render", "hold")
+    plan = ResonancePlan(args.start_hz, args.stop_hz, args.coarse_points, args.fine_points) if args.procedure in searched else ResonancePlan()
     frequency, search = working_frequency(station, out, key, metadata, args.restart, plan)
     for warning in () if search is None else search.warnings:
         print(f"tactile measure: warning: {warning}", file=sys.stderr)
@@ -241,7 +291,7 @@ def _check_plan_flags(args) -> None:
     for flag, value in positive.items():
         if value is not None and not value > 0:
             raise TactileError(f"{flag} must be positive, got {value:g}")
-    if args.procedure in ("resonance", "scan", "render"):
+    if args.procedure in ("resonance", "scan", "render", "hold"):
         sweeps = {"--coarse-points": args.coarse_points, "--fine-points": args.fine_points}
         check_sizes(sweeps, sum(sweeps.values()), "--coarse-points + --fine-points")
     if args.procedure == "scan":
@@ -261,7 +311,7 @@ def _check_plan_flags(args) -> None:
         check_sizes({}, args.samples * len(args.voltages), "--samples x --voltages")
     elif args.procedure == "voltage-sweep":
         check_sizes({}, len(args.voltages), "--voltages")
-    if args.procedure in ("resonance", "scan", "render") and not args.start_hz < args.stop_hz:
+    if args.procedure in ("resonance", "scan", "render", "hold") and not args.start_hz < args.stop_hz:
         raise TactileError(f"--start-hz {args.start_hz:g} must be below --stop-hz {args.stop_hz:g}")
 
 
@@ -282,8 +332,10 @@ def run(args):
                 raise
             _shut_down(station, signals)
         if figure is not None:
-            compared = (_scan_figure(args, result.path, figure) if result.procedure == "scan"
-                        else _render_comparison(result.path, figure))
+            figures = {"scan": lambda: _scan_figure(args, result.path, figure),
+                       "render": lambda: _render_comparison(result.path, figure),
+                       "hold": lambda: _hold_figure(result, figure)}
+            compared = figures[result.procedure]()
     summary = {
         "log": str(result.path),
         "procedure": result.procedure,
@@ -321,10 +373,17 @@ def _measure(args, station, metadata: dict, out: Path):
     frequency = args.frequency_hz or _centre(args, station, metadata, out, "frequency")
     if args.procedure == "render":
         return _render(args, station, metadata, out, frequency)
+    if args.procedure == "hold":
+        return _hold(args, station, metadata, out, frequency)
     if args.procedure == "ringdown":
+        from instruments.drivers.lockin import capture_interval
         from instruments.procedures.ringdown import RingdownPlan, ringdown
 
-        plan = RingdownPlan(frequency, args.voltages, args.cycles, args.samples, args.interval_us * 1e-6)
+        interval = capture_interval(args.interval_us * 1e-6)
+        if not args.json and abs(interval / (args.interval_us * 1e-6) - 1) > 1e-9:
+            print(f"ring-down samples every {interval * 1e6:g} us (the lock-in's capture interval nearest "
+                  f"{args.interval_us:g} us)")
+        plan = RingdownPlan(frequency, args.voltages, args.cycles, args.samples, interval)
         return ringdown(station, out, plan, metadata, args.restart)
     plan = procedures.VoltageSweepPlan(frequency, args.voltages)
     return procedures.voltage_sweep(station, out, plan, metadata, args.restart)
@@ -353,7 +412,7 @@ def _figure_output(args, log: Path):
     The figure may replace only a file tactile wrote there (the folder's record of its outputs,
     :mod:`workflow.pipeline.outputs`) unless ``--force``; it may be neither the log, nor its resonance log.
     """
-    if args.procedure not in ("scan", "render"):
+    if args.procedure not in ("scan", "render", "hold"):
         yield None
         return
     from matplotlib.backend_bases import FigureCanvasBase
@@ -406,6 +465,44 @@ def _render(args, station, metadata: dict, out: Path, frequency: float):
                              {**metadata, **describe_texture(texture, motion)}, args.restart)
 
 
+def _hold(args, station, metadata: dict, out: Path, frequency: float):
+    """Hold the target of --velocity-m-s or --deflection-um (default: the plate's working deflection) from ``frequency``."""
+    from instruments.drivers.lockin import settle_time
+    from instruments.procedures.hold import HoldPlan, hold
+    from instruments.procedures.readout import DEFAULT_FILTER_POLES, SETTLE_TOLERANCE
+    from workflow.damping.laws import ConstantQ
+    from workflow.models import analytical
+    from workflow.models.materials import DESIGN_VOLTAGE
+    from workflow.models.plate import ORIGINAL_PLATE
+
+    built = built_plate_from_args(args)
+    plate = built.plate() if built else ORIGINAL_PLATE
+    if args.velocity_m_s is not None:
+        velocity = args.velocity_m_s
+    else:
+        deflection = (args.deflection_um * 1e-6 if args.deflection_um is not None
+                      else PLATE_Q * float(analytical.deflection_per_volt_per_q(plate)) * DESIGN_VOLTAGE)
+        velocity = 2 * math.pi * frequency * deflection
+    damping = load_damping(args)
+    law = ConstantQ(args.q) if damping is None else damping.median_law()
+    period = settle_time(station.readout.time_constant, DEFAULT_FILTER_POLES, SETTLE_TOLERANCE)
+    if args.interval_s < period:
+        raise TactileError(f"--interval-s {args.interval_s:g} is shorter than the loop period {period:.3g} s "
+                           "(the lock-in's settling at --time-constant)")
+    plan = HoldPlan(frequency, velocity, args.duration_s, args.interval_s, law, not args.open_loop, args.start_voltage)
+    return hold(station, out, plan, metadata, args.restart)
+
+
+def _hold_figure(result, path: Path) -> dict:
+    """The hold's figure (velocity, frequency, drive and temperature against time) at ``path``, drawn again only
+    when the hold measured something (a rerun with nothing left to hold keeps it)."""
+    from workflow.pipeline.hold_logs import hold_figure_file
+
+    if not result.measured and path.exists():
+        return {"figure": str(path)}
+    return hold_figure_file([result.path], path)
+
+
 def _render_comparison(log: Path, path: Path) -> dict:
     """Compare a render log's captures with the wanted and predicted envelopes; the side-by-side figure at ``path``."""
     from workflow.pipeline.render_logs import comparison_figure_file
@@ -449,6 +546,16 @@ def _print_summary(procedure: str, summary: dict) -> None:
                        f"{c['wanted_contrast'][0]:.3f})" if c.get("contrast") else ""
             print(f"  {name}: envelope error {c['error']:.1%} measured, {c['predicted_error']:.1%} predicted; "
                   f"measured - predicted {c['model_error']:.1%}; {times or 'no step'}{contrast}")
+        print(f"  figure: {summary['figure']}")
+    elif procedure == "hold":
+        loop = "closed" if summary["closed_loop"] else "open"
+        print(f"  {loop} loop, target {summary['target_velocity_m_s']:.4g} m/s: {summary['samples']} samples, the last "
+              f"{summary['final_velocity_error']:+.2%} off the target")
+        if "max_velocity_error" in summary:
+            low, high = summary["frequency_range_hz"]
+            print(f"  from sample {summary['held_from_sample']}: velocity within {summary['max_velocity_error']:.2%} "
+                  f"(rms {summary['rms_velocity_error']:.2%}); frequency {low:.1f} to {high:.1f} Hz; drive "
+                  f"{summary['drive_range_v'][0]:.2f} to {summary['drive_range_v'][1]:.2f} V")
         print(f"  figure: {summary['figure']}")
     elif procedure == "scan":
         print(f"  {summary['points']} points at {summary['frequency_hz']:.1f} Hz, {summary['voltage_v']:g} V: largest "

@@ -333,6 +333,8 @@ def add_bench_arguments(parser) -> None:
     group.add_argument("--garble-rate", type=float, default=0.0, help="probability of a garbled reply (default 0)")
     group.add_argument("--disconnect-at", type=int, default=None, metavar="N",
                        help="cut the line at the N-th command (once; default never)")
+    group.add_argument("--faulty", choices=("generator", "vibrometer", "lockin"), default=None,
+                       help="drop and garble the replies of this instrument only (default: of all)")
     group.add_argument("--bench-limit", type=bounded(float, *LIMITS["simulator.ceramic_voltage_limit_v"], "V"),
                        default=None, metavar="VOLTS",
                        help="the simulated generator's own limit, peak volts across the ceramics, "
@@ -340,6 +342,11 @@ def add_bench_arguments(parser) -> None:
     group.add_argument("--softening", type=bounded(float, *LIMITS["softening_s2_m2"], "s^2/m^2"), default=0.0,
                        metavar="KAPPA", help="amplitude softening of the simulated resonance, f_r (1 - KAPPA v^2) with v "
                        f"the antinode velocity, {limit_text('softening_s2_m2', 's^2/m^2')} (default 0: none)")
+    group.add_argument("--no-heating", action="store_true",
+                       help="the simulated plate does not warm with the power it dissipates (default: it does)")
+    group.add_argument("--thermal-factor", type=bounded(float, 0.0, 100.0), default=1.0, metavar="K",
+                       help="multiply the simulated plate's frequency coefficient (-1.75e-4 /K, CuBe) by K: a stress "
+                       "case of the hold, 0 to 100 (default 1)")
     group.add_argument("--point-mm", type=_point, default=(0.0, 0.0), metavar="X,Y",
                        help="where the simulated vibrometer points on the paper's plate, from its centre [mm] (default "
                        "0,0: an antinode; a built plate's spot is moved by its scanner instead)")
@@ -460,7 +467,8 @@ def bench_settings(args):
     from instruments.simulator.bench import built_bench_settings
 
     try:
-        faults = FaultSettings(args.drop_rate, args.garble_rate, args.disconnect_at, seed=args.seed)
+        faults = FaultSettings(args.drop_rate, args.garble_rate, args.disconnect_at, seed=args.seed,
+                               instruments=None if args.faulty is None else (args.faulty,))
     except ValueError as error:
         raise TactileError(f"bad fault flag: {error}") from None
     limit = DEFAULT_CERAMIC_VOLTAGE_LIMIT if args.bench_limit is None else args.bench_limit
@@ -471,7 +479,7 @@ def bench_settings(args):
         if args.point_mm != (0.0, 0.0):
             raise TactileError("--point-mm points the paper's plate; a built plate's spot is moved by its scanner "
                                "('tactile measure scan --points')")
-        return built_bench_settings(built_plate_model(args, built, deviations_from_args(args)), **fields)
+        return _heated(built_bench_settings(built_plate_model(args, built, deviations_from_args(args)), **fields), args)
     point = tuple(value * MM for value in args.point_mm)
     off = point_problem(ORIGINAL_PLATE, *point)
     if off:
@@ -481,7 +489,16 @@ def bench_settings(args):
         settings.mode_factor()
     except ValueError as error:
         raise TactileError(f"--point-mm {args.point_mm[0]:g},{args.point_mm[1]:g}: {error}") from None
-    return settings
+    return _heated(settings, args)
+
+
+def _heated(settings, args):
+    """``settings`` with the plate's heating of --no-heating and --thermal-factor."""
+    from dataclasses import replace
+
+    thermal = settings.response.thermal
+    thermal = None if args.no_heating or thermal is None else thermal.scaled(args.thermal_factor)
+    return replace(settings, response=replace(settings.response, thermal=thermal))
 
 
 # Stop signals as an exception, so that a command's cleanup (the bench's output off) runs on each.

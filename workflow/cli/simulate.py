@@ -19,8 +19,8 @@ from workflow.units import KHZ, PM_PER_V
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
         "simulate",
-        help="run the bench simulator (generator + vibrometer over one simulated plate)",
-        description="Serve the simulated generator and vibrometer on pseudo-terminals (--pty), or print the "
+        help="run the bench simulator (generator, vibrometer controller and lock-in over one simulated plate)",
+        description="Serve the simulated generator, vibrometer controller and lock-in on pseudo-terminals (--pty), or print the "
         "simulated plate's physics (resonance, Q(v) law, working point). Protocols: docs/instruments.md.",
     )
     parser.add_argument("--pty", action="store_true",

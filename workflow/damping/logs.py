@@ -320,6 +320,9 @@ def read_table(path, required: tuple = logformat.REQUIRED_COLUMNS, phase: bool =
         if logformat.RENDER_TIME in header:
             raise InputFileError(f"{path}: a render log ('tactile measure render': a texture played and its envelope), "
                                  "not sweeps or ring-downs; it holds no damping campaign")
+        if logformat.HOLD_TIME in header:
+            raise InputFileError(f"{path}: a hold log ('tactile measure hold': the plate held at resonance), not sweeps "
+                                 "or ring-downs; it holds no damping campaign")
         columns = _column_indices(path, header_number, header, required, phase)
         table = {name: array("d") for name in columns}
         line_numbers, rows, dropouts = array("q"), 0, 0

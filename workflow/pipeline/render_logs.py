@@ -6,7 +6,6 @@ each playback's captured envelope with the wanted and predicted ones (:mod:`work
 :func:`comparison_figure_file` draws them side by side.
 """
 
-import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -14,6 +13,8 @@ import numpy as np
 
 from instruments.drivers.amplifier import PowerAmplifier
 from instruments.drivers.arbitrary import MAX_POINTS, drive_of_codes
+from instruments.drivers.lockin import capture_interval
+from instruments.procedures.capture import CaptureWindow
 from instruments.procedures.logwriter import read_log
 from instruments.procedures.render import Playback, RenderPlan, render_playback
 from workflow import logformat
@@ -29,13 +30,14 @@ from workflow.units import MM
 PLAYBACKS = ("plain", "precompensated")
 """The drives ``tactile measure render`` plays, in this order (playback ids 0 and 1)."""
 RECORD_SAMPLES = 256
-"""Envelope samples captured per playback (the vibrometer record's most) [-]."""
+"""Envelope samples captured per playback (the most a ring-down keeps too) [-]."""
 
 
 def record_times(loop: float, loops: float, samples: int = RECORD_SAMPLES) -> tuple:
-    """(interval [s], whole microseconds, at least 1) and the capture times covering ``loops`` loops of ``loop`` [s]."""
-    interval = max(1, math.ceil(loops * loop * 1e6 / samples)) * 1e-6
-    return interval, interval * np.arange(samples)
+    """(interval [s], the lock-in's shortest capture interval covering ``loops`` loops of ``loop`` [s]) and the capture
+    times (:class:`~instruments.procedures.capture.CaptureWindow`)."""
+    interval = capture_interval(loops * loop / samples, at_least=True)
+    return interval, CaptureWindow.after(interval, 0.0, samples).times()
 
 
 def render_plan(rendering, texture, motion, amplifier: PowerAmplifier, loops: float, settle: float) -> RenderPlan:

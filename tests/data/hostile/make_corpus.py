@@ -14,14 +14,17 @@ KEY_REWRITES = {
     "frequency_hz": lambda text: f"{float(text):.12e}",
     "drive_voltage_v": lambda text: f"{float(text):.3f}",
     "sweep": lambda text: f"{int(text)}.0",
-    "decay_time_s": lambda text: f"{float(text):.8f}",
+    "decay_time_s": lambda text: f"{float(text):.10e}",
     "x_mm": lambda text: "-0" if float(text) == 0 else f"{float(text):g}",
     "y_mm": lambda text: f"{float(text):g}",
+    "hold_time_s": lambda text: f"{float(text):.3f}",
 }
 """A spreadsheet's rewriting of the key columns: the same values, other digits (5 -> 5.000, -43.0000 -> -43, 0 -> -0)."""
 PLAN_KEYS = {"resonance": "plan_coarse_points", "campaign": "plan_center_frequency", "voltage-sweep": "plan_frequency",
-             "ringdown": "plan_frequency", "scan": "plan_frequency"}
+             "ringdown": "plan_frequency", "scan": "plan_frequency", "hold": "plan_target_velocity"}
 """The plan metadata item each procedure's ``plan_edited.csv`` spoils."""
+FOREIGN_COLUMNS = {"hold": "hold_time_s"}
+"""The key column ``foreign_row.csv`` moves by 0.5 (the frequency, except in a hold, where it is measured)."""
 
 
 def split(text: str) -> tuple[list, list, list]:
@@ -42,8 +45,8 @@ def edits(procedure: str, text: str) -> dict:
     reformatted = [[KEY_REWRITES[name](cell) if name in KEY_REWRITES else cell for name, cell in zip(header, row)]
                    for row in rows]
     first = [row for row in rows if row[column["sweep"]] == rows[0][column["sweep"]]]
-    foreign = [list(row) for row in rows]
-    foreign[1][column["frequency_hz"]] = str(float(rows[1][column["frequency_hz"]]) + 0.5)
+    foreign, moved = [list(row) for row in rows], column[FOREIGN_COLUMNS.get(procedure, "frequency_hz")]
+    foreign[1][moved] = str(float(rows[1][moved]) + 0.5)
     cut = [list(row) for row in rows]
     cut[2] = cut[2][:2]
     not_integer, unplanned = [list(row) for row in rows], [list(row) for row in rows]

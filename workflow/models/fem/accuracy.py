@@ -40,7 +40,7 @@ ELEMENTS_PER_GAP = 2
 """Elements along x across each gap between ceramics [-]."""
 GRADING = 0.85
 """Grading of the elements towards the ceramic ends: end element (1-c)/(1+c) of the mean [-]."""
-WIDTH_ELEMENT_RATIO = 2.5
+WIDTH_ELEMENT_RATIO = 2.0
 """Element length across the width over the mean element length along a ceramic [-]."""
 RICHARDSON_RATE = 2.0
 """Assumed convergence rate p of the frequency and deflection in the degree [-]: below the lowest observed, 2.15 on a
