@@ -16,7 +16,7 @@ third plates whose measured resonance falls inside the 90 % predictive band and 
 ((p95 - p05) / p50), with the posterior-predictive check of the calibration plates (``Calibration.check``).
 One JSON line per campaign on stderr, the summary as one JSON object on the last line of stdout.
 
-    nice python bench/bench_calibration_coverage.py [--campaigns 20] [--seed 2029] [--accuracy 0.002]
+    nice python bench/bench_calibration_coverage.py [--campaigns 20] [--seed 2029] [--accuracy 0.002] [--no-discrepancy]
 """
 
 import argparse
@@ -24,7 +24,7 @@ import json
 import sys
 import tempfile
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -124,8 +124,10 @@ def measure(model, folder: Path, label: str, seed: int):
     return measured_plate(read_built_plate(path))
 
 
-def study(n: int, seed: int, accuracy: float, sim_accuracy: float) -> dict:
+def study(n: int, seed: int, accuracy: float, sim_accuracy: float, discrepancy: bool = True) -> dict:
     settings = load_settings()
+    if not discrepancy:
+        settings = replace(settings, frequency_discrepancy=0.0, deflection_discrepancy=0.0)
     cache = EvaluationCache()
     fem = {"q": materials.PLATE_Q, "voltage_v": materials.DESIGN_VOLTAGE, "accuracy": accuracy, "piezo": "eigenstrain"}
     model = FemModel(q=fem["q"], voltage=fem["voltage_v"], settings=FemAccuracy(target=accuracy), cache=cache)
@@ -180,6 +182,7 @@ def study(n: int, seed: int, accuracy: float, sim_accuracy: float) -> dict:
         "inside_when_flagged": float(np.mean([r["inside"] for r in records if not r["check"]["passed"]] or [np.nan])),
         "accuracy": accuracy,
         "sim_accuracy": sim_accuracy,
+        "discrepancy_scales": [float(x) for x in settings.discrepancy_scales],
         "surrogate_seconds": surrogate_seconds,
         "wall_s": time.perf_counter() - started,
     }
@@ -193,8 +196,10 @@ def main(argv=None) -> dict:
                         help=f"FEM accuracy of the calibration's surrogates (default {DEFAULT_ACCURACY:g}, tactile calibrate's)")
     parser.add_argument("--sim-accuracy", type=float, default=DEFAULT_ACCURACY,
                         help=f"FEM accuracy of the simulated built plates (default {DEFAULT_ACCURACY:g}, the simulator's)")
+    parser.add_argument("--no-discrepancy", action="store_true",
+                        help="calibrate without the model-discrepancy terms (their scales 0: the calibration before issue 29)")
     args = parser.parse_args(argv)
-    result = {"seed": args.seed, **study(args.campaigns, args.seed, args.accuracy, args.sim_accuracy)}
+    result = {"seed": args.seed, **study(args.campaigns, args.seed, args.accuracy, args.sim_accuracy, not args.no_discrepancy)}
     print(json.dumps(result))
     return result
 

@@ -17,7 +17,8 @@ velocities where the true Q lies inside the answer's 90 % band (``fit.json``'s `
 of (p95 - p05) / p50 over them.  One JSON line per truth on stderr as they finish, the summary as one JSON
 object on the last line of stdout.
 
-    nice python bench/bench_damping_coverage.py [--truths 40] [--seed 2029] [--workers 2]
+    nice python bench/bench_damping_coverage.py [--truths 40] [--seed 2029] [--workers 2] 2> records.log
+    python bench/bench_damping_coverage.py --records records.log   # the summary of the truths a run finished
 """
 
 import argparse
@@ -176,9 +177,13 @@ def study_truth(truth: Truth, max_steps: int = 20000) -> dict:
         "sampled": sorted(fit.fits),
         "warning": summary["warning"],
         "forward_model": summary["forward_model"],
+        "effects": summary.get("effects"),
+        "shares": summary.get("shares"),
         "kappa": parameters.get("kappa"),
         "drift": parameters.get("drift_rate"),
         "fit_seconds": seconds,
+        "band": {"v_m_s": velocity.tolist(), "q_p05": low.tolist(), "q_p50": mid.tolist(), "q_p95": high.tolist(),
+                 "q_true": true_q.tolist()},
     }
 
 
@@ -190,9 +195,16 @@ def summarise(records: list) -> dict:
 
     def effect(name, truth_key):
         carried = [r for r in records if r[truth_key]]
+        absent = [r for r in records if not r[truth_key]]
+
+        def detected(chosen):
+            return sum(bool((r.get("effects") or {}).get(name, {}).get("detected")) for r in chosen)
+
         return {"campaigns_carrying_it": len(carried),
                 "fitted_when_carried": sum(bool(r["forward_model"][name]) for r in carried),
-                "fitted_when_absent": sum(bool(r["forward_model"][name]) for r in records if not r[truth_key])}
+                "fitted_when_absent": sum(bool(r["forward_model"][name]) for r in absent),
+                "detected_when_carried": detected(carried),
+                "detected_when_absent": detected(absent)}
 
     return {
         "campaigns": len(records),
@@ -220,14 +232,19 @@ def main(argv=None) -> dict:
     parser.add_argument("--seed", type=int, default=2029, help="seed of the truths and their campaigns (default 2029)")
     parser.add_argument("--workers", type=int, default=1, help="campaigns fitted side by side (default 1)")
     parser.add_argument("--max-steps", type=int, default=20000, help="cap on each chain (default 20000)")
+    parser.add_argument("--records", type=Path, metavar="LOG",
+                        help="summarise the per-truth JSON lines of an earlier run (its stderr) instead of fitting")
     args = parser.parse_args(argv)
     start = time.perf_counter()
-    records = []
-    with ProcessPoolExecutor(max_workers=args.workers) as pool:
-        futures = [pool.submit(study_truth, truth, args.max_steps) for truth in truths(args.truths, args.seed)]
-        for future in as_completed(futures):
-            records.append(future.result())
-            print(json.dumps(records[-1]), file=sys.stderr, flush=True)
+    if args.records:
+        records = [json.loads(line) for line in args.records.read_text().splitlines() if line.startswith('{"truth"')]
+    else:
+        records = []
+        with ProcessPoolExecutor(max_workers=args.workers) as pool:
+            futures = [pool.submit(study_truth, truth, args.max_steps) for truth in truths(args.truths, args.seed)]
+            for future in as_completed(futures):
+                records.append(future.result())
+                print(json.dumps(records[-1]), file=sys.stderr, flush=True)
     records.sort(key=lambda r: r["truth"])
     result = {"seed": args.seed, **summarise(records), "wall_s": time.perf_counter() - start,
               "coverage_by_truth": [round(r["coverage"], 3) for r in records]}
