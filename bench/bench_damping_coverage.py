@@ -226,6 +226,51 @@ def summarise(records: list) -> dict:
     }
 
 
+def coverage_figure(records: list, before: list, examples: int = 4):
+    """Top: each truth's coverage and band width, after (``records``) and before (``before``, may be empty), with the
+    goals; bottom: the band against the truth of the ``examples`` truths with the lowest coverage."""
+    import matplotlib.pyplot as plt
+
+    shown = sorted(records, key=lambda r: r["coverage"])[:examples]
+    figure, axes = plt.subplot_mosaic([["coverage"] * examples, ["width"] * examples, [f"band{k}" for k in range(examples)]],
+                                      figsize=(12, 9.5), height_ratios=(1, 0.7, 1), layout="constrained")
+    markers = {"power": "o", "threshold": "s", "spline": "^"}
+    for label, chosen, colour, shift in (("before (main)", before, "tab:grey", -0.15), ("after", records, "tab:blue", 0.15)):
+        for kind, marker in markers.items():
+            own = [r for r in chosen if r["kind"] == kind]
+            if own:
+                index = np.array([r["truth"] for r in own]) + shift
+                axes["coverage"].plot(index, [100 * r["coverage"] for r in own], marker, color=colour, ls="none",
+                                      label=f"{label}: {kind}")
+                axes["width"].plot(index, [100 * r["width"] for r in own], marker, color=colour, ls="none")
+    goals = CAMPAIGN_GOALS
+    axes["coverage"].axhline(100 * goals["campaign_coverage"], color="tab:red", ls="--", lw=1,
+                             label="70 %: 9 campaigns in 10 at or above")
+    axes["coverage"].axhline(90, color="k", ls=":", lw=1, label="nominal 90 %")
+    axes["coverage"].set(ylabel="truth inside the 90 % band\n[% of velocities]", ylim=(-3, 103))
+    axes["coverage"].legend(fontsize=7, ncol=4, loc="lower left")
+    axes["width"].axhline(100 * goals["median_width"], color="tab:red", ls="--", lw=1)
+    axes["width"].set(ylabel="median band width\n(p95 - p05) / p50 [%]", xlabel="hidden truth", yscale="log")
+    for k, r in enumerate(shown):
+        ax, band = axes[f"band{k}"], r["band"]
+        v = np.asarray(band["v_m_s"])
+        ax.fill_between(v, band["q_p05"], band["q_p95"], color="tab:blue", alpha=0.3, label="90 % band")
+        ax.plot(v, band["q_p50"], color="tab:blue", lw=1, label="median")
+        ax.plot(v, band["q_true"], "k--", lw=1.2, label="hidden truth")
+        effects = "+".join(name for name, key in (("softening", "softening"), ("drift", "drift_rate")) if r[key])
+        ax.set(title=f"truth {r['truth']}: {r['kind']}{' + ' + effects if effects else ''}\n"
+               f"coverage {100 * r['coverage']:.0f} %, width {100 * r['width']:.1f} %", xlabel="v [m/s]")
+        ax.title.set_fontsize(8)
+    axes["band0"].set_ylabel("Q")
+    axes["band0"].legend(fontsize=7)
+    return figure
+
+
+def read_records(path: Path) -> list:
+    """The per-truth JSON lines of a run's stderr."""
+    return [json.loads(line) for line in path.read_text().splitlines() if line.startswith('{"truth"')]
+
+
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--truths", type=int, default=40, help="hidden truths (default 40)")
@@ -234,10 +279,14 @@ def main(argv=None) -> dict:
     parser.add_argument("--max-steps", type=int, default=20000, help="cap on each chain (default 20000)")
     parser.add_argument("--records", type=Path, metavar="LOG",
                         help="summarise the per-truth JSON lines of an earlier run (its stderr) instead of fitting")
+    parser.add_argument("--figure", type=Path, metavar="PNG", help="draw the study's figure from --records")
+    parser.add_argument("--before", type=Path, metavar="LOG", help="with --figure: the records of the fit before")
     args = parser.parse_args(argv)
     start = time.perf_counter()
     if args.records:
-        records = [json.loads(line) for line in args.records.read_text().splitlines() if line.startswith('{"truth"')]
+        records = read_records(args.records)
+        if args.figure:
+            coverage_figure(records, read_records(args.before) if args.before else []).savefig(args.figure, dpi=100)
     else:
         records = []
         with ProcessPoolExecutor(max_workers=args.workers) as pool:

@@ -170,6 +170,7 @@ class Calibration:
             "diagnostics": self.diagnostics.to_dict(),
             "fem": dict(self.fem),
             "discrepancy": {"names": list(DISCREPANCIES), "samples": self.discrepancy.tolist()},
+            "intervals": interval_contents(self.settings),
         }
 
     @classmethod
@@ -208,6 +209,29 @@ class Calibration:
         if discrepancy is None:
             settings = replace(settings, frequency_discrepancy=0.0, deflection_discrepancy=0.0)
         return cls(settings, samples, plates, surrogates, diagnostics, fem, discrepancy)
+
+
+def interval_contents(settings: CalibrationSettings) -> dict:
+    """What a prediction's 90 % band (:func:`predict`) contains and what it does not (issue 29), in words; written into
+    ``calibration.json`` beside the samples (read back: ignored, it follows from the settings)."""
+    discrepancy = settings.frequency_discrepancy > 0 or settings.deflection_discrepancy > 0
+    return {
+        "contains": [
+            "the posterior of the parameters " + ", ".join(settings.names) + " given the calibration plates' measurements "
+            "and their noise",
+            "the surrogate's error (leave-one-out) and the FEM's discretisation error",
+            (f"the model discrepancy: how far a built plate may differ from the FEM at any value of the parameters "
+             f"(prior scales {100 * settings.frequency_discrepancy:g} % in f_r, {100 * settings.deflection_discrepancy:g} % "
+             "in the deflection; the plates raise it when the parameters cannot represent them)") if discrepancy else
+            "no model discrepancy (switched off in the settings): only deviations the parameters span",
+        ],
+        "does_not_contain": [
+            "manufacturing scatter of a new plate about the calibration plates' (the robust design adds it: its tolerances)",
+            "the measurement noise of the new plate's own resonance search",
+            "a plate built elsewhere, of other materials or by another process than the calibration plates",
+            "Q(v): the predictions are at constant Q (the fit of Q(v) has its own band)",
+        ],
+    }
 
 
 FEM_KEYS = {"q": "q", "voltage_v": "design.voltage_v", "accuracy": "fem_accuracy"}

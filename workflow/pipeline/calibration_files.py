@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from workflow.calibration.calibration import Calibration, MeasuredPlate, measured_plate, predict
+from workflow.calibration.calibration import Calibration, MeasuredPlate, interval_contents, measured_plate, predict
 from workflow.calibration.logs import read_built_plate
 from workflow.calibration.measurements import scan_shape
 from workflow.calibration.parameters import CalibrationSettings
@@ -140,6 +140,8 @@ def calibration_summary(calibration: Calibration, nominal_frequencies, files: di
         "diagnostics": calibration.diagnostics.to_dict(),
         "identifiability": calibration.identifiability(),
         "at_prior_bound": calibration.at_prior_bounds(),
+        "check": calibration.check(),
+        "intervals": interval_contents(calibration.settings),
         "fem_evaluations": calibration.evaluations + len(calibration.plates),
         "fem_surface_evaluations": sum(s.evaluations for s in calibration.surrogates if s.shape is not None),
         "wall_time_s": seconds,
