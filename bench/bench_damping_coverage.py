@@ -142,8 +142,14 @@ def truths(n: int, seed: int) -> list:
     return [draw_truth(k, rng) for k in range(n)]
 
 
-def study_truth(truth: Truth, max_steps: int = 20000) -> dict:
-    """Simulate the truth's campaign on the bench, fit it with the default options, and measure the band."""
+LAW_DRAWS = 1000
+"""Draws of Q(v) per sampled law kept with ``--draws`` (to weigh other answer rules on the same fits) [-]."""
+
+
+def study_truth(truth: Truth, max_steps: int = 20000, draws: Path | None = None) -> dict:
+    """Simulate the truth's campaign on the bench, fit it with the default options, and measure the band; with
+    ``draws`` (a folder), keep :data:`LAW_DRAWS` draws of each sampled law's Q on the band's velocities and the
+    comparison in ``truthNN.npz``."""
     settings = default_bench_settings(law=truth.law, drift_rate=truth.drift_rate, softening=truth.softening,
                                       seed=truth.seed)
     with tempfile.TemporaryDirectory() as folder:
@@ -159,6 +165,15 @@ def study_truth(truth: Truth, max_steps: int = 20000) -> dict:
     velocity = np.asarray(band["v_m_s"])
     low, mid, high = (np.asarray(band[key]) for key in ("q_p05", "q_p50", "q_p95"))
     true_q = truth.law.quality_factor(velocity)
+    if draws is not None:
+        rng = np.random.default_rng(0)
+        arrays = {"velocity": velocity, "truth": true_q}
+        for name, law_fit in fit.fits.items():
+            q = law_fit.laws().quality_factor(velocity[None, :])
+            arrays[f"q_{name}"] = q[rng.choice(len(q), size=min(LAW_DRAWS, len(q)), replace=False)].astype(np.float32)
+        comparison = {"loo": fit.comparison.laws, "close": list(fit.comparison.close),
+                      "passed": {name: c.passed for name, c in fit.checks.items()}, "preferred": fit.preferred}
+        np.savez(draws / f"truth{truth.index:02d}.npz", comparison=json.dumps(comparison), **arrays)
     inside = (true_q >= low) & (true_q <= high)
     parameters = summary["parameters"]
     return {
@@ -279,6 +294,8 @@ def main(argv=None) -> dict:
     parser.add_argument("--max-steps", type=int, default=20000, help="cap on each chain (default 20000)")
     parser.add_argument("--records", type=Path, metavar="LOG",
                         help="summarise the per-truth JSON lines of an earlier run (its stderr) instead of fitting")
+    parser.add_argument("--draws", type=Path, metavar="DIR",
+                        help="keep each sampled law's draws of Q(v) and the comparison per truth in DIR (truthNN.npz)")
     parser.add_argument("--figure", type=Path, metavar="PNG", help="draw the study's figure from --records")
     parser.add_argument("--before", type=Path, metavar="LOG", help="with --figure: the records of the fit before")
     args = parser.parse_args(argv)
@@ -288,9 +305,11 @@ def main(argv=None) -> dict:
         if args.figure:
             coverage_figure(records, read_records(args.before) if args.before else []).savefig(args.figure, dpi=100)
     else:
+        if args.draws:
+            args.draws.mkdir(parents=True, exist_ok=True)
         records = []
         with ProcessPoolExecutor(max_workers=args.workers) as pool:
-            futures = [pool.submit(study_truth, truth, args.max_steps) for truth in truths(args.truths, args.seed)]
+            futures = [pool.submit(study_truth, truth, args.max_steps, args.draws) for truth in truths(args.truths, args.seed)]
             for future in as_completed(futures):
                 records.append(future.result())
                 print(json.dumps(records[-1]), file=sys.stderr, flush=True)
