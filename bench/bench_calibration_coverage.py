@@ -34,7 +34,7 @@ from instruments.procedures.sweeps import ResonancePlan, resonance_search
 from instruments.simulator.bench import built_bench_settings
 from workflow.calibration.calibration import calibrate, measured_plate, nominal_theta, predict, prior_surrogates
 from workflow.calibration.logs import read_built_plate
-from workflow.calibration.parameters import load_settings
+from workflow.calibration.parameters import CalibrationSettings, load_settings
 from workflow.execution.cache import EvaluationCache
 from workflow.execution.parallel import map_evaluations
 from workflow.models import materials
@@ -109,9 +109,10 @@ def campaigns(n: int, seed: int) -> list:
 
 
 def simulated_plate(task: tuple):
-    """The simulator's model of one built plate (FEM of the plate as built, cached): (design name, deviations, accuracy)."""
-    name, deviations, accuracy = task
-    return built_plate_model(design(name), deviations, FemAccuracy(target=accuracy), EvaluationCache())
+    """The simulator's model of one built plate (FEM of the plate as built, cached): (design name, deviations, FEM
+    settings)."""
+    name, deviations, fem_settings = task
+    return built_plate_model(design(name), deviations, fem_settings, EvaluationCache())
 
 
 def measure(model, folder: Path, label: str, seed: int):
@@ -124,18 +125,23 @@ def measure(model, folder: Path, label: str, seed: int):
     return measured_plate(read_built_plate(path))
 
 
-def study(n: int, seed: int, accuracy: float, sim_accuracy: float, discrepancy: bool = True) -> dict:
-    settings = load_settings()
+def study(n: int, seed: int, fem_settings, sim_settings, settings: CalibrationSettings | None = None,
+          discrepancy: bool = True) -> dict:
+    """The study over ``n`` campaigns (see the module): the calibration's surrogates on ``fem_settings``, the simulated
+    plates on ``sim_settings`` (each a :class:`FemAccuracy` or a fixed mesh's :class:`FemSettings`), the calibration's
+    ``settings`` (default: ``tactile calibrate``'s), without the model-discrepancy terms unless ``discrepancy``."""
+    settings = settings or load_settings()
     if not discrepancy:
         settings = replace(settings, frequency_discrepancy=0.0, deflection_discrepancy=0.0)
     cache = EvaluationCache()
-    fem = {"q": materials.PLATE_Q, "voltage_v": materials.DESIGN_VOLTAGE, "accuracy": accuracy, "piezo": "eigenstrain"}
-    model = FemModel(q=fem["q"], voltage=fem["voltage_v"], settings=FemAccuracy(target=accuracy), cache=cache)
+    accuracy = getattr(fem_settings, "target", None)
+    fem = {"q": materials.PLATE_Q, "voltage_v": materials.DESIGN_VOLTAGE, "accuracy": accuracy or 0.01, "piezo": "eigenstrain"}
+    model = FemModel(q=fem["q"], voltage=fem["voltage_v"], settings=fem_settings, cache=cache)
     drawn = campaigns(n, seed)
     started = time.perf_counter()
     surrogates = dict(zip(DESIGNS, prior_surrogates([design(name) for name in DESIGNS], settings, model.evaluate_plates)))
     surrogate_seconds = time.perf_counter() - started
-    tasks = [(plate.design, plate.deviations, sim_accuracy) for plates in drawn for plate in plates]
+    tasks = [(plate.design, plate.deviations, sim_settings) for plates in drawn for plate in plates]
     simulated = map_evaluations(simulated_plate, tasks, progress=False)
     records = []
     with tempfile.TemporaryDirectory() as folder:
@@ -181,7 +187,7 @@ def study(n: int, seed: int, accuracy: float, sim_accuracy: float, discrepancy: 
         "check_flagged": [r["campaign"] for r in records if not r["check"]["passed"]],
         "inside_when_flagged": float(np.mean([r["inside"] for r in records if not r["check"]["passed"]] or [np.nan])),
         "accuracy": accuracy,
-        "sim_accuracy": sim_accuracy,
+        "sim_accuracy": getattr(sim_settings, "target", None),
         "discrepancy_scales": [float(x) for x in settings.discrepancy_scales],
         "surrogate_seconds": surrogate_seconds,
         "wall_s": time.perf_counter() - started,
@@ -199,7 +205,8 @@ def main(argv=None) -> dict:
     parser.add_argument("--no-discrepancy", action="store_true",
                         help="calibrate without the model-discrepancy terms (their scales 0: the calibration before issue 29)")
     args = parser.parse_args(argv)
-    result = {"seed": args.seed, **study(args.campaigns, args.seed, args.accuracy, args.sim_accuracy, not args.no_discrepancy)}
+    result = {"seed": args.seed, **study(args.campaigns, args.seed, FemAccuracy(target=args.accuracy),
+                                         FemAccuracy(target=args.sim_accuracy), discrepancy=not args.no_discrepancy)}
     print(json.dumps(result))
     return result
 

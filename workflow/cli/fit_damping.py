@@ -97,7 +97,8 @@ def _print_human(summary: dict) -> None:
               f"runs p {check['runs_test_combined_p']:.2g}, flexible-law likelihood ratio p "
               f"{_number(check['flexible_law_likelihood_ratio_p'])}" + "".join(f"; {note}" for note in check["notes"]))
     for name, effect in summary["effects"].items():
-        state = ("not fitted" if not effect["fitted"]
+        state = ("not fitted" + (f" ({effect['not_fitted_because']})" if "not_fitted_because" in effect else "")
+                 if not effect["fitted"]
                  else "fitted, " + ("shown by the logs" if effect["detected"] else "not resolved by the logs") + f" ({effect['rule']})")
         print(f"  {name}: {state}")
     print(f"  velocity convention: {summary['velocity_convention']}")

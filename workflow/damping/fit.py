@@ -898,8 +898,20 @@ def effects_summary(fit: DampingFit, parameters: dict) -> dict:
                       "rule": f"kappa's 5 % quantile above {SOFTENING_DETECTED:g} of its median"},
         "drift": {"fitted": forward.drift,
                   "detected": None if drift is None else bool(drift["p05"] > 0 or drift["p95"] < 0),
-                  "rule": "the drift rate's 90 % interval excludes zero"},
+                  "rule": "the drift rate's 90 % interval excludes zero",
+                  **({} if forward.drift else {"not_fitted_because": _drift_left_out(fit.log)})},
     }
+
+
+def _drift_left_out(log: CampaignLog) -> str:
+    """Why a fit did not model the drift within the sweeps (:func:`default_forward_model`)."""
+    if log.timestamp is None:
+        return "the logs have no timestamp_s"
+    if not default_forward_model(log).drift:
+        return ("every sweep runs the same way in frequency: a steady drift within a sweep stretches the resonance curve "
+                "as a change of Q does, so the logs cannot tell them apart (each sweep's resonance is free: drift between "
+                "sweeps is taken up)")
+    return "left out by the caller (--no-drift)"
 
 
 def band_contents(fit: DampingFit) -> dict:

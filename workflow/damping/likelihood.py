@@ -75,10 +75,23 @@ class ForwardModel:
 
 
 def default_forward_model(log: CampaignLog) -> ForwardModel:
-    """The effects fitted unless the caller says otherwise: softening whenever the logs have sweeps, drift whenever
-    they also have ``timestamp_s`` (issue 29: a fit that left them out blamed the law for their mark on the curves,
-    and its band missed the truth).  Each prior includes the effect's absence (kappa = 0, beta = 0)."""
-    return ForwardModel(softening=log.n_sweeps > 0, drift=log.n_sweeps > 0 and log.timestamp is not None)
+    """The effects fitted unless the caller says otherwise (issue 29: a fit that left them out blamed the law for their
+    mark on the curves, and its band missed the truth); each prior includes the effect's absence (kappa = 0, beta = 0).
+
+    Softening whenever the logs have sweeps.  Drift when the sweeps also have ``timestamp_s`` and run both up and down
+    in frequency (:func:`sweep_directions`): with every sweep one way, a steady drift within a sweep stretches each
+    resonance curve exactly as a change of Q does, so the logs cannot tell the two apart and the drift's prior would
+    only trade against Q (a synthetic campaign without drift then gave Q0 100 for a true 150); the resonance of each
+    sweep stays free, which takes up drift between sweeps."""
+    directions = set(sweep_directions(log))
+    return ForwardModel(softening=log.n_sweeps > 0,
+                        drift=log.n_sweeps > 0 and log.timestamp is not None and {-1, 1} <= directions)
+
+
+def sweep_directions(log: CampaignLog) -> tuple:
+    """Each sweep's direction in its rows' order: +1 up in frequency, -1 down, 0 a single frequency."""
+    return tuple(int(np.sign(np.median(np.diff(log.frequency[log.sweep == k])))) if np.sum(log.sweep == k) > 1 else 0
+                 for k in range(log.n_sweeps))
 
 
 Q0_RANGE = (1.0, 1e5)

@@ -177,6 +177,7 @@ def calibrated_record(calibration: Calibration, plate, evaluate, source: str) ->
         "w_dyn_um": w[1] / UM, "w_dyn_um_p05": w[0] / UM, "w_dyn_um_p95": w[2] / UM,
         "calibration": {"file": source, "surrogate_error": surrogate.log_frequency.loo_rms,
                         "fem_evaluations": surrogate.evaluations, "samples": len(calibration.samples)},
+        "intervals": interval_contents(calibration.settings),
     }
 
 
