@@ -126,10 +126,11 @@ def measure(model, folder: Path, label: str, seed: int):
 
 
 def study(n: int, seed: int, fem_settings, sim_settings, settings: CalibrationSettings | None = None,
-          discrepancy: bool = True) -> dict:
+          discrepancy: bool = True, scheduler=None) -> dict:
     """The study over ``n`` campaigns (see the module): the calibration's surrogates on ``fem_settings``, the simulated
     plates on ``sim_settings`` (each a :class:`FemAccuracy` or a fixed mesh's :class:`FemSettings`), the calibration's
-    ``settings`` (default: ``tactile calibrate``'s), without the model-discrepancy terms unless ``discrepancy``."""
+    ``settings`` (default: ``tactile calibrate``'s), without the model-discrepancy terms unless ``discrepancy``; the
+    simulated plates' FEM on ``scheduler`` (:func:`~workflow.execution.parallel.map_evaluations`: the local cores)."""
     settings = settings or load_settings()
     if not discrepancy:
         settings = replace(settings, frequency_discrepancy=0.0, deflection_discrepancy=0.0)
@@ -139,10 +140,11 @@ def study(n: int, seed: int, fem_settings, sim_settings, settings: CalibrationSe
     model = FemModel(q=fem["q"], voltage=fem["voltage_v"], settings=fem_settings, cache=cache)
     drawn = campaigns(n, seed)
     started = time.perf_counter()
-    surrogates = dict(zip(DESIGNS, prior_surrogates([design(name) for name in DESIGNS], settings, model.evaluate_plates)))
+    used = sorted({plate.design for plates in drawn for plate in plates})
+    surrogates = dict(zip(used, prior_surrogates([design(name) for name in used], settings, model.evaluate_plates)))
     surrogate_seconds = time.perf_counter() - started
     tasks = [(plate.design, plate.deviations, sim_settings) for plates in drawn for plate in plates]
-    simulated = map_evaluations(simulated_plate, tasks, progress=False)
+    simulated = map_evaluations(simulated_plate, tasks, scheduler=scheduler, progress=False)
     records = []
     with tempfile.TemporaryDirectory() as folder:
         for index, plates in enumerate(drawn):
@@ -191,6 +193,7 @@ def study(n: int, seed: int, fem_settings, sim_settings, settings: CalibrationSe
         "discrepancy_scales": [float(x) for x in settings.discrepancy_scales],
         "surrogate_seconds": surrogate_seconds,
         "wall_s": time.perf_counter() - started,
+        "records": records,
     }
 
 
@@ -207,6 +210,7 @@ def main(argv=None) -> dict:
     args = parser.parse_args(argv)
     result = {"seed": args.seed, **study(args.campaigns, args.seed, FemAccuracy(target=args.accuracy),
                                          FemAccuracy(target=args.sim_accuracy), discrepancy=not args.no_discrepancy)}
+    result.pop("records")  # on stderr as they came
     print(json.dumps(result))
     return result
 
