@@ -104,9 +104,10 @@ def log_probability(state: np.ndarray, data: CalibrationData) -> np.ndarray:
     """Log posterior of sampler states (n_walkers, n + 2) up to a constant (vectorised): the parameters [SI] and the
     logarithms of the discrepancy terms' standardised sizes u (:data:`~workflow.calibration.parameters.DISCREPANCIES`)."""
     theta, units = split_state(state, data.settings)
-    prior = data.settings.log_prior(theta) + np.sum(np.log(units) - 0.5 * units**2, axis=-1)
+    with np.errstate(over="ignore"):  # a walker far out in ln u: an infinite term, its probability -inf
+        prior = data.settings.log_prior(theta) + np.sum(np.log(units) - 0.5 * units**2, axis=-1)
+        frequency_extra, deflection_extra = np.moveaxis(np.square(units * data.settings.discrepancy_scales), -1, 0)
     inside = np.isfinite(prior)
-    frequency_extra, deflection_extra = np.moveaxis(np.square(units * data.settings.discrepancy_scales), -1, 0)
     clipped = np.clip(theta, data.settings.bounds[:, 0], data.settings.bounds[:, 1])
     predicted = np.stack([s.log_frequency(clipped) for s in data.surrogates], axis=-1)
     variance = data.sigma**2 + frequency_extra[..., None]

@@ -1,0 +1,62 @@
+"""The Q(v) answer's law uncertainty (issue 29): the threshold law's fitted onset width, the close laws mixed in
+equal shares, the effects fitted by default where the logs can show them, old posterior files still read."""
+
+import numpy as np
+import pytest
+
+from workflow.damping.comparison import LawComparison, answer_shares
+from workflow.damping.laws import StackedLaws, ThresholdLoss
+from workflow.damping.likelihood import ForwardModel, default_forward_model, sweep_directions
+from workflow.damping.posterior import DampingPosterior, load_posterior, save_posterior, stacked_posterior
+from workflow.damping.synthetic import simulate_campaign
+
+SMALL = dict(voltages=(3.0, 9.0, 15.0), points_per_sweep=20)
+
+
+def test_the_onset_width_shapes_the_threshold_and_its_old_value_is_the_default():
+    sharp, default, broad = (ThresholdLoss(150.0, 0.5, 0.1, onset) for onset in (0.05, 0.2, 1.0))
+    assert ThresholdLoss(150.0, 0.5, 0.1) == default
+    v_t = np.array([0.1])
+    excess = [law.loss(v_t)[0] - 1 / 150.0 for law in (sharp, default, broad)]
+    assert excess == pytest.approx([0.5 * (s * 0.1 * np.log(2)) ** 2 for s in (0.05, 0.2, 1.0)])
+    far = np.array([0.6])  # far above the onset every width gives the shifted quadratic
+    assert sharp.loss(far) == pytest.approx(default.loss(far), rel=1e-6)
+
+
+def test_a_posterior_file_written_before_the_onset_was_fitted_reads_with_the_old_fixed_onset(tmp_path):
+    posterior = DampingPosterior("threshold", {"q0": np.full(5, 150.0), "alpha": np.full(5, 0.5), "v_t": np.full(5, 0.1)})
+    loaded = load_posterior(save_posterior(posterior, tmp_path / "posterior.npz", np.zeros((1, 1)), ["x"]))
+    assert np.all(loaded.parameters["onset"] == 0.2)
+    stacked = stacked_posterior({"threshold": loaded, "flexible": DampingPosterior("flexible", {
+        "q0": np.full(5, 90.0), **{f"d{k}": np.zeros(5) for k in range(1, 9)}, "v_top": np.full(5, 0.2),
+        "v_first": np.full(5, 0.05)})}, {"threshold": 0.5, "flexible": 0.5}, 40, seed=0)
+    names = [name for name in stacked.parameters if name != "threshold_onset"]
+    old = DampingPosterior(StackedLaws.name, {name: stacked.parameters[name] for name in names})
+    again = load_posterior(save_posterior(old, tmp_path / "stacked.npz", np.zeros((1, 1)), ["x"]))
+    assert np.all(again.parameters["threshold_onset"] == 0.2)
+
+
+def comparison(elpd: dict, dse: dict) -> LawComparison:
+    best = max(elpd, key=elpd.get)
+    laws = {name: {"elpd_loo": value, "elpd_diff": elpd[best] - value, "dse": dse.get(name, 0.0)} for name, value in elpd.items()}
+    return LawComparison(laws, best, {name: 1.0 / len(elpd) for name in elpd})
+
+
+def test_the_answer_mixes_in_equal_shares_the_laws_the_data_do_not_tell_apart_that_pass_their_checks():
+    close = comparison({"threshold": 10.0, "flexible": 9.0, "quadratic": -40.0}, {"flexible": 2.0, "quadratic": 5.0})
+    assert close.close == ("threshold", "flexible")
+    assert answer_shares(close, {"threshold": True, "flexible": True, "quadratic": True}) == {"threshold": 0.5, "flexible": 0.5}
+    assert answer_shares(close, {"threshold": True, "flexible": False, "quadratic": True}) == {"threshold": 1.0}
+    apart = comparison({"threshold": 10.0, "flexible": 0.0}, {"flexible": 2.0})
+    assert answer_shares(apart, {"threshold": True, "flexible": True}) == {"threshold": 1.0}
+
+
+def test_softening_is_fitted_by_default_and_drift_only_where_the_sweeps_can_tell_it_from_q():
+    one_way = simulate_campaign(seed=1, **SMALL)
+    both_ways = simulate_campaign(seed=1, alternate=True, **SMALL)
+    assert sweep_directions(one_way) == (1, 1, 1) and sweep_directions(both_ways) == (1, -1, 1)
+    assert default_forward_model(one_way) == ForwardModel(softening=True, drift=False)
+    assert default_forward_model(both_ways) == ForwardModel(softening=True, drift=True)
+    untimed = simulate_campaign(seed=1, alternate=True, **SMALL)
+    untimed = type(untimed)(**{**vars(untimed), "timestamp": None})
+    assert default_forward_model(untimed) == ForwardModel(softening=True, drift=False)
