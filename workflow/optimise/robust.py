@@ -17,7 +17,7 @@ For each stock resonator thickness h_i (docs/calibration.md, "Robust design"):
 The candidate with the largest median deflection whose modes are separated is the optimum.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
@@ -116,12 +116,6 @@ class RobustCandidate:
         FEM evaluations for this candidate [-].
     lambda_at_edge : bool
         The solved lambda sits at the edge of the surrogate's box (the result is then an extrapolation).
-    result : FemResult
-        The FEM of the design at the posterior median (modes, deflection per unit Q).
-    deflection_ratios : numpy.ndarray
-        Draws of w over its median under posterior and scatter [-] (:class:`AchievedSpread`).
-    surrogate : RobustSurrogate
-        The surrogate the design was solved on (to weigh the design under another calibration).
     """
 
     plate: Plate
@@ -137,9 +131,6 @@ class RobustCandidate:
     surrogate_error: float
     evaluations: int
     lambda_at_edge: bool
-    result: object = field(repr=False, default=None)
-    deflection_ratios: np.ndarray = field(repr=False, default=None)
-    surrogate: "RobustSurrogate" = field(repr=False, default=None)
 
 
 @dataclass(frozen=True)
@@ -282,76 +273,32 @@ def robust_candidate(calibration: Calibration, plate: Plate, settings: RobustSet
     low, high = surrogate.bounds[0]
     too_low, too_high = shortfall(low) < 0, shortfall(high) > 0
     log_lambda = low if too_low else high if too_high else brentq(shortfall, low, high, xtol=1e-8)
+    check = scattered_draws(calibration, plate, settings.tolerances, CHECK_DRAWS, settings.seed + 1)
+    log_f, log_w = surrogate.sample(log_lambda, check, settings.seed + 1)
+    frequencies, deflections = np.exp(log_f), np.exp(log_w)
+    probability = float(np.mean(frequencies >= settings.min_frequency))
     design = plate.with_(wavelength=float(np.exp(log_lambda)))
-    achieved = achieved_spread(surrogate, calibration, design, settings)
     median = deviated_plate(design, robust_inputs(calibration), np.median(posterior_columns(calibration, plate), axis=0))
     (result,) = evaluate([median])
     nearest, separated = mode_separation(result, settings)
     probes = np.abs(result.probe_model.response(result.frequency, q))
     return RobustCandidate(
         plate=design,
-        frequency=achieved.frequency,
-        deflection=achieved.deflection,
-        probability=achieved.probability,
-        probability_error=achieved.probability_error,
+        frequency=tuple(float(x) for x in np.percentile(frequencies, [5, 50, 95])),
+        deflection=tuple(float(x) for x in np.percentile(deflections, [5, 50, 95])),
+        probability=probability,
+        probability_error=float(np.sqrt(probability * (1 - probability) / CHECK_DRAWS)),
         draws=CHECK_DRAWS,
-        margin=achieved.margin,
+        margin=float(np.percentile(frequencies, 5) - settings.min_frequency),
         nearest_transverse=nearest,
         separated=separated,
         homogeneity=float(np.std(probes) / np.mean(probes)),
         surrogate_error=surrogate.log_frequency.loo_rms,
         evaluations=surrogate.evaluations + 1,
         lambda_at_edge=bool(too_low or too_high),
-        result=result,
-        deflection_ratios=achieved.deflection_ratios,
-        surrogate=surrogate,
     )
 
 
-@dataclass(frozen=True)
-class AchievedSpread:
-    """A design's f_r and w under a calibration's posterior, the manufacturing tolerances and the model's errors.
-
-    Attributes
-    ----------
-    frequency, deflection : tuple of float
-        (p05, p50, p95) of f_r [Hz] and w [m] (constant Q, the FEM's drive).
-    probability, probability_error : float
-        P(f_r >= f_min) and its Monte Carlo standard error [-].
-    margin : float
-        p05 of f_r minus f_min [Hz].
-    deflection_ratios : numpy.ndarray
-        :data:`RATIO_DRAWS` draws of w over its median [-], for pairing with draws of Q(v).
-    """
-
-    frequency: tuple
-    deflection: tuple
-    probability: float
-    probability_error: float
-    margin: float
-    deflection_ratios: np.ndarray
-
-
-RATIO_DRAWS = 1000
-"""Draws of the deflection's spread a candidate keeps [-]."""
-
-
-def achieved_spread(surrogate: RobustSurrogate, calibration: Calibration, design: Plate, settings: RobustSettings) -> AchievedSpread:
-    """:class:`AchievedSpread` of the nominal ``design`` (its lambda inside ``surrogate``'s box) under ``calibration`` and
-    the tolerances, from :data:`CHECK_DRAWS` fresh draws (the module's step 3); the calibration may be another than the
-    one the surrogate was built for (its posterior is then clipped to the surrogate's box)."""
-    check = scattered_draws(calibration, design, settings.tolerances, CHECK_DRAWS, settings.seed + 1)
-    log_f, log_w = surrogate.sample(float(np.log(design.wavelength)), check, settings.seed + 1)
-    frequencies, deflections = np.exp(log_f), np.exp(log_w)
-    probability = float(np.mean(frequencies >= settings.min_frequency))
-    return AchievedSpread(
-        frequency=tuple(float(x) for x in np.percentile(frequencies, [5, 50, 95])),
-        deflection=tuple(float(x) for x in np.percentile(deflections, [5, 50, 95])),
-        probability=probability,
-        probability_error=float(np.sqrt(probability * (1 - probability) / CHECK_DRAWS)),
-        margin=float(np.percentile(frequencies, 5) - settings.min_frequency),
-        deflection_ratios=deflections[:RATIO_DRAWS] / np.median(deflections),
-    )
 
 
 def mode_separation(result, settings: RobustSettings) -> tuple[dict | None, bool]:

@@ -1,16 +1,13 @@
 """The design to build, per h_p: the report's opening section, as data.
 
-With a calibration on measured built plates (``tactile run``'s default: the published plates), the design to
-build is the robust one (:mod:`workflow.optimise.robust`): P(f_r >= f_min) >= the reliability under the
-calibration's posterior, its model discrepancy and the manufacturing tolerances, h_i from stock; the nominal
-optimum stays beside it for comparison.  Without one, the nominal optimum: the FEM optimum (space mapping,
-constant Q) where the FEM ran, the beam optimum with Q(v) otherwise.  The numbers at a geometry use the fitted
-Q(v): the deflection at the design voltage and the voltage for the target deflection, each as the 5/50/95 %
-quantiles over posterior draws (for a robust design paired with draws of the calibration and the tolerances),
-the margin to the frequency limit and, with the FEM, the nearest mode that mixes in a transverse shape.
+The geometry is the FEM optimum (space mapping, constant Q) where the FEM ran, the beam
+optimum with Q(v) otherwise; the numbers at that geometry use the fitted Q(v): the
+deflection at the design voltage and the voltage for the target deflection, each as the
+5/50/95 % quantiles over posterior draws, the margin to the frequency limit and, with the
+FEM, the nearest mode that mixes in a transverse shape.
 """
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 from typing import Dict, Optional, Tuple
 
 import numpy as np
@@ -71,13 +68,6 @@ class RecommendedDesign:
     admittance : tuple of arrays or None
         For the coupled piezoelectric FEM: frequencies [Hz] around f_r and f_a and the whole plate's
         electrical admittance there, Y = i omega Q_e / V with the plate's Q [S] (complex).
-    kind : str
-        "nominal" (an optimum of the nominal model) or "robust" (the robust design under a calibration).
-    frequency_band : tuple of float or None
-        For a robust design: f_r's (p05, p50, p95) under the calibration's posterior and model discrepancy, the
-        manufacturing tolerances and the surrogate's and FEM's errors [Hz]; ``frequency`` is then its median.
-    probability, probability_error : float or None
-        For a robust design: P(f_r >= the frequency limit) and its Monte Carlo standard error [-].
     """
 
     plate: Plate
@@ -95,16 +85,11 @@ class RecommendedDesign:
     frequency_error: Optional[float] = None
     antiresonance: Optional[float] = None
     admittance: Optional[tuple] = None
-    kind: str = "nominal"
-    frequency_band: Optional[Tuple[float, float, float]] = None
-    probability: Optional[float] = None
-    probability_error: Optional[float] = None
 
     @property
     def frequency_margin(self) -> float:
-        """Working frequency (a robust design's: its 5 % quantile) minus the frequency limit [Hz]."""
-        low = self.frequency if self.frequency_band is None else self.frequency_band[0]
-        return low - self.problem.min_frequency
+        """Working frequency minus the frequency limit [Hz]."""
+        return self.frequency - self.problem.min_frequency
 
     @property
     def working_velocity(self) -> float:
@@ -144,34 +129,24 @@ class Recommendation:
     Attributes
     ----------
     designs : dict
-        h_p [m] -> :class:`RecommendedDesign`: the design to build (robust under the calibration when there is one).
+        h_p [m] -> :class:`RecommendedDesign`.
     original : RecommendedDesign or None
         The original plate with the FEM, for reference.
     law : str
         Name of the fitted Q(v) law.
     draws : int
         Posterior draws behind the quantiles.
-    nominal : dict
-        h_p [m] -> the nominal optimum, beside a robust design for comparison (empty without a calibration).
-    calibration : dict or None
-        What the robust designs rest on: ``source``, ``plates`` (names), ``reliability``, ``check`` (the
-        posterior-predictive check's statement), ``interval`` (what a robust design's bands contain); None without.
-    not_robust : dict
-        h_p [m] -> why no robust design was found (its nominal optimum is then the design to build).
     """
 
     designs: Dict[float, RecommendedDesign]
     original: Optional[RecommendedDesign]
     law: str
     draws: int
-    nominal: Dict[float, RecommendedDesign] = field(default_factory=dict)
-    calibration: Optional[dict] = None
-    not_robust: Dict[float, str] = field(default_factory=dict)
 
     def margin_within_mesh_error(self, design: RecommendedDesign) -> bool:
-        """Whether a nominal FEM design's frequency margin is smaller than its estimated discretisation error
-        (or unknown: a FEM design on a fixed mesh); a robust design's band holds the FEM's error."""
-        if design.model != "FEM" or design.kind == "robust":
+        """Whether a FEM design's frequency margin is smaller than its estimated discretisation error
+        (or unknown: a FEM design on a fixed mesh)."""
+        if design.model != "FEM":
             return False
         error = design.frequency_error
         return error is None or design.frequency_margin < abs(error) * design.frequency
@@ -254,54 +229,3 @@ def beam_recommendation(plate: Plate, problem: DesignProblem, draws, target: flo
         deflection=quantiles(damped_deflection(plate, problem.voltage, draws)),
         required_voltage=quantiles(required_voltage(plate, draws, target)),
     )
-
-
-def robust_recommendation(candidate, problem: DesignProblem, draws, target: float, seed: int = 0) -> RecommendedDesign:
-    """The robust design ``candidate`` (:class:`~workflow.optimise.robust.RobustCandidate`) with Q(v): its FEM at the
-    posterior median gives the modes and the deflection per unit Q; each posterior draw of Q(v) is paired with a
-    draw of the deflection's spread under the calibration and the tolerances, and solved self-consistently.
-
-    Parameters
-    ----------
-    candidate : RobustCandidate
-    problem : DesignProblem
-    draws : Q(v) law
-        Posterior draws as one law with (n,) parameters.
-    target : float
-        Deflection to reach [m].
-    seed : int
-        Picks the deflection-spread draws paired with the Q(v) draws.
-    """
-    n = np.size(draws.quality_factor(np.zeros(1)))
-    spread = DeflectionSpread(candidate.result, np.random.default_rng(seed).choice(candidate.deflection_ratios, n))
-    nominal = fem_recommendation(candidate.result, candidate.plate, problem, draws, target)
-    return replace(
-        nominal,
-        frequency=candidate.frequency[1],
-        deflection=quantiles(fem_damped_deflection(spread, draws)),
-        required_voltage=quantiles(fem_required_voltage(spread, draws, target)),
-        kind="robust",
-        frequency_band=candidate.frequency,
-        probability=candidate.probability,
-        probability_error=candidate.probability_error,
-    )
-
-
-@dataclass(frozen=True)
-class DeflectionSpread:
-    """A FEM result whose deflection per unit Q varies from draw to draw by ``ratio`` (a calibration's and the
-    tolerances' spread): same frequency and voltage, deflection ``ratio`` times the result's [-]."""
-
-    result: object
-    ratio: np.ndarray
-
-    @property
-    def frequency(self):
-        return self.result.frequency
-
-    @property
-    def voltage(self):
-        return self.result.voltage
-
-    def deflection_at_q(self, q):
-        return self.ratio * self.result.deflection_at_q(q)
