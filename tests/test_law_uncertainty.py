@@ -4,9 +4,12 @@ equal shares, the effects fitted by default where the logs can show them, old po
 import numpy as np
 import pytest
 
+from instruments.procedures.simulated import simulate_campaign as simulate_bench_campaign
+from instruments.procedures.simulated import simulate_ringdown
 from workflow.damping.comparison import LawComparison, answer_shares
 from workflow.damping.laws import StackedLaws, ThresholdLoss
 from workflow.damping.likelihood import ForwardModel, default_forward_model, sweep_directions
+from workflow.damping.logs import read_logs
 from workflow.damping.posterior import DampingPosterior, load_posterior, save_posterior, stacked_posterior
 from workflow.damping.synthetic import simulate_campaign
 
@@ -51,7 +54,7 @@ def test_the_answer_mixes_in_equal_shares_the_laws_the_data_do_not_tell_apart_th
     assert answer_shares(apart, {"threshold": True, "flexible": True}) == {"threshold": 1.0}
 
 
-def test_softening_is_fitted_by_default_and_drift_only_where_the_sweeps_can_tell_it_from_q():
+def test_softening_is_fitted_by_default_and_drift_only_where_the_logs_can_tell_it_from_q(tmp_path):
     one_way = simulate_campaign(seed=1, **SMALL)
     both_ways = simulate_campaign(seed=1, alternate=True, **SMALL)
     assert sweep_directions(one_way) == (1, 1, 1) and sweep_directions(both_ways) == (1, -1, 1)
@@ -60,3 +63,8 @@ def test_softening_is_fitted_by_default_and_drift_only_where_the_sweeps_can_tell
     untimed = simulate_campaign(seed=1, alternate=True, **SMALL)
     untimed = type(untimed)(**{**vars(untimed), "timestamp": None})
     assert default_forward_model(untimed) == ForwardModel(softening=True, drift=False)
+    simulate_bench_campaign(tmp_path / "c.csv", points_per_sweep=11, voltages=(5.0, 10.0))
+    simulate_ringdown(tmp_path / "r.csv", voltages=(5.0,), samples=20)
+    sweeps = read_logs([tmp_path / "c.csv"])
+    assert set(sweep_directions(sweeps)) == {1} and not default_forward_model(sweeps).drift
+    assert default_forward_model(read_logs([tmp_path / "c.csv", tmp_path / "r.csv"])).drift  # ring-downs measure Q

@@ -908,9 +908,9 @@ def _drift_left_out(log: CampaignLog) -> str:
     if log.timestamp is None:
         return "the logs have no timestamp_s"
     if not default_forward_model(log).drift:
-        return ("every sweep runs the same way in frequency: a steady drift within a sweep stretches the resonance curve "
-                "as a change of Q does, so the logs cannot tell them apart (each sweep's resonance is free: drift between "
-                "sweeps is taken up)")
+        return ("every sweep runs the same way in frequency and there are no ring-downs: a steady drift within a sweep "
+                "stretches the resonance curve as a change of Q does, so the logs cannot tell them apart (each sweep's "
+                "resonance is free: drift between sweeps is taken up)")
     return "left out by the caller (--no-drift)"
 
 

@@ -78,14 +78,14 @@ def default_forward_model(log: CampaignLog) -> ForwardModel:
     """The effects fitted unless the caller says otherwise (issue 29: a fit that left them out blamed the law for their
     mark on the curves, and its band missed the truth); each prior includes the effect's absence (kappa = 0, beta = 0).
 
-    Softening whenever the logs have sweeps.  Drift when the sweeps also have ``timestamp_s`` and run both up and down
-    in frequency (:func:`sweep_directions`): with every sweep one way, a steady drift within a sweep stretches each
-    resonance curve exactly as a change of Q does, so the logs cannot tell the two apart and the drift's prior would
-    only trade against Q (a synthetic campaign without drift then gave Q0 100 for a true 150); the resonance of each
-    sweep stays free, which takes up drift between sweeps."""
-    directions = set(sweep_directions(log))
-    return ForwardModel(softening=log.n_sweeps > 0,
-                        drift=log.n_sweeps > 0 and log.timestamp is not None and {-1, 1} <= directions)
+    Softening whenever the logs have sweeps.  Drift when the sweeps also have ``timestamp_s`` and either run both up
+    and down in frequency (:func:`sweep_directions`) or come with ring-downs: with every sweep one way and nothing
+    else, a steady drift within a sweep stretches each resonance curve as a change of Q does (with the gain taking up
+    the peak), so the logs cannot tell the two apart and the drift's prior would only trade against Q (a synthetic
+    campaign without drift then gave Q0 100 for a true 150); ring-downs measure Q apart from the curves' width.  The
+    resonance of each sweep stays free, which takes up drift between sweeps."""
+    separable = {-1, 1} <= set(sweep_directions(log)) or log.ringdown is not None
+    return ForwardModel(softening=log.n_sweeps > 0, drift=log.n_sweeps > 0 and log.timestamp is not None and separable)
 
 
 def sweep_directions(log: CampaignLog) -> tuple:
