@@ -247,6 +247,7 @@ def coverage_figure(records: list, before: list, examples: int = 4):
     import matplotlib.pyplot as plt
 
     shown = sorted(records, key=lambda r: r["coverage"])[:examples]
+    examples = len(shown)
     figure, axes = plt.subplot_mosaic([["coverage"] * examples, ["width"] * examples, [f"band{k}" for k in range(examples)]],
                                       figsize=(12, 9.5), height_ratios=(1, 0.7, 1), layout="constrained")
     markers = {"power": "o", "threshold": "s", "spline": "^"}
