@@ -202,6 +202,20 @@ def study_truth(truth: Truth, max_steps: int = 20000, draws: Path | None = None)
     }
 
 
+ISSUE_RANGE = (0.08, 0.23)
+"""Antinode velocities of the issue's table [m/s]: from about the lowest sweep peak to the working point."""
+
+
+def coverage_within(record: dict, low: float, high: float) -> float:
+    """A record's coverage over the band's velocities within [low, high] [m/s] (NaN where it has none)."""
+    band = record["band"]
+    v = np.asarray(band["v_m_s"])
+    chosen = (v >= low) & (v <= high)
+    truth = np.asarray(band["q_true"])[chosen]
+    inside = (truth >= np.asarray(band["q_p05"])[chosen]) & (truth <= np.asarray(band["q_p95"])[chosen])
+    return float(np.mean(inside)) if chosen.any() else float("nan")
+
+
 def summarise(records: list) -> dict:
     """Mean coverage, the share of campaigns at or above 70 %, the median width, per kind and for the effects."""
     coverage = np.array([r["coverage"] for r in records])
@@ -227,6 +241,7 @@ def summarise(records: list) -> dict:
         "share_at_or_above_70": float(np.mean(coverage >= goals["campaign_coverage"])),
         "lowest_coverages": sorted(float(c) for c in coverage)[:5],
         "median_width": float(np.median(width)),
+        "within_issue_range": _within(records, *ISSUE_RANGE),
         "goals_met": bool(coverage.mean() >= goals["mean_coverage"]
                           and np.mean(coverage >= goals["campaign_coverage"]) >= goals["campaign_share"]
                           and np.median(width) < goals["median_width"]),
@@ -285,6 +300,16 @@ def coverage_figure(records: list, before: list, examples: int = 4):
 def read_records(path: Path) -> list:
     """The per-truth JSON lines of a run's stderr."""
     return [json.loads(line) for line in path.read_text().splitlines() if line.startswith('{"truth"')]
+
+
+def _within(records: list, low: float, high: float) -> dict | None:
+    """Mean coverage and the share of campaigns at or above 70 % over [low, high] m/s (records with their bands)."""
+    values = np.array([coverage_within(r, low, high) for r in records if "band" in r])
+    values = values[np.isfinite(values)]
+    if not len(values):
+        return None
+    return {"v_m_s": [low, high], "campaigns": len(values), "mean_coverage": float(values.mean()),
+            "share_at_or_above_70": float(np.mean(values >= CAMPAIGN_GOALS["campaign_coverage"]))}
 
 
 def main(argv=None) -> dict:
