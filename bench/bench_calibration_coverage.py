@@ -197,6 +197,36 @@ def study(n: int, seed: int, fem_settings, sim_settings, settings: CalibrationSe
     }
 
 
+def read_records(path: Path) -> list:
+    """The per-campaign JSON lines of a run's stderr."""
+    return [json.loads(line) for line in path.read_text().splitlines() if line.startswith('{"campaign"')]
+
+
+def coverage_figure(runs: dict):
+    """Each campaign's predicted band of the third plate relative to its measured resonance, one row of markers per
+    run (``runs``: label -> records), with the nominal FEM's prediction."""
+    import matplotlib.pyplot as plt
+
+    figure, ax = plt.subplots(figsize=(10, 4.5), layout="constrained")
+    for k, (label, records) in enumerate(runs.items()):
+        shift = 0.2 * (k - (len(runs) - 1) / 2)
+        for r in records:
+            measured = r["measured_f_hz"][2]
+            low, mid, high = (100 * (x / measured - 1) for x in r["predicted_hz"])
+            colour = f"C{k}"
+            ax.plot([r["campaign"] + shift] * 2, [low, high], color=colour, lw=2, alpha=0.9 if r["inside"] else 0.5)
+            ax.plot(r["campaign"] + shift, mid, "o" if r["inside"] else "x", color=colour,
+                    label=label if r is records[0] else None)
+    nominal = next(iter(runs.values()))
+    ax.plot([r["campaign"] for r in nominal], [100 * (r["nominal_f_hz"][2] / r["measured_f_hz"][2] - 1) for r in nominal],
+            "k_", ms=10, label="uncalibrated FEM")
+    ax.axhline(0, color="k", lw=0.8)
+    ax.set(xlabel="campaign (calibrated on two plates, the third predicted)",
+           ylabel="prediction / measured f_r - 1 [%]\n(90 % band; x: the band misses)")
+    ax.legend(fontsize=8)
+    return figure
+
+
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--campaigns", type=int, default=20, help="campaigns of three built plates (default 20)")
@@ -205,9 +235,17 @@ def main(argv=None) -> dict:
                         help=f"FEM accuracy of the calibration's surrogates (default {DEFAULT_ACCURACY:g}, tactile calibrate's)")
     parser.add_argument("--sim-accuracy", type=float, default=DEFAULT_ACCURACY,
                         help=f"FEM accuracy of the simulated built plates (default {DEFAULT_ACCURACY:g}, the simulator's)")
+    parser.add_argument("--figure", type=Path, metavar="PNG",
+                        help="draw the study's figure from the records of runs (--records) instead of running")
+    parser.add_argument("--records", nargs="+", metavar="LABEL=LOG", default=[],
+                        help="with --figure: the per-campaign JSON lines of runs (their stderr), each labelled")
     parser.add_argument("--no-discrepancy", action="store_true",
                         help="calibrate without the model-discrepancy terms (their scales 0: the calibration before issue 29)")
     args = parser.parse_args(argv)
+    if args.figure:
+        runs = {item.split("=", 1)[0]: read_records(Path(item.split("=", 1)[1])) for item in args.records}
+        coverage_figure(runs).savefig(args.figure, dpi=100)
+        return {"figure": str(args.figure)}
     result = {"seed": args.seed, **study(args.campaigns, args.seed, FemAccuracy(target=args.accuracy),
                                          FemAccuracy(target=args.sim_accuracy), discrepancy=not args.no_discrepancy)}
     result.pop("records")  # on stderr as they came

@@ -8,7 +8,7 @@ from instruments.procedures.simulated import simulate_campaign as simulate_bench
 from instruments.procedures.simulated import simulate_ringdown
 from workflow.damping.comparison import LawComparison, answer_shares
 from workflow.damping.laws import StackedLaws, ThresholdLoss
-from workflow.damping.likelihood import ForwardModel, default_forward_model, sweep_directions
+from workflow.damping.likelihood import MAX_DRIFT_SHARE, ForwardModel, default_forward_model, fit_data
 from workflow.damping.logs import read_logs
 from workflow.damping.posterior import DampingPosterior, load_posterior, save_posterior, stacked_posterior
 from workflow.damping.synthetic import simulate_campaign
@@ -54,17 +54,16 @@ def test_the_answer_mixes_in_equal_shares_the_laws_the_data_do_not_tell_apart_th
     assert answer_shares(apart, {"threshold": True, "flexible": True}) == {"threshold": 1.0}
 
 
-def test_softening_is_fitted_by_default_and_drift_only_where_the_logs_can_tell_it_from_q(tmp_path):
-    one_way = simulate_campaign(seed=1, **SMALL)
-    both_ways = simulate_campaign(seed=1, alternate=True, **SMALL)
-    assert sweep_directions(one_way) == (1, 1, 1) and sweep_directions(both_ways) == (1, -1, 1)
-    assert default_forward_model(one_way) == ForwardModel(softening=True, drift=False)
-    assert default_forward_model(both_ways) == ForwardModel(softening=True, drift=True)
-    untimed = simulate_campaign(seed=1, alternate=True, **SMALL)
-    untimed = type(untimed)(**{**vars(untimed), "timestamp": None})
+def test_softening_and_drift_are_fitted_by_default_where_the_logs_can_show_them_and_the_drift_is_bounded(tmp_path):
+    campaign = simulate_campaign(seed=1, **SMALL)
+    assert default_forward_model(campaign) == ForwardModel(softening=True, drift=True)
+    untimed = type(campaign)(**{**vars(campaign), "timestamp": None})
     assert default_forward_model(untimed) == ForwardModel(softening=True, drift=False)
-    simulate_bench_campaign(tmp_path / "c.csv", points_per_sweep=11, voltages=(5.0, 10.0))
+    data = fit_data(campaign, "quadratic", default_forward_model(campaign))
+    sweep_rate = 2 * 1000.0 / (SMALL["points_per_sweep"] - 1)  # the synthetic sweeps: 2 kHz at one point a second
+    bound = data.upper[data.layout.names.index("drift_rate")]
+    assert bound == pytest.approx(MAX_DRIFT_SHARE * sweep_rate, rel=1e-6)
+    simulate_bench_campaign(tmp_path / "c.csv", points_per_sweep=11, voltages=(5.0,))
     simulate_ringdown(tmp_path / "r.csv", voltages=(5.0,), samples=20)
-    sweeps = read_logs([tmp_path / "c.csv"])
-    assert set(sweep_directions(sweeps)) == {1} and not default_forward_model(sweeps).drift
-    assert default_forward_model(read_logs([tmp_path / "c.csv", tmp_path / "r.csv"])).drift  # ring-downs measure Q
+    assert default_forward_model(read_logs([tmp_path / "r.csv"])) == ForwardModel(softening=False, drift=False)
+    assert default_forward_model(read_logs([tmp_path / "c.csv"])).drift

@@ -905,13 +905,7 @@ def effects_summary(fit: DampingFit, parameters: dict) -> dict:
 
 def _drift_left_out(log: CampaignLog) -> str:
     """Why a fit did not model the drift within the sweeps (:func:`default_forward_model`)."""
-    if log.timestamp is None:
-        return "the logs have no timestamp_s"
-    if not default_forward_model(log).drift:
-        return ("every sweep runs the same way in frequency and there are no ring-downs: a steady drift within a sweep "
-                "stretches the resonance curve as a change of Q does, so the logs cannot tell them apart (each sweep's "
-                "resonance is free: drift between sweeps is taken up)")
-    return "left out by the caller (--no-drift)"
+    return "the logs have no timestamp_s" if log.timestamp is None else "left out by the caller (--no-drift)"
 
 
 def band_contents(fit: DampingFit) -> dict:

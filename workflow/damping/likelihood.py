@@ -76,24 +76,17 @@ class ForwardModel:
 
 def default_forward_model(log: CampaignLog) -> ForwardModel:
     """The effects fitted unless the caller says otherwise (issue 29: a fit that left them out blamed the law for their
-    mark on the curves, and its band missed the truth); each prior includes the effect's absence (kappa = 0, beta = 0).
-
-    Softening whenever the logs have sweeps.  Drift when the sweeps also have ``timestamp_s`` and either run both up
-    and down in frequency (:func:`sweep_directions`) or come with ring-downs: with every sweep one way and nothing
-    else, a steady drift within a sweep stretches each resonance curve as a change of Q does (with the gain taking up
-    the peak), so the logs cannot tell the two apart and the drift's prior would only trade against Q (a synthetic
-    campaign without drift then gave Q0 100 for a true 150); ring-downs measure Q apart from the curves' width.  The
-    resonance of each sweep stays free, which takes up drift between sweeps."""
-    separable = {-1, 1} <= set(sweep_directions(log)) or log.ringdown is not None
-    return ForwardModel(softening=log.n_sweeps > 0, drift=log.n_sweeps > 0 and log.timestamp is not None and separable)
+    mark on the curves, and its band missed the truth): softening whenever the logs have sweeps, drift whenever they
+    also have ``timestamp_s``.  Each prior includes the effect's absence (kappa = 0, beta = 0); the drift's is bounded
+    by :data:`MAX_DRIFT_SHARE`."""
+    return ForwardModel(softening=log.n_sweeps > 0, drift=log.n_sweeps > 0 and log.timestamp is not None)
 
 
-def sweep_directions(log: CampaignLog) -> tuple:
-    """Each sweep's direction in its rows' order: +1 up in frequency, -1 down, 0 a single frequency."""
-    return tuple(int(np.sign(np.median(np.diff(log.frequency[log.sweep == k])))) if np.sum(log.sweep == k) > 1 else 0
-                 for k in range(log.n_sweeps))
-
-
+MAX_DRIFT_SHARE = 0.1
+"""Prior bound of the drift within a sweep, as a share of the slowest sweep's rate (span / duration) [-]: a resonance
+moving by more than a tenth of the span while it is swept leaves no curve to fit, and near the sweep rate the drift
+trades against Q (a synthetic campaign without drift, its four sweeps upward, gave Q0 100 [83, 121] for a true 150
+with the bound at the full rate)."""
 Q0_RANGE = (1.0, 1e5)
 """Prior range of Q0 [-]."""
 MIN_Q_AT_MAX_VELOCITY = 1.0
@@ -314,7 +307,7 @@ def fit_data(log: CampaignLog, law_name: str, forward: ForwardModel = ForwardMod
         time_offset = log.timestamp - means[log.sweep]
         durations = np.array([np.ptp(time_offset[log.sweep == k]) for k in range(log.n_sweeps)])
         spans = np.array([np.ptp(log.frequency[log.sweep == k]) for k in range(log.n_sweeps)])
-        limit = float(np.max(spans / np.maximum(durations, 1e-9)))
+        limit = MAX_DRIFT_SHARE * float(np.min(spans / np.maximum(durations, 1e-9)))
         bounds["drift_rate"] = (-limit, limit)
     decay_data = None
     if decays:
