@@ -214,15 +214,15 @@ def coverage_figure(runs: dict):
             measured = r["measured_f_hz"][2]
             low, mid, high = (100 * (x / measured - 1) for x in r["predicted_hz"])
             colour = f"C{k}"
-            ax.plot([r["campaign"] + shift] * 2, [low, high], color=colour, lw=2, alpha=0.9 if r["inside"] else 0.5)
-            ax.plot(r["campaign"] + shift, mid, "o" if r["inside"] else "x", color=colour,
-                    label=label if r is records[0] else None)
+            ax.plot([r["campaign"] + shift] * 2, [low, high], color=colour, lw=2, alpha=0.9 if r["inside"] else 0.5,
+                    label=f"{label}: 90 % band, median (o inside, x missed)" if r is records[0] else None)
+            ax.plot(r["campaign"] + shift, mid, "o" if r["inside"] else "x", color=colour)
     nominal = next(iter(runs.values()))
     ax.plot([r["campaign"] for r in nominal], [100 * (r["nominal_f_hz"][2] / r["measured_f_hz"][2] - 1) for r in nominal],
             "k_", ms=10, label="uncalibrated FEM")
     ax.axhline(0, color="k", lw=0.8)
     ax.set(xlabel="campaign (calibrated on two plates, the third predicted)",
-           ylabel="prediction / measured f_r - 1 [%]\n(90 % band; x: the band misses)")
+           ylabel="prediction / measured f_r - 1 [%]")
     ax.legend(fontsize=8)
     return figure
 
