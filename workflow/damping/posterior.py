@@ -94,12 +94,11 @@ def stacked_posterior(posteriors: Dict[str, DampingPosterior], weights: Dict[str
     component = rng.choice(len(names), size=n, p=probability / probability.sum())
     columns = {"component": np.array([STACKED_COMPONENTS.index(names[i]) for i in component], dtype=float)}
     for name in STACKED_COMPONENTS:
+        own = posteriors.get(name)
+        rows = None if own is None else rng.integers(len(next(iter(own.parameters.values()))), size=n)
         for p in parameter_names(LAWS[name]):
-            if name in posteriors:
-                samples = posteriors[name].parameters[p]
-                columns[f"{name}_{p}"] = samples[rng.integers(len(samples), size=n)]
-            else:
-                columns[f"{name}_{p}"] = np.full(n, NEUTRAL_PARAMETERS.get(p, 0.0))
+            # one posterior sample per draw for all of a law's parameters: their correlations are the posterior's
+            columns[f"{name}_{p}"] = np.full(n, NEUTRAL_PARAMETERS.get(p, 0.0)) if own is None else own.parameters[p][rows]
     return DampingPosterior(StackedLaws.name, columns)
 
 
