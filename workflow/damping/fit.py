@@ -925,6 +925,9 @@ def band_contents(fit: DampingFit) -> dict:
             "Q(v) outside the measured velocities (the laws extrapolate)",
             "another plate's Q(v): the fit is of the plate measured",
             "the drift of Q itself with temperature or time beyond the resonance's drift",
+            "a shift of the resonance that follows the amplitude with a lag, as the plate's heating while it is driven "
+            "(a steady drift rate cannot follow it; on the simulated bench it made Q 1-5 % high, outside the band: "
+            "docs/damping.md#coverage-over-truths-the-fit-does-not-contain)",
             "a measurement point or a velocity calibration other than the logs say",
         ],
     }
