@@ -81,7 +81,7 @@ def test_summary_has_the_contract_keys(fit):
         assert key in summary["diagnostics"]
     assert {"median", "p05", "p95"} <= set(summary["parameters"]["q0"])
     assert "PSIS-LOO" in summary["comparison"]["criterion"]
-    assert summary["selection"] in ("best", "stacking", "fallback") and summary["checks"][summary["law"]]["passed"]
+    assert summary["selection"] in ("best", "mixture", "fallback") and summary["checks"][summary["law"]]["passed"]
 
 
 def test_half_power_estimates_fall_with_voltage(campaign):

@@ -107,6 +107,8 @@ def test_a_mixed_working_mode_is_said_so_and_a_lonely_mode_has_no_partner():
     assert design.working_mode_mixed and nearest_transverse_mode(mixed, mixed[0]) is None
     text = recommendation_section(Recommendation({1 * MM: design}, None, "constant", 3))
     assert "0.30 (mixed)" in text and "none among the 1 computed modes" in text
+    meaning = text.split("What these intervals contain:")[1]  # issue 29: what the table's intervals hold and not
+    assert "law's shape" in meaning and "do not contain" in meaning and "manufacturing tolerances" in meaning
 
 
 def _with_error(result, relative: float):

@@ -133,6 +133,11 @@ class ResonanceFit:
         return self.peak_velocity / (2 * np.pi * self.frequency * self.quality_factor * voltage)
 
 
+LOSS_RANGE = (1e-6, 1.0)
+"""Loss factors 1/Q the Lorentzian of a sweep's top may take [-]: a top whose plain Lorentzian lies outside (Q below
+1: a sweep too coarse for its peak, issue 29's coverage study met one) is not a resonance it resolves."""
+
+
 def lorentzian_top(frequency: np.ndarray, velocity: np.ndarray) -> ResonanceFit | None:
     """Fit :class:`ResonanceFit` to a sweep's top (the module's equation).
 
@@ -162,6 +167,8 @@ def lorentzian_top(frequency: np.ndarray, velocity: np.ndarray) -> ResonanceFit 
         return None
     peak = v[k]
     loss = np.sqrt(intercept / slope)
+    if not LOSS_RANGE[0] < loss < LOSS_RANGE[1]:
+        return None
     start = np.array([loss, 1e-3 * loss, 1 / (np.sqrt(slope) * peak)])
 
     def residual(p):
@@ -169,7 +176,7 @@ def lorentzian_top(frequency: np.ndarray, velocity: np.ndarray) -> ResonanceFit 
         return (c / vt) ** 2 / (u2 + (loss + stiffening * (vt / peak) ** 2) ** 2) - 1
 
     free = len(vt) >= MIN_POINTS_VELOCITY_DEPENDENCE
-    fit = least_squares(residual, start, bounds=([1e-6, 0.0, 1e-9], [1.0, 1.0 if free else 2e-3 * loss, np.inf]),
+    fit = least_squares(residual, start, bounds=([LOSS_RANGE[0], 0.0, 1e-9], [LOSS_RANGE[1], 1.0 if free else 2e-3 * loss, np.inf]),
                         x_scale="jac")
     loss, stiffening, c = fit.x[0], fit.x[1], fit.x[2] * peak
     q_peak = 1 / (loss + stiffening)

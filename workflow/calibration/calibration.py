@@ -5,20 +5,21 @@ accuracy and the cache).  :class:`Calibration` converts to and from plain data (
 ``calibration.json`` that ``--calibration`` reads: no code, no pickle).
 """
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Sequence
 
 import numpy as np
 
 from workflow.calibration.logs import BuiltPlateLog
 from workflow.calibration.measurements import ScanShape
-from workflow.calibration.parameters import CalibrationSettings, Parameter, checked_settings
+from workflow.calibration.parameters import DISCREPANCIES, CalibrationSettings, Parameter, checked_settings
 from workflow.calibration.plate_surrogate import Evaluate, EvaluateSurfaces, PlateSurrogate, build_plate_surrogate
 from workflow.calibration.posterior import (
     ChainDiagnostics,
     calibration_data,
     identifiability,
     parameter_summary,
+    predictive_check,
     predictive_quantiles,
     prior_bounds,
     sample_posterior,
@@ -30,7 +31,9 @@ from workflow.models.limits import LIMITS, plate_problem, problem
 from workflow.models.plate import Plate
 
 FORMAT = "tactile-calibration"
-VERSION = 1
+VERSION = 2
+"""Version written; version 1 (before the model-discrepancy terms) is still read, its discrepancy zero."""
+READ_VERSIONS = (1, 2)
 PREDICTION_DEGREE = 1
 """Degree of the surrogate built at a new geometry over the posterior's range (narrow: linear suffices, its
 leave-one-out error says how well)."""
@@ -115,6 +118,9 @@ class Calibration:
     diagnostics : ChainDiagnostics
     fem : dict
         FEM conditions of the surrogates: ``q`` [-], ``voltage_v`` [V], ``accuracy`` [-], ``piezo``.
+    discrepancy : numpy.ndarray or None
+        (n, 2) the model-discrepancy terms at the samples, relative sds of ln f_r and ln g [-]
+        (:mod:`workflow.calibration.posterior`); None (a calibration file of version 1) stands for zeros.
     """
 
     settings: CalibrationSettings
@@ -123,6 +129,11 @@ class Calibration:
     surrogates: tuple
     diagnostics: ChainDiagnostics
     fem: dict
+    discrepancy: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.discrepancy is None:
+            object.__setattr__(self, "discrepancy", np.zeros((len(self.samples), len(DISCREPANCIES))))
 
     @property
     def evaluations(self) -> int:
@@ -140,6 +151,13 @@ class Calibration:
         """Parameters whose posterior sits at a prior bound: name -> "at lower/upper prior bound"."""
         return prior_bounds(self.settings, self.samples)
 
+    def check(self) -> dict:
+        """The posterior-predictive check of the calibration plates and the discrepancy terms
+        (:func:`~workflow.calibration.posterior.predictive_check`)."""
+        data = calibration_data(self.settings, self.surrogates, [p.frequency for p in self.plates],
+                                [p.deflection_per_volt for p in self.plates], [p.scan for p in self.plates])
+        return predictive_check(data, self.samples, self.discrepancy, [p.name for p in self.plates])
+
     def to_dict(self) -> dict:
         return {
             "format": FORMAT,
@@ -151,14 +169,17 @@ class Calibration:
             "surrogates": [s.to_dict() for s in self.surrogates],
             "diagnostics": self.diagnostics.to_dict(),
             "fem": dict(self.fem),
+            "discrepancy": {"names": list(DISCREPANCIES), "samples": self.discrepancy.tolist()},
+            "intervals": interval_contents(self.settings),
         }
 
     @classmethod
     def from_dict(cls, data: dict, origin: str = "calibration") -> "Calibration":
         """Inverse of :meth:`to_dict`, every value checked; raises :class:`InputFileError` naming ``origin`` and the
         field when it is not one (docs/calibration.md, "Using a calibration")."""
-        if not isinstance(data, dict) or data.get("format") != FORMAT or data.get("version") != VERSION:
-            raise InputFileError(f"{origin}: not a calibration file of 'tactile calibrate' ({FORMAT} version {VERSION})")
+        if not isinstance(data, dict) or data.get("format") != FORMAT or data.get("version") not in READ_VERSIONS:
+            raise InputFileError(f"{origin}: not a calibration file of 'tactile calibrate' ({FORMAT} version "
+                                 f"{' or '.join(map(str, READ_VERSIONS))})")
         field = "settings"
         try:
             settings = dict(data["settings"])
@@ -178,12 +199,39 @@ class Calibration:
             diagnostics = ChainDiagnostics.from_dict(data["diagnostics"])
             field = "fem"
             fem = _checked_fem(data["fem"], origin)
+            field = "discrepancy"
+            discrepancy = None if data["version"] == 1 else _checked_discrepancy(data["discrepancy"], len(samples), origin)
         except InputFileError:
             raise
         except (KeyError, TypeError, ValueError, IndexError, AttributeError, TactileError) as error:
             raise InputFileError(f"{origin}: damaged calibration file, field '{field}' "
                                  f"({type(error).__name__}: {error})") from None
-        return cls(settings, samples, plates, surrogates, diagnostics, fem)
+        if discrepancy is None:
+            settings = replace(settings, frequency_discrepancy=0.0, deflection_discrepancy=0.0)
+        return cls(settings, samples, plates, surrogates, diagnostics, fem, discrepancy)
+
+
+def interval_contents(settings: CalibrationSettings) -> dict:
+    """What a prediction's 90 % band (:func:`predict`) contains and what it does not (issue 29), in words; written into
+    ``calibration.json`` beside the samples (read back: ignored, it follows from the settings)."""
+    discrepancy = settings.frequency_discrepancy > 0 or settings.deflection_discrepancy > 0
+    return {
+        "contains": [
+            "the posterior of the parameters " + ", ".join(settings.names) + " given the calibration plates' measurements "
+            "and their noise",
+            "the surrogate's error (leave-one-out) and the FEM's discretisation error",
+            (f"the model discrepancy: how far a built plate may differ from the FEM at any value of the parameters "
+             f"(prior scales {100 * settings.frequency_discrepancy:g} % in f_r, {100 * settings.deflection_discrepancy:g} % "
+             "in the deflection; the plates raise it when the parameters cannot represent them)") if discrepancy else
+            "no model discrepancy (switched off in the settings): only deviations the parameters span",
+        ],
+        "does_not_contain": [
+            "manufacturing scatter of a new plate about the calibration plates' (the robust design adds it: its tolerances)",
+            "the measurement noise of the new plate's own resonance search",
+            "a plate built elsewhere, of other materials or by another process than the calibration plates",
+            "Q(v): the predictions are at constant Q (the fit of Q(v) has its own band)",
+        ],
+    }
 
 
 FEM_KEYS = {"q": "q", "voltage_v": "design.voltage_v", "accuracy": "fem_accuracy"}
@@ -220,6 +268,24 @@ def _check_predictions(surrogate: PlateSurrogate, samples: np.ndarray, where: st
                              f"outside the plausible {low:g} to {high:g} Hz")
     if not np.all(np.isfinite(deflection) & (deflection > 0)):
         raise InputFileError(f"{where}: its surrogate predicts a deflection that is not a finite length")
+
+
+def _checked_discrepancy(record, n_samples: int, origin: str) -> np.ndarray:
+    """The discrepancy terms: a finite (n_samples, 2) table of relative sds within their plausible range."""
+    if not isinstance(record, dict) or record.get("names") != list(DISCREPANCIES):
+        raise InputFileError(f"{origin}: field 'discrepancy' must name the terms {', '.join(DISCREPANCIES)}")
+    values = np.asarray(record["samples"], dtype=float)
+    if values.shape != (n_samples, len(DISCREPANCIES)) or not np.all(np.isfinite(values)):
+        raise InputFileError(f"{origin}: field 'discrepancy' must hold one finite row of {len(DISCREPANCIES)} terms per "
+                             "posterior sample")
+    if not np.all((values >= 0) & (values <= MAX_DISCREPANCY)):
+        raise InputFileError(f"{origin}: field 'discrepancy': a relative sd outside 0 to {MAX_DISCREPANCY:g}")
+    return values
+
+
+MAX_DISCREPANCY = 10.0
+"""Largest model-discrepancy term a calibration file may hold, as a relative sd [-] (the prior scales reach 2: five
+of them)."""
 
 
 def _checked_samples(values, settings: CalibrationSettings, origin: str) -> np.ndarray:
@@ -281,8 +347,8 @@ def posterior_from(plates: Sequence[MeasuredPlate], surrogates: Sequence[PlateSu
     """Sample the posterior given measured plates and their surrogates (no FEM evaluation)."""
     data = calibration_data(settings, surrogates, [p.frequency for p in plates], [p.deflection_per_volt for p in plates],
                             [p.scan for p in plates])
-    samples, diagnostics = sample_posterior(data)
-    return Calibration(settings, samples, tuple(plates), tuple(surrogates), diagnostics, dict(fem))
+    samples, discrepancy, diagnostics = sample_posterior(data)
+    return Calibration(settings, samples, tuple(plates), tuple(surrogates), diagnostics, dict(fem), discrepancy)
 
 
 def calibrate(plates: Sequence[MeasuredPlate], settings: CalibrationSettings, evaluate: Evaluate, fem: dict,
@@ -324,4 +390,4 @@ def predict(calibration: Calibration, plate: Plate, evaluate: Evaluate, surrogat
         surrogate used (a new one over the posterior's range unless given).
     """
     surrogate = surrogate or prediction_surrogate(calibration, plate, evaluate)
-    return {**predictive_quantiles(surrogate, calibration.samples), "surrogate": surrogate}
+    return {**predictive_quantiles(surrogate, calibration.samples, calibration.discrepancy), "surrogate": surrogate}

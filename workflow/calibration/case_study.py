@@ -35,7 +35,7 @@ def cross_predictions(first: MeasuredPlate, second: MeasuredPlate, settings: Cal
         ((second, surrogates[1]), (first, surrogates[0])),
     ):
         calibration = posterior_from([source], [source_surrogate], settings, fem)
-        predicted = predictive_quantiles(target_surrogate, calibration.samples)["frequency"]
+        predicted = predictive_quantiles(target_surrogate, calibration.samples, calibration.discrepancy)["frequency"]
         directions.append({
             "calibrated_on": source.name,
             "predicted": target.name,
@@ -43,7 +43,8 @@ def cross_predictions(first: MeasuredPlate, second: MeasuredPlate, settings: Cal
             "predicted_hz": tuple(float(x) for x in predicted),
             "inside": bool(predicted[0] <= target.frequency <= predicted[2]),
             "error": float(predicted[1] / target.frequency - 1),
-            "source_fit_hz": float(predictive_quantiles(source_surrogate, calibration.samples)["frequency"][1]),
+            "source_fit_hz": float(predictive_quantiles(source_surrogate, calibration.samples,
+                                                        calibration.discrepancy)["frequency"][1]),
             "parameters": calibration.summary(),
             "evaluations": sum(s.evaluations for s in surrogates),
         })

@@ -35,6 +35,8 @@ else:  # pragma: no cover - Python 3.10
 DEFAULTS_FILE = "calibration.toml"
 """Default settings, package data beside this module."""
 
+DISCREPANCIES = ("frequency", "deflection")
+"""The model-discrepancy terms sampled beside the parameters, in this order (:attr:`CalibrationSettings.discrepancy_scales`)."""
 LENGTHS = ("glue_um", "resonator_offset_um")
 """Parameters that are lengths: micrometres in files, metres inside."""
 FACTORS = ("ceramic_modulus_factor", "resonator_modulus_factor", "glue_modulus_factor")
@@ -54,6 +56,8 @@ SETTINGS_NUMBERS = {
     ("sampler", "steps"): ("steps", int, 10, 10_000_000),
     ("sampler", "seed"): ("sampler_seed", int, 0, 2**32 - 1),
     ("sampler", "kept_samples"): ("kept_samples", int, 10, 100_000),
+    ("discrepancy", "frequency"): ("frequency_discrepancy", float, 0.0, 0.5),
+    ("discrepancy", "deflection"): ("deflection_discrepancy", float, 0.0, 2.0),
 }
 """(TOML table, key) -> (:class:`CalibrationSettings` field, type, lowest, highest accepted value); at most 100 000
 kept samples keep ``calibration.json`` within :data:`~workflow.inputfiles.MAX_CALIBRATION_BYTES`."""
@@ -147,6 +151,10 @@ class CalibrationSettings:
         FEM evaluations of each surrogate's design and the polynomial degree (1 or 2) [-].
     surrogate_seed, sampler_seed : int
     walkers, steps, kept_samples : int
+    frequency_discrepancy, deflection_discrepancy : float
+        Scales of the half-normal priors of the model-discrepancy terms: the relative standard deviation by which a
+        built plate's ln f_r and ln g may differ from the FEM at every value of the parameters (what the parameters
+        do not span), added in quadrature to the measurement's (:mod:`workflow.calibration.posterior`) [-]; 0: none.
     """
 
     parameters: tuple
@@ -160,6 +168,8 @@ class CalibrationSettings:
     steps: int = 4000
     sampler_seed: int = 2
     kept_samples: int = 4000
+    frequency_discrepancy: float = 0.01
+    deflection_discrepancy: float = 0.1
 
     @property
     def names(self) -> tuple:
@@ -174,6 +184,11 @@ class CalibrationSettings:
         """Joint log prior of ``theta`` (..., n) [SI] up to a constant."""
         theta = np.asarray(theta, dtype=float)
         return sum(p.log_prior(theta[..., k]) for k, p in enumerate(self.parameters))
+
+    @property
+    def discrepancy_scales(self) -> np.ndarray:
+        """Prior scales of the :data:`DISCREPANCIES` terms, relative [-]."""
+        return np.array([self.frequency_discrepancy, self.deflection_discrepancy])
 
     def prior_scale(self) -> tuple[np.ndarray, np.ndarray]:
         """Prior mean and standard deviation of each parameter [SI] (to standardise directions)."""
@@ -265,8 +280,10 @@ def checked_settings(settings: CalibrationSettings, origin: str) -> CalibrationS
         parameter.check(f"{origin}: parameter {parameter.name}")
     for field, kind, low, high in SETTINGS_NUMBERS.values():
         _setting(getattr(settings, field), kind, low, high, f"{origin}: {field}")
-    if settings.walkers < 2 * len(settings.parameters):
-        raise InputFileError(f"{origin}: [sampler] walkers must be at least twice the {len(settings.parameters)} parameters")
+    dimension = len(settings.parameters) + len(DISCREPANCIES)
+    if settings.walkers < 2 * dimension:
+        raise InputFileError(f"{origin}: [sampler] walkers must be at least twice the {len(settings.parameters)} parameters "
+                             f"and {len(DISCREPANCIES)} discrepancy terms sampled ({2 * dimension})")
     return settings
 
 

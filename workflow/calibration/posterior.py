@@ -9,6 +9,14 @@ Likelihood (docs/calibration.md), each term only for the plates whose logs have 
 * scan pattern: each point p, m_p ~ N(s P_j,p(theta), noise^2 + leave-one-out_p^2), s = +-1 the
   sign that aligns the patterns (:func:`~workflow.calibration.measurements.aligned_misfit`).
 
+Model discrepancy (issue 29): a built plate may differ from the FEM in ways the parameters do not span, so
+the resonance's variance gains (tau_f u_f)^2 and the deflection's (tau_g u_g)^2, u_f and u_g sampled beside the
+parameters with half-normal priors of scale 1 (tau: the settings' ``discrepancy_scales``), sampled as ln u (no
+boundary at u = 0 for the walkers to stick to; the prior's density in ln u is u exp(-u^2/2)).  With the variances
+depending on u, the likelihood keeps its normalisation -1/2 ln(variance).  When the parameters can take up what
+the plates measured, u's posterior stays near its prior; when they cannot, the plates push it up.  A prediction
+of a plate adds N(0, (tau_f u_f)^2) to ln f_r at each posterior sample.
+
 Priors from :class:`~workflow.calibration.parameters.CalibrationSettings`.  Samples are SI values.
 """
 
@@ -19,9 +27,10 @@ from typing import Sequence
 
 import emcee
 import numpy as np
+from scipy import stats
 
 from workflow.calibration.measurements import aligned_misfit
-from workflow.calibration.parameters import CalibrationSettings
+from workflow.calibration.parameters import DISCREPANCIES, CalibrationSettings
 from workflow.calibration.plate_surrogate import PlateSurrogate
 
 CHAIN_TAUS = 50
@@ -86,21 +95,38 @@ def calibration_data(settings: CalibrationSettings, surrogates: Sequence[PlateSu
                            deflection_terms, pattern_terms)
 
 
-def log_probability(theta: np.ndarray, data: CalibrationData) -> np.ndarray:
-    """Log posterior of parameter vectors ``theta`` (n_walkers, n) [SI] up to a constant (vectorised)."""
-    prior = data.settings.log_prior(theta)
+def _gaussian(residual, variance):
+    """ln N(residual; 0, variance) up to a constant, summed over the last axis when there is one [-]."""
+    return -0.5 * (residual**2 / variance + np.log(variance))
+
+
+def log_probability(state: np.ndarray, data: CalibrationData) -> np.ndarray:
+    """Log posterior of sampler states (n_walkers, n + 2) up to a constant (vectorised): the parameters [SI] and the
+    logarithms of the discrepancy terms' standardised sizes u (:data:`~workflow.calibration.parameters.DISCREPANCIES`)."""
+    theta, units = split_state(state, data.settings)
+    with np.errstate(over="ignore"):  # a walker far out in ln u: an infinite term, its probability -inf
+        prior = data.settings.log_prior(theta) + np.sum(np.log(units) - 0.5 * units**2, axis=-1)
+        frequency_extra, deflection_extra = np.moveaxis(np.square(units * data.settings.discrepancy_scales), -1, 0)
     inside = np.isfinite(prior)
     clipped = np.clip(theta, data.settings.bounds[:, 0], data.settings.bounds[:, 1])
     predicted = np.stack([s.log_frequency(clipped) for s in data.surrogates], axis=-1)
-    likelihood = -0.5 * np.sum(((data.log_measured - predicted) / data.sigma) ** 2, axis=-1)
+    variance = data.sigma**2 + frequency_extra[..., None]
+    likelihood = np.sum(_gaussian(data.log_measured - predicted, variance), axis=-1)
     for surrogate, term in zip(data.surrogates, data.deflections):
         if term is not None:
-            likelihood = likelihood - 0.5 * ((term[0] - surrogate.log_point_deflection(clipped)) / term[1]) ** 2
+            likelihood = likelihood + _gaussian(term[0] - surrogate.log_point_deflection(clipped), term[1] ** 2 + deflection_extra)
     for surrogate, term in zip(data.surrogates, data.patterns):
         if term is not None:
             misfit = aligned_misfit(term[0], surrogate.shape(clipped)) / term[1]
             likelihood = likelihood - 0.5 * np.sum(misfit**2, axis=-1)
     return np.where(inside, prior + likelihood, -np.inf)
+
+
+def split_state(state: np.ndarray, settings: CalibrationSettings) -> tuple[np.ndarray, np.ndarray]:
+    """(parameters [SI], discrepancy terms' standardised sizes u [-]) of sampler states (..., n + 2), which hold ln u."""
+    n = len(settings.parameters)
+    with np.errstate(over="ignore"):
+        return state[..., :n], np.exp(state[..., n:])
 
 
 @dataclass(frozen=True)
@@ -162,20 +188,24 @@ class ChainDiagnostics:
         return cls(tuple(data["tau"]), data["n_steps"], data["n_walkers"], data["burn_in"], data["acceptance"], data["seconds"])
 
 
-def sample_posterior(data: CalibrationData) -> tuple[np.ndarray, ChainDiagnostics]:
+def sample_posterior(data: CalibrationData) -> tuple[np.ndarray, np.ndarray, ChainDiagnostics]:
     """Run emcee for ``settings.steps`` steps from prior draws; keep ``settings.kept_samples`` after burn-in.
 
     Returns
     -------
     samples : numpy.ndarray
-        (kept, n) posterior samples [SI], evenly thinned after a burn-in of 2 tau_max.
+        (kept, n) posterior samples of the parameters [SI], evenly thinned after a burn-in of 2 tau_max.
+    discrepancy : numpy.ndarray
+        (kept, 2) the discrepancy terms' relative standard deviations tau u at the same samples [-].
     diagnostics : ChainDiagnostics
+        Of the parameters and the discrepancy terms.
     """
     settings = data.settings
     rng = np.random.default_rng(settings.sampler_seed)
-    start = np.stack([p.draw(settings.walkers, rng) for p in settings.parameters], axis=1)
+    units = np.abs(rng.normal(size=(settings.walkers, len(DISCREPANCIES))))
+    start = np.column_stack([np.stack([p.draw(settings.walkers, rng) for p in settings.parameters], axis=1), np.log(units)])
     moves = [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
-    sampler = emcee.EnsembleSampler(settings.walkers, len(settings.parameters), log_probability, args=(data,),
+    sampler = emcee.EnsembleSampler(settings.walkers, start.shape[1], log_probability, args=(data,),
                                     vectorize=True, moves=moves)
     sampler.random_state = np.random.RandomState(settings.sampler_seed).get_state()
     began = time.perf_counter()
@@ -194,7 +224,8 @@ def sample_posterior(data: CalibrationData) -> tuple[np.ndarray, ChainDiagnostic
         acceptance=float(np.mean(sampler.acceptance_fraction)),
         seconds=seconds,
     )
-    return kept, diagnostics
+    theta, units = split_state(kept, settings)
+    return theta, units * settings.discrepancy_scales, diagnostics
 
 
 def parameter_summary(settings: CalibrationSettings, samples: np.ndarray) -> dict:
@@ -270,18 +301,96 @@ def identifiability(settings: CalibrationSettings, samples: np.ndarray) -> dict:
     }
 
 
-def predictive_quantiles(surrogate: PlateSurrogate, samples: np.ndarray, seed: int = 0, quantiles=(5, 50, 95)) -> dict:
-    """Quantiles of f_r [Hz] and w [m] of a plate over posterior samples, surrogate and FEM error included.
+def predictive_quantiles(surrogate: PlateSurrogate, samples: np.ndarray, discrepancy: np.ndarray, seed: int = 0,
+                         quantiles=(5, 50, 95)) -> dict:
+    """Quantiles of f_r [Hz] and w [m] of a plate over posterior samples: surrogate, FEM and model discrepancy included.
 
-    Each sample's ln f gets an independent normal error of the surrogate's ``frequency_sigma``, and
-    ln w one of the deflection surface's leave-one-out error.
+    Each sample's ln f gets independent normal errors of the surrogate's ``frequency_sigma`` and of the sample's
+    frequency discrepancy, and ln w one of the deflection surface's leave-one-out error and the sample's deflection
+    discrepancy (the deflection per volt's, taken for the deflection's).
+
+    Parameters
+    ----------
+    surrogate : PlateSurrogate
+    samples : numpy.ndarray
+        (n, k) posterior samples [SI].
+    discrepancy : numpy.ndarray
+        (n, 2) the samples' discrepancy terms, relative sds of ln f_r and ln g [-].
     """
     rng = np.random.default_rng(seed)
     bounds = np.asarray(surrogate.log_frequency.bounds)
     clipped = np.clip(samples, bounds[:, 0], bounds[:, 1])
-    log_f = surrogate.log_frequency(clipped) + rng.normal(0, surrogate.frequency_sigma, len(samples))
-    log_w = surrogate.log_deflection(clipped) + rng.normal(0, surrogate.log_deflection.loo_rms, len(samples))
+    n = len(samples)
+    log_f = surrogate.log_frequency(clipped) + rng.normal(0, np.hypot(surrogate.frequency_sigma, discrepancy[:, 0]), n)
+    log_w = surrogate.log_deflection(clipped) + rng.normal(0, np.hypot(surrogate.log_deflection.loo_rms, discrepancy[:, 1]), n)
     return {
         "frequency": np.exp(np.percentile(log_f, quantiles)),
         "deflection": np.exp(np.percentile(log_w, quantiles)),
     }
+
+
+CHECK_ALPHA = 0.01
+"""A calibration plate's measurement fails the posterior-predictive check when its two-sided p is below this [-]."""
+HALF_NORMAL_MEDIAN = 0.6745
+"""Median of a half-normal distribution of scale 1 [-]."""
+
+
+def predictive_check(data: CalibrationData, samples: np.ndarray, discrepancy: np.ndarray, names) -> dict:
+    """Posterior-predictive check of the calibration plates: can the parameters represent what they measured?
+
+    For each plate's resonance (and deflection per volt, when used), the posterior predictive without the
+    discrepancy term (surrogate at each posterior sample plus the measurement's, surrogate's and FEM's errors) is
+    compared with the measurement: z = (measured - mean) / sd in ln, two-sided p = 2 Phi(-|z|).  A measurement
+    with p below :data:`CHECK_ALPHA` is one the parameters cannot represent; the discrepancy term's posterior then
+    sits above its prior, and widens every prediction accordingly.
+
+    Parameters
+    ----------
+    data : CalibrationData
+    samples : numpy.ndarray
+        (n, k) posterior samples [SI].
+    discrepancy : numpy.ndarray
+        (n, 2) their discrepancy terms [-].
+    names : sequence of str
+        The plates' names.
+
+    Returns
+    -------
+    dict
+        ``plates`` (per plate: name -> {quantity: {z, p}}), ``passed``, ``worst`` (the smallest p and where),
+        ``discrepancy`` (per term: posterior median and p95 against the prior's median, relative sds) and
+        ``statement`` (one sentence).
+    """
+    clipped = np.clip(samples, data.settings.bounds[:, 0], data.settings.bounds[:, 1])
+    plates, worst = [], (1.0, None)
+    for k, (name, surrogate) in enumerate(zip(names, data.surrogates)):
+        terms = {"resonance frequency": (data.log_measured[k], surrogate.log_frequency(clipped), data.sigma[k])}
+        if k < len(data.deflections) and data.deflections[k] is not None:
+            terms["deflection per volt"] = (data.deflections[k][0], surrogate.log_point_deflection(clipped),
+                                            data.deflections[k][1])
+        record = {}
+        for quantity, (measured, predicted, sigma) in terms.items():
+            z = float((measured - np.mean(predicted)) / np.sqrt(np.var(predicted) + sigma**2))
+            p = float(2 * stats.norm.sf(abs(z)))
+            record[quantity] = {"z": z, "p": p}
+            worst = min(worst, (p, f"{name}: {quantity}"), key=lambda pair: pair[0])
+        plates.append({"name": name, **record})
+    scales = data.settings.discrepancy_scales
+    terms = {}
+    for j, term in enumerate(DISCREPANCIES):
+        if scales[j] > 0:
+            median, high = np.percentile(discrepancy[:, j], [50, 95])
+            terms[term] = {"median": float(median), "p95": float(high), "prior_median": float(HALF_NORMAL_MEDIAN * scales[j])}
+    passed = worst[0] >= CHECK_ALPHA
+    frequency = terms.get("frequency")
+    if passed:
+        statement = (f"the parameters represent what the calibration plates measured (posterior-predictive p >= "
+                     f"{worst[0]:.2g} for every measurement)")
+    else:
+        statement = (f"the parameters cannot represent what was measured: {worst[1]} lies at p = {worst[0]:.1e} of the "
+                     "posterior predictive")
+    if frequency is not None:
+        statement += (f"; the model-discrepancy term of the resonance, {100 * frequency['median']:.2g} % (posterior "
+                      f"median; its prior's {100 * frequency['prior_median']:.2g} %), widens every prediction")
+    return {"plates": plates, "passed": passed, "alpha": CHECK_ALPHA,
+            "worst": {"p": worst[0], "where": worst[1]}, "discrepancy": terms, "statement": statement}

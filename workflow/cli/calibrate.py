@@ -81,6 +81,9 @@ def _print_human(summary: dict) -> None:
           f"({d['steps_per_tau']:.0f} tau), acceptance {d['acceptance']:.2f}, "
           f"{'converged' if d['converged'] else 'NOT converged'}")
     print(f"  identifiability: {summary['identifiability']['statement']}")
+    print(f"  posterior-predictive check: {summary['check']['statement']}")
+    print(f"  a prediction's 90 % band contains {'; '.join(summary['intervals']['contains'])}; "
+          f"not {'; '.join(summary['intervals']['does_not_contain'])}")
     for name, where in summary["at_prior_bound"].items():
         print(f"  {name}: {where} (the prior, not the data, limits it)")
     print(f"  {summary['fem_evaluations']} FEM evaluations, {summary['wall_time_s']:.0f} s; calibration: {summary['calibration']}")

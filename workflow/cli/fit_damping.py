@@ -1,5 +1,6 @@
 """``tactile fit-damping``: Bayesian fit of Q(v) to interferometer logs."""
 
+import argparse
 import sys
 from functools import partial
 from pathlib import Path
@@ -7,7 +8,7 @@ from pathlib import Path
 from workflow.cli.options import add_force_option, add_json_flag, add_mixed_plates_option, bounded, limit_text, seed_option
 from workflow.damping.fit import fit_damping, fit_summary
 from workflow.damping.laws import SAMPLED_LAWS
-from workflow.damping.likelihood import ForwardModel
+from workflow.damping.likelihood import ForwardModel, default_forward_model
 from workflow.damping.logs import drop_short_sweeps, read_logs
 from workflow.execution.parallel import map_evaluations
 from workflow.models.limits import LIMITS
@@ -22,8 +23,8 @@ def register(subparsers) -> None:
         description="Infer the amplitude-dependent quality factor Q(v) from frequency sweeps at several "
         "drive voltages (interferometer logs, format in docs/log-format.md), with the resonance of each sweep, the "
         "drive-to-deflection gain and the noise as nuisance parameters.  Laws are screened at the MAP, "
-        "compared by PSIS-LOO and checked for misfit; the design uses the best law, the stacking mixture "
-        "or the flexible law (docs/damping.md).  Writes posterior.npz (what --damping reads), posterior.nc "
+        "compared by PSIS-LOO and checked for misfit; the design uses the best law, the laws the data do not tell "
+        "apart mixed in equal shares, or the flexible law (docs/damping.md).  Writes posterior.npz (what --damping reads), posterior.nc "
         "(ArviZ), fit.json and figures into --out.",
     )
     parser.add_argument("logs", nargs="+", metavar="LOG.csv",
@@ -40,11 +41,13 @@ def register(subparsers) -> None:
     seed_option(parser, 0, "random seed of the walkers and the sampler")
     parser.add_argument("--max-steps", type=bounded(int, *LIMITS["damping.max_steps"]), default=20000,
                         help=f"cap on each chain's length, {limit_text('damping.max_steps')} (default: 20000)")
-    parser.add_argument("--softening", action="store_true",
+    parser.add_argument("--softening", action=argparse.BooleanOptionalAction, default=None,
                         help="fit the resonance's amplitude softening f_r0 (1 - kappa v^2), each sweep solved in its "
-                        "measuring order (up and down sweeps differ when the resonance folds over)")
-    parser.add_argument("--drift", action="store_true",
-                        help="fit a drift rate of the resonance within each sweep (needs timestamp_s)")
+                        "measuring order (up and down sweeps differ when the resonance folds over); default: fitted "
+                        "whenever the logs have sweeps (its prior includes none), --no-softening leaves it out")
+    parser.add_argument("--drift", action=argparse.BooleanOptionalAction, default=None,
+                        help="fit a drift rate of the resonance within each sweep (needs timestamp_s); default: fitted "
+                        "whenever the sweep logs have timestamp_s, --no-drift leaves it out")
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     add_json_flag(parser)
     parser.set_defaults(handler=run)
@@ -58,7 +61,9 @@ def run(args) -> dict:
     laws = SAMPLED_LAWS if args.law == "all" else (args.law,)
     with output_folder(args.out, FIT_OUTPUTS, force=args.force) as out:
         noise = stated_noise(args.logs)
-        forward = ForwardModel(softening=args.softening, drift=args.drift)
+        automatic = default_forward_model(log)
+        forward = ForwardModel(softening=automatic.softening if args.softening is None else args.softening,
+                               drift=automatic.drift if args.drift is None else args.drift)
         fit = fit_damping(log, laws=laws, seed=args.seed, max_steps=args.max_steps, progress=True, forward=forward,
                           stated_noise=noise, mapper=partial(map_evaluations, description="laws sampled"))
         summary = dict(fit_summary(fit), files=write_fit(fit, out, figures=not args.no_figures, protect=input_paths))
@@ -91,9 +96,17 @@ def _print_human(summary: dict) -> None:
         print(f"  checks {name:10s} {'passed' if check['passed'] else 'FAILED'}: binned chi2 p {check['binned_chi2_p']:.2g}, "
               f"runs p {check['runs_test_combined_p']:.2g}, flexible-law likelihood ratio p "
               f"{_number(check['flexible_law_likelihood_ratio_p'])}" + "".join(f"; {note}" for note in check["notes"]))
+    for name, effect in summary["effects"].items():
+        state = ("not fitted" + (f" ({effect['not_fitted_because']})" if "not_fitted_because" in effect else "")
+                 if not effect["fitted"]
+                 else "fitted, " + ("shown by the logs" if effect["detected"] else "not resolved by the logs") + f" ({effect['rule']})")
+        print(f"  {name}: {state}")
     print(f"  velocity convention: {summary['velocity_convention']}")
-    print(f"  preferred by PSIS-LOO: {summary['law']}; design uses: {summary['selection']} ({summary['design_law']}); "
+    shares = ", ".join(f"{name} {share:.2g}" for name, share in summary["shares"].items())
+    print(f"  preferred by PSIS-LOO: {summary['law']}; design uses: {summary['selection']} ({shares}); "
           f"posterior: {summary['files']['posterior']}")
+    interval = summary["q_of_v"]["interval"]
+    print(f"  the 90 % band of Q(v) contains {'; '.join(interval['contains'])}; not {'; '.join(interval['does_not_contain'])}")
 
 
 def _number(value) -> str:

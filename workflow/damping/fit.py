@@ -9,10 +9,10 @@ the tau estimate changed by less than 1 % since the previous check (emcee's docu
 criterion), or until the step cap.
 
 :func:`fit_damping` screens the laws at their MAP (BIC within :data:`SCREEN_BIC` of the
-best are sampled), compares the sampled laws by PSIS-LOO (:mod:`workflow.damping.comparison`),
-checks the best law's misfit (:mod:`workflow.damping.checks`) and picks the answer the
-design uses: the best law, the stacking mixture when laws are close, or the flexible law
-when the best law fails its checks.  BIC at the MAP is also given for every law.
+best are sampled, and the flexible law always), compares the sampled laws by PSIS-LOO
+(:mod:`workflow.damping.comparison`), checks their misfit (:mod:`workflow.damping.checks`) and picks
+the answer the design uses: the best law, the laws the data do not tell apart mixed in equal shares, or
+the flexible law when the best law fails its checks.  BIC at the MAP is also given for every law.
 
 Moves: differential evolution (80 %) and its snooker variant (20 %), as the emcee
 documentation suggests for roughly Gaussian posteriors; on the synthetic campaign their
@@ -30,15 +30,16 @@ from scipy import fft, optimize
 from threadpoolctl import threadpool_limits
 
 from workflow.damping.checks import MisfitCheck, misfit_check
-from workflow.damping.comparison import CRITERION, LawComparison, compare_laws
+from workflow.damping.comparison import CLOSE_DSE, CRITERION, LawComparison, answer_shares, compare_laws
 from workflow.damping.inference_data import law_inference_data, loo_draws
-from workflow.damping.laws import LAWS, SAMPLED_LAWS, MonotoneSpline, parameter_names
+from workflow.damping.laws import LAWS, SAMPLED_LAWS, MonotoneSpline, ThresholdLoss, parameter_names
 from workflow.damping.likelihood import (
     FitData,
     ForwardModel,
     ParameterLayout,
     WarmStarts,
     decay_estimates,
+    default_forward_model,
     fit_data,
     in_prior,
     initial_effects,
@@ -213,9 +214,11 @@ class DampingFit:
     checks : dict
         Law name -> :class:`~workflow.damping.checks.MisfitCheck` of each sampled law.
     selection : str
-        What the design uses: ``"best"`` (the preferred law), ``"stacking"`` (the
-        stacking-weighted mixture) or ``"fallback"`` (the flexible law, the preferred law
-        having failed its checks).
+        What the design uses: ``"best"`` (the preferred law), ``"mixture"`` (the laws the data do not tell
+        apart, in equal shares: :func:`~workflow.damping.comparison.answer_shares`) or ``"fallback"`` (the
+        flexible law, the preferred law having failed its checks).
+    shares : dict
+        Law name -> its share of the answer [-].
     answer : DampingPosterior
         The posterior the design uses (``posterior.npz``).
     agreement : RingdownAgreement or None
@@ -230,6 +233,7 @@ class DampingFit:
     comparison: LawComparison
     checks: Dict[str, MisfitCheck]
     selection: str
+    shares: Dict[str, float]
     answer: DampingPosterior
     agreement: Optional["RingdownAgreement"] = None
 
@@ -288,6 +292,7 @@ def initial_guess(data: FitData, sweeps: SweepEstimates) -> Tuple[np.ndarray, np
     start["alpha"], scale["alpha"] = slope, max(0.1 * slope, 1e-4 * alpha_upper)
     v_max = float(np.max(data.velocity))
     start["v_t"], scale["v_t"] = 0.1 * v_max, 0.05 * v_max
+    start["ln_onset"], scale["ln_onset"] = np.log(ThresholdLoss.onset), 0.3
     fixed = dict(layout.fixed)
     knots = MonotoneSpline.knots(fixed.get("v_top", v_max), fixed.get("v_first"))
     for name, rise in zip(MonotoneSpline.INCREMENTS, slope * np.diff(knots**2)):
@@ -629,7 +634,7 @@ def fit_damping(
     max_seconds: Optional[float] = None,
     progress: bool = False,
     n_walkers: Optional[int] = None,
-    forward: ForwardModel = ForwardModel(),
+    forward: Optional[ForwardModel] = None,
     stated_noise: Optional[float] = None,
     chain_taus: float = COMPARISON_TAUS,
     mapper: Optional[Callable] = None,
@@ -643,7 +648,8 @@ def fit_damping(
         resonance are dropped (:func:`~workflow.damping.logs.drop_short_sweeps`).
     laws : sequence of str
         Candidate laws (keys of :data:`~workflow.damping.laws.LAWS`); those within
-        :data:`SCREEN_BIC` of the best BIC at the MAP are sampled.
+        :data:`SCREEN_BIC` of the best BIC at the MAP are sampled, and the flexible law whenever it is a
+        candidate (it nests the others up to its knots: the measure of what their shapes leave out).
     seed : int
     max_steps : int
         Cap on each chain [steps].
@@ -652,8 +658,9 @@ def fit_damping(
     progress : bool
     n_walkers : int, optional
         Walkers per chain (default max(32, 2 D + 2)).
-    forward : ForwardModel
-        Softening and drift fitted beyond Q(v) (default: neither).
+    forward : ForwardModel, optional
+        Softening and drift fitted beyond Q(v); default
+        :func:`~workflow.damping.likelihood.default_forward_model`: both when the logs can show them.
     stated_noise : float, optional
         The instrument's relative velocity noise [-], for the misfit check.
     chain_taus : float
@@ -665,12 +672,13 @@ def fit_damping(
     Returns
     -------
     DampingFit
-        ``preferred`` has the highest elpd_loo; ``answer`` is the preferred law, the
-        stacking mixture (a law within :data:`~workflow.damping.comparison.CLOSE_DSE` dse) or,
-        when the preferred law fails :func:`~workflow.damping.checks.misfit_check`, the
+        ``preferred`` has the highest elpd_loo; ``answer`` is the preferred law, the laws within
+        :data:`~workflow.damping.comparison.CLOSE_DSE` dse of it that pass their checks mixed in equal
+        shares, or, when the preferred law fails :func:`~workflow.damping.checks.misfit_check`, the
         flexible law (sampled then if it was not).
     """
     log = drop_short_sweeps(log)
+    forward = default_forward_model(log) if forward is None else forward
     sweeps = sweep_estimates(log)
     maps = {name: map_fit(log, name, sweeps, forward) for name in dict.fromkeys((*laws, *LAWS))}
     n_points = len(log.velocity) + (0 if log.ringdown is None else len(log.ringdown.velocity))
@@ -698,7 +706,7 @@ def fit_damping(
         )
         return misfit_check(fits[name].samples, fits[name].data, stated_noise, seed, alternative)
 
-    fits = sample(screened)
+    fits = sample(list(dict.fromkeys(screened + [name for name in laws if name == FALLBACK_LAW])))
     checks = {name: check(name) for name in fits}
     comparison = compare_laws({name: f.inference_data for name, f in fits.items()})
     preferred = comparison.best
@@ -709,14 +717,14 @@ def fit_damping(
     for name in criteria:
         criteria[name]["sampled"] = name in fits
     if not checks[preferred].passed and preferred != FALLBACK_LAW:
-        selection, answer = "fallback", fits[FALLBACK_LAW].posterior()
-    elif comparison.selection == "stacking":
-        posteriors = {name: f.posterior() for name, f in fits.items()}
-        selection, answer = "stacking", stacked_posterior(posteriors, comparison.weights, STACKED_DRAWS, seed)
+        selection, shares = "fallback", {FALLBACK_LAW: 1.0}
     else:
-        selection, answer = "best", fits[preferred].posterior()
+        shares = answer_shares(comparison, {name: check.passed for name, check in checks.items()})
+        selection = "mixture" if len(shares) > 1 else "best"
+    posteriors = {name: fits[name].posterior() for name in shares}
+    answer = posteriors[next(iter(shares))] if len(shares) == 1 else stacked_posterior(posteriors, shares, STACKED_DRAWS, seed)
     agreement = ringdown_agreement(log, preferred, forward, seed) if log.n_sweeps and log.ringdown is not None else None
-    return DampingFit(log, sweeps, fits, criteria, preferred, comparison, checks, selection, answer, agreement)
+    return DampingFit(log, sweeps, fits, criteria, preferred, comparison, checks, selection, shares, answer, agreement)
 
 
 AGREEMENT_Z = 3.0
@@ -791,7 +799,7 @@ def ringdown_agreement(log: CampaignLog, law_name: str, forward: ForwardModel = 
 
 
 _UNITS = {"q0": "-", "gain": "m/V", "sigma_rel": "-", "sigma_abs": "m/s", "kappa": "s^2/m^2", "drift_rate": "Hz/s",
-          "sigma_decay_rel": "-", "sigma_decay_abs": "m/s", "v_t": "m/s", **{d: "-" for d in MonotoneSpline.INCREMENTS}}
+          "sigma_decay_rel": "-", "sigma_decay_abs": "m/s", "v_t": "m/s", "onset": "-", **{d: "-" for d in MonotoneSpline.INCREMENTS}}
 _ALPHA_UNITS = {"quadratic": "s^2/m^2", "linear": "s/m", "threshold": "s^2/m^2"}
 
 
@@ -858,6 +866,58 @@ def ringdown_summary(fit: DampingFit, parameters: dict) -> Optional[dict]:
     }
 
 
+SOFTENING_DETECTED = 0.25
+"""Softening is detected when its posterior's 5 % quantile exceeds this share of its median [-]: a posterior piled
+against kappa = 0 (no softening) has 0.09, one clear of zero by three standard errors 0.5 or more."""
+
+
+def effects_summary(fit: DampingFit, parameters: dict) -> dict:
+    """Softening and drift: whether the fit modelled them and whether the logs show them (``parameters``: the preferred
+    law's :func:`parameter_summary`).  Softening is detected by :data:`SOFTENING_DETECTED`; a drift when its 90 %
+    interval excludes zero."""
+    forward = fit.best.data.layout.forward
+    kappa, drift = parameters.get("kappa"), parameters.get("drift_rate")
+    return {
+        "softening": {"fitted": forward.softening,
+                      "detected": None if kappa is None else bool(kappa["p05"] > SOFTENING_DETECTED * kappa["median"]),
+                      "rule": f"kappa's 5 % quantile above {SOFTENING_DETECTED:g} of its median"},
+        "drift": {"fitted": forward.drift,
+                  "detected": None if drift is None else bool(drift["p05"] > 0 or drift["p95"] < 0),
+                  "rule": "the drift rate's 90 % interval excludes zero",
+                  **({} if forward.drift else {"not_fitted_because": _drift_left_out(fit.log)})},
+    }
+
+
+def _drift_left_out(log: CampaignLog) -> str:
+    """Why a fit did not model the drift within the sweeps (:func:`default_forward_model`)."""
+    return "the logs have no timestamp_s" if log.timestamp is None else "left out by the caller (--no-drift)"
+
+
+def band_contents(fit: DampingFit) -> dict:
+    """What the 90 % band of Q(v) (``q_of_v``, and the draws the design uses) contains and what it does not."""
+    laws = ", ".join(f"{name} {share:.2g}" for name, share in fit.shares.items())
+    forward = fit.best.data.layout.forward
+    effects = [name for name, fitted in (("the softening", forward.softening), ("the drift", forward.drift)) if fitted]
+    return {
+        "contains": [
+            "the measurement noise (fitted: relative and absolute)",
+            "the posterior of each law's parameters with the nuisance parameters (gain, each sweep's resonance"
+            + "".join(f", {name}" for name in effects) + ")",
+            f"the law's shape: the laws the data do not tell apart (PSIS-LOO within {CLOSE_DSE:g} dse) in equal shares "
+            f"({laws}); the flexible law is always among the candidates",
+        ],
+        "does_not_contain": [
+            "Q(v) outside the measured velocities (the laws extrapolate)",
+            "another plate's Q(v): the fit is of the plate measured",
+            "the drift of Q itself with temperature or time beyond the resonance's drift",
+            "a shift of the resonance that follows the amplitude with a lag, as the plate's heating while it is driven "
+            "(a steady drift rate cannot follow it; on the simulated bench it made Q 1-5 % high, outside the band: "
+            "docs/damping.md#coverage-over-truths-the-fit-does-not-contain)",
+            "a measurement point or a velocity calibration other than the logs say",
+        ],
+    }
+
+
 def fit_summary(fit: DampingFit) -> dict:
     """The JSON of ``tactile fit-damping`` (docs/cli.md): the answer, the preferred law, the comparison and the checks."""
     best = fit.best
@@ -868,6 +928,7 @@ def fit_summary(fit: DampingFit) -> dict:
         "criterion": CRITERION,
         "preferred": fit.preferred,
         "selection": fit.selection,
+        "shares": fit.shares,
         "weights": fit.comparison.weights,
         "loo": fit.comparison.laws,
         "pareto_k_warning": fit.comparison.pareto_warning,
@@ -882,7 +943,9 @@ def fit_summary(fit: DampingFit) -> dict:
         "warning": fit.warning,
         "checks": {name: check.summary() for name, check in fit.checks.items()},
         "parameters": parameters,
-        "q_of_v": {"v_m_s": velocity, "q_p05": q05, "q_p50": q50, "q_p95": q95, "law": fit.answer.law_name},
+        "shares": fit.shares,
+        "q_of_v": {"v_m_s": velocity, "q_p05": q05, "q_p50": q50, "q_p95": q95, "law": fit.answer.law_name,
+                   "interval": band_contents(fit)},
         "diagnostics": diagnostics_summary(best),
         "comparison": comparison,
         "other_laws": {
@@ -896,6 +959,7 @@ def fit_summary(fit: DampingFit) -> dict:
             "half_power_q": [None if not np.isfinite(q) else float(q) for q in fit.sweeps.quality_factor],
         },
         "forward_model": {"softening": best.data.layout.forward.softening, "drift": best.data.layout.forward.drift},
+        "effects": effects_summary(fit, parameters),
         "ringdown": ringdown_summary(fit, parameters),
         "velocity_convention": VELOCITY_CONVENTION,
         "n_points": int(len(fit.log.velocity)),

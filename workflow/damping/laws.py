@@ -89,13 +89,14 @@ def _softplus(x):
 
 @dataclass(frozen=True)
 class ThresholdLoss:
-    """Q flat at Q0 below a threshold velocity v_t and falling above it, with a smooth onset.
+    """Q flat at Q0 below a threshold velocity v_t and falling above it, with a smooth onset of its own width.
 
-    1/Q(v) = 1/Q0 + alpha (s softplus((|v| - v_t) / s))^2,  s = ONSET v_t,
+    1/Q(v) = 1/Q0 + alpha (s softplus((|v| - v_t) / s))^2,  s = onset v_t,
 
     softplus(x) = ln(1 + e^x).  Far above v_t the extra loss is alpha (|v| - v_t)^2 (the
     quadratic law shifted to start at v_t); far below it is nil; the onset is spread over
-    about ``s`` = 0.2 v_t.  v_t -> 0 gives back :class:`QuadraticLoss`.
+    about ``s`` = ``onset`` v_t, a fitted share (:data:`ONSET_RANGE`) whose default, 0.2, was the law's fixed
+    value before issue 29.  v_t -> 0 gives back :class:`QuadraticLoss`.
 
     Attributes
     ----------
@@ -105,14 +106,18 @@ class ThresholdLoss:
         Loss coefficient above the threshold [s^2/m^2], >= 0.
     v_t : float or array
         Threshold velocity amplitude [m/s], > 0.
+    onset : float or array
+        Width of the onset relative to the threshold, s / v_t [-], > 0.
     """
 
     q0: float
     alpha: float
     v_t: float
+    onset: float = 0.2
     name: ClassVar[str] = "threshold"
-    ONSET: ClassVar[float] = 0.2
-    """Width of the onset relative to the threshold, s / v_t [-]."""
+    ONSET_RANGE: ClassVar[tuple] = (0.05, 1.0)
+    """Range of the onset width the fit explores, s / v_t [-]: from a sharp corner to an onset spread over the whole
+    threshold."""
 
     def quality_factor(self, velocity):
         """Q at the peak velocity amplitude ``velocity`` [m/s] -> [-]."""
@@ -120,7 +125,7 @@ class ThresholdLoss:
 
     def loss(self, velocity):
         """Loss factor 1/Q at ``velocity`` [m/s] -> [-]."""
-        width = self.ONSET * np.maximum(np.asarray(self.v_t, dtype=float), 1e-300)
+        width = np.asarray(self.onset, dtype=float) * np.maximum(np.asarray(self.v_t, dtype=float), 1e-300)
         excess = width * _softplus((np.abs(velocity) - np.asarray(self.v_t)) / width)
         return 1.0 / np.asarray(self.q0) + np.asarray(self.alpha) * np.square(excess)
 

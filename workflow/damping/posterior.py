@@ -15,7 +15,7 @@ from typing import Dict
 
 import numpy as np
 
-from workflow.damping.laws import LAWS, POSTERIOR_LAWS, STACKED_COMPONENTS, StackedLaws, parameter_names
+from workflow.damping.laws import LAWS, POSTERIOR_LAWS, STACKED_COMPONENTS, StackedLaws, ThresholdLoss, parameter_names
 from workflow.damping.likelihood import Q0_RANGE
 from workflow.errors import InputFileError
 from workflow.inputfiles import MAX_POSTERIOR_BYTES, open_input
@@ -70,7 +70,7 @@ class DampingPosterior:
         return POSTERIOR_LAWS[self.law_name](**self.parameters)
 
 
-NEUTRAL_PARAMETERS = {"q0": 1e3, "alpha": 0.0, "v_t": 1.0, "v_top": 1.0, "v_first": 0.5}
+NEUTRAL_PARAMETERS = {"q0": 1e3, "alpha": 0.0, "v_t": 1.0, "onset": 0.2, "v_top": 1.0, "v_first": 0.5}
 """Placeholder values (a constant Q of 1000; increments 0) for the columns of a law a stacked posterior does not mix."""
 
 
@@ -94,12 +94,11 @@ def stacked_posterior(posteriors: Dict[str, DampingPosterior], weights: Dict[str
     component = rng.choice(len(names), size=n, p=probability / probability.sum())
     columns = {"component": np.array([STACKED_COMPONENTS.index(names[i]) for i in component], dtype=float)}
     for name in STACKED_COMPONENTS:
+        own = posteriors.get(name)
+        rows = None if own is None else rng.integers(len(next(iter(own.parameters.values()))), size=n)
         for p in parameter_names(LAWS[name]):
-            if name in posteriors:
-                samples = posteriors[name].parameters[p]
-                columns[f"{name}_{p}"] = samples[rng.integers(len(samples), size=n)]
-            else:
-                columns[f"{name}_{p}"] = np.full(n, NEUTRAL_PARAMETERS.get(p, 0.0))
+            # one posterior sample per draw for all of a law's parameters: their correlations are the posterior's
+            columns[f"{name}_{p}"] = np.full(n, NEUTRAL_PARAMETERS.get(p, 0.0)) if own is None else own.parameters[p][rows]
     return DampingPosterior(StackedLaws.name, columns)
 
 
@@ -152,14 +151,31 @@ def load_posterior(path) -> DampingPosterior:
     if law_name not in POSTERIOR_LAWS:
         raise InputFileError(f"{path}: unknown Q(v) law {law_name!r}; expected one of {', '.join(POSTERIOR_LAWS)}")
     expected = list(parameter_names(POSTERIOR_LAWS[law_name]))
-    if sorted(names) != sorted(expected) or samples.ndim != 2 or samples.shape[1] != len(names) or len(samples) == 0:
+    if samples.ndim != 2 or samples.shape[1] != len(names) or len(samples) == 0:
+        raise InputFileError(f"{path}: parameters {names} do not match the {law_name} law ({expected})")
+    samples, names = _with_defaults(samples, names, law_name)
+    if sorted(names) != sorted(expected):
         raise InputFileError(f"{path}: parameters {names} do not match the {law_name} law ({expected})")
     if not np.all(np.isfinite(samples)):
         raise InputFileError(f"{path}: non-finite posterior samples")
-    ranges = {"q0": Q0_RANGE, "alpha": (0.0, MAX_ALPHA), "component": (0, len(STACKED_COMPONENTS) - 1)}
+    ranges = {"q0": Q0_RANGE, "alpha": (0.0, MAX_ALPHA), "onset": ThresholdLoss.ONSET_RANGE,
+              "component": (0, len(STACKED_COMPONENTS) - 1)}
     for i, name in enumerate(names):
         own = name.split("_", 1)[1] if law_name == StackedLaws.name and name != "component" else name
         low, high = ranges.get(own, (-np.inf, np.inf))
         if not np.all((samples[:, i] >= low) & (samples[:, i] <= high)):
             raise InputFileError(f"{path}: posterior samples of {name} outside the accepted range {low:g} to {high:g}")
     return DampingPosterior(law_name, {name: samples[:, i] for i, name in enumerate(names)}, source=str(path))
+
+
+ADDED_PARAMETERS = {"onset": ThresholdLoss.onset}
+"""Parameters added to a law after posterior files were written without them, and the value those files imply: the
+threshold law's onset width was fixed at 0.2 of v_t before it was fitted (issue 29)."""
+
+
+def _with_defaults(samples: np.ndarray, names: list, law_name: str) -> tuple:
+    """``samples`` and ``names`` completed by the :data:`ADDED_PARAMETERS` a file of an earlier version lacks."""
+    own = (lambda name: name.split("_", 1)[1]) if law_name == StackedLaws.name else (lambda name: name)
+    missing = [name for name in parameter_names(POSTERIOR_LAWS[law_name]) if name not in names and own(name) in ADDED_PARAMETERS]
+    columns = [np.full((len(samples), 1), ADDED_PARAMETERS[own(name)]) for name in missing]
+    return np.hstack([samples, *columns]), names + missing

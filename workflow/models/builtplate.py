@@ -8,7 +8,7 @@ plays a built plate.  :class:`BuiltPlate` is the nominal geometry a built-plate 
 metadata (docs/log-format.md), parsed and checked here, written back by :meth:`BuiltPlate.metadata`.
 """
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -45,10 +45,14 @@ def scaled_material(material: Material, factor: float) -> Material:
 class PlateDeviations:
     """How a built plate differs from its nominal design.
 
+    The first five are the deviations the calibration's parameters describe (or, for the ceramics' placement, the
+    drive); the others are deviations no calibration parameter spans (issue 29: what a calibration must survive).
+
     Attributes
     ----------
     glue_thickness : float
-        Epoxy bond under each ceramic [m] (replaces the nominal plate's bond).
+        Epoxy bond under each ceramic [m] (replaces the nominal plate's bond); with ``glue_thickness_factors``
+        its mean.
     ceramic_modulus_factor : float
         Ceramic stiffness c^E over the record's [-] (d kept, see :func:`scaled_ceramic`).
     resonator_modulus_factor : float
@@ -60,6 +64,19 @@ class PlateDeviations:
         keeps the plate symmetric, so the offset acts on the drive only: every ceramic then
         covers a shifted stretch of the sinusoidal mode, and the modal drive falls by
         :meth:`drive_factor` (the modes it would excite, antisymmetric in x, are not modelled).
+    glue_modulus_factor : float
+        The bond's Young's modulus over its record's [-]: below 1 for a bond only partly cured.
+    glue_thickness_factors : tuple of float
+        Bond thickness under each ceramic over the mean, from the centre ceramic outwards (mirrored on the
+        other half: the quarter-plate FEM is symmetric) [-]; empty: uniform (:class:`~workflow.models.materials.VaryingGlue`).
+    width_offset : float
+        Built width minus nominal width [m].
+    ceramic_length_offset : float
+        Built ceramic length minus nominal l_p = lambda/2 - delta [m] (the gaps shrink by as much: the ceramics stay
+        centred on the antinodes).
+    ceramic_record : str or None
+        The material record the ceramics were actually made of (e.g. an anisotropic ``PZT-5A``), before
+        ``ceramic_modulus_factor``; None: the nominal plate's.
     """
 
     glue_thickness: float = 0.0
@@ -67,12 +84,21 @@ class PlateDeviations:
     resonator_modulus_factor: float = 1.0
     resonator_thickness_offset: float = 0.0
     ceramic_offset: float = 0.0
+    glue_modulus_factor: float = 1.0
+    glue_thickness_factors: tuple = ()
+    width_offset: float = 0.0
+    ceramic_length_offset: float = 0.0
+    ceramic_record: str | None = None
 
     def __post_init__(self):
         for name, key in DEVIATION_LIMITS.items():
-            reason = problem(key, getattr(self, name), si=True, name=name)
-            if reason:
-                raise ValueError(reason)
+            for value in np.ravel(getattr(self, name)):
+                reason = problem(key, value, si=True, name=name)
+                if reason:
+                    raise ValueError(reason)
+        if self.ceramic_record is not None and self.ceramic_record not in materials.ceramic_names():
+            raise ValueError(f"ceramic_record {self.ceramic_record!r} is not a ceramic record; known: "
+                             f"{', '.join(materials.ceramic_names())}")
 
     def drive_factor(self, wavelength: float) -> float:
         """cos(2 pi delta / lambda) [-]: the modal drive of ceramics shifted by delta along a mode of wavelength lambda [m].
@@ -83,14 +109,23 @@ class PlateDeviations:
         return float(np.cos(2 * np.pi * self.ceramic_offset / wavelength))
 
     def metadata(self) -> dict:
-        """Flat ``deviation_*`` items in the units of the logs (um, mm) for a simulated log's header."""
-        return {
+        """Flat ``deviation_*`` items in the units of the logs (um, mm) for a simulated log's header (the deviations
+        beyond the calibration's parameters only when present)."""
+        items = {
             "deviation_glue_um": self.glue_thickness / UM,
             "deviation_ceramic_modulus_factor": self.ceramic_modulus_factor,
             "deviation_resonator_modulus_factor": self.resonator_modulus_factor,
             "deviation_hi_offset_um": self.resonator_thickness_offset / UM,
             "deviation_ceramic_offset_mm": self.ceramic_offset / MM,
         }
+        beyond = {
+            "deviation_glue_modulus_factor": (self.glue_modulus_factor, 1.0),
+            "deviation_glue_thickness_factors": (",".join(f"{f:g}" for f in self.glue_thickness_factors), ""),
+            "deviation_width_offset_mm": (self.width_offset / MM, 0.0),
+            "deviation_ceramic_length_offset_mm": (self.ceramic_length_offset / MM, 0.0),
+            "deviation_ceramic_record": (self.ceramic_record, None),
+        }
+        return {**items, **{key: value for key, (value, nominal) in beyond.items() if value != nominal}}
 
 
 DEVIATION_LIMITS = {
@@ -99,8 +134,12 @@ DEVIATION_LIMITS = {
     "resonator_modulus_factor": "modulus_factor",
     "resonator_thickness_offset": "hi_offset_um",
     "ceramic_offset": "ceramic_offset_mm",
+    "glue_modulus_factor": "glue_modulus_factor",
+    "glue_thickness_factors": "glue_thickness_factor",
+    "width_offset": "width_offset_mm",
+    "ceramic_length_offset": "ceramic_length_offset_mm",
 }
-""":class:`PlateDeviations` field -> its key in :data:`~workflow.models.limits.LIMITS`."""
+""":class:`PlateDeviations` field -> its key in :data:`~workflow.models.limits.LIMITS` (each value of a tuple checked)."""
 
 
 DEMONSTRATION_DEVIATIONS = PlateDeviations(
@@ -117,18 +156,28 @@ not fitted to the paper)."""
 
 
 def deviated_plate(plate: Plate, deviations: PlateDeviations) -> Plate:
-    """The plate as built: ``plate`` with the bond, moduli and resonator thickness of ``deviations``.
+    """The plate as built: ``plate`` with the bond, materials, thickness, width and ceramic length of ``deviations``.
 
     Raises
     ------
     GeometryError
-        If the resonator thickness offset leaves no resonator.
+        If the resonator thickness offset leaves no resonator, or the ceramics would overlap.
     """
+    ceramic = plate.ceramic if deviations.ceramic_record is None else materials.ceramic(deviations.ceramic_record)
+    glue = plate.glue if deviations.glue_modulus_factor == 1.0 else scaled_material(plate.glue, deviations.glue_modulus_factor)
+    if deviations.glue_thickness_factors:
+        profile = tuple(float(f) for f in deviations.glue_thickness_factors)
+        outwards = np.abs(plate.ceramic_indices) // 2
+        glue = materials.VaryingGlue(**{f.name: getattr(glue, f.name) for f in fields(materials.Glue)},
+                                     thickness_factors=tuple(profile[min(k, len(profile) - 1)] for k in outwards))
     return plate.with_(
         glue_thickness=deviations.glue_thickness,
-        ceramic=scaled_ceramic(plate.ceramic, deviations.ceramic_modulus_factor),
+        glue=glue,
+        ceramic=scaled_ceramic(ceramic, deviations.ceramic_modulus_factor),
         resonator=scaled_material(plate.resonator, deviations.resonator_modulus_factor),
         resonator_thickness=plate.resonator_thickness + deviations.resonator_thickness_offset,
+        width=plate.width + deviations.width_offset,
+        gap=plate.gap - deviations.ceramic_length_offset,
     )
 
 

@@ -35,6 +35,10 @@ LIMITS = {
     "modulus_factor": (0.5, 1.5),
     "hi_offset_um": (-1000.0, 1000.0),
     "ceramic_offset_mm": (-10.0, 10.0),
+    "glue_modulus_factor": (0.01, 1.5),
+    "glue_thickness_factor": (0.1, 10.0),
+    "width_offset_mm": (-10.0, 10.0),
+    "ceramic_length_offset_mm": (-5.0, 5.0),
     "frequency_hz": (100.0, 10e6),
     "drive_voltage_v": (0.0, 1000.0),
     "velocity_m_s": (0.0, 10.0),
@@ -96,7 +100,9 @@ for _key, _quantity in (
 Physical quantities: wavelength, resonator and ceramic thickness, width [mm] (any plate a lab builds;
 the design space of Table 1 is narrower, :func:`~workflow.models.plate.check_design_space`), bond
 [um], modulus factors [-] (ceramic c^E, resonator and bond E over their records'), resonator thickness
-offset [um] and ceramic offset along x [mm] of a built plate, drive and resonance frequency [Hz] (a
+offset [um] and ceramic offset along x [mm] of a built plate, and the simulator's deviations beyond the
+calibration's parameters: the modulus of a bond only partly cured over its record's [-], the bond's local thickness
+over its mean [-], the width's and the ceramics' length error [mm], drive and resonance frequency [Hz] (a
 tactile plate works at tens of kHz; a value in kHz is refused), peak voltage across the ceramics [V],
 peak velocity [m/s] (above any vibrometer decoder's range), ring-down decay time [s] (the longest
 record), plate temperature [deg C], quality factor [-], amplifier gain [V/V], amplitude softening

@@ -108,6 +108,29 @@ class Glue(Material):
 
 
 @dataclass(frozen=True, kw_only=True)
+class VaryingGlue(Glue):
+    """A bond whose thickness differs from ceramic to ceramic (docs/instruments.md, "Built plates").
+
+    The FEM keeps one glue layer of the plate's ``glue_thickness`` (the mean) and gives the bond under ceramic k the
+    modulus E / f_k: a layer f_k times as thick has that compliance, through the thickness and in shear.  The bond's
+    mass (under 1 % of a plate's) and the small shift in height of the ceramic above a thicker bond are not modelled.
+
+    Attributes
+    ----------
+    thickness_factors : tuple of float
+        Local bond thickness over the layer's, one per ceramic in the order of ``Plate.ceramic_centres`` [-].
+    """
+
+    thickness_factors: tuple
+
+    def under_ceramic(self, index: int) -> Material:
+        """The isotropic bond under ceramic ``index`` (of ``Plate.ceramic_centres``): E / f_index [Pa]."""
+        factor = self.thickness_factors[index]
+        return Material(f"{self.name} under ceramic {index}", self.youngs_modulus / factor, self.density,
+                        self.poisson_ratio, source=self.source)
+
+
+@dataclass(frozen=True, kw_only=True)
 class PiezoMaterial(Material):
     """A poled piezo-ceramic, poling axis z, driven through the transverse (31) effect.
 

@@ -7,7 +7,8 @@ For each stock resonator thickness h_i (docs/calibration.md, "Robust design"):
    posterior's central 99 % and three manufacturing standard deviations, lambda around the
    beam model's estimate;
 2. Monte Carlo draws: posterior samples plus manufacturing scatter (normal, standard deviations
-   :class:`Tolerances`) plus the surrogate's and the FEM's errors; lambda is solved so that
+   :class:`Tolerances`) plus the surrogate's and the FEM's errors and the calibration's model discrepancy;
+   lambda is solved so that
    the quantile of f_r at level (1 - reliability) minus :data:`SOLVE_MARGIN_SE` Monte Carlo
    standard errors equals f_min (conservative by the solve's own sampling error);
 3. the achieved probability from fresh draws (its Monte Carlo standard error given), and one FEM
@@ -162,15 +163,18 @@ def posterior_columns(calibration: Calibration, plate: Plate) -> np.ndarray:
 
 
 def scattered_draws(calibration: Calibration, plate: Plate, tolerances: Tolerances, n: int, seed: int) -> np.ndarray:
-    """(n, 1 + k + 1) draws of (ln lambda deviation, parameters, h_p offset) [SI]: posterior plus scatter."""
+    """(n, 1 + k + 1 + 2) draws of (ln lambda deviation, parameters, h_p offset) [SI] and the model discrepancy of
+    ln f_r and ln w [-]: posterior plus scatter plus, for each drawn posterior sample, a normal draw of its
+    discrepancy terms (:mod:`workflow.calibration.posterior`)."""
     rng = np.random.default_rng(seed)
     names = robust_inputs(calibration)
-    theta = posterior_columns(calibration, plate)[rng.integers(0, len(calibration.samples), n)]
+    chosen = rng.integers(0, len(calibration.samples), n)
+    theta = posterior_columns(calibration, plate)[chosen]
     theta[:, names.index("glue_um")] = np.abs(theta[:, names.index("glue_um")] + rng.normal(0, tolerances.glue_thickness, n))
     theta[:, names.index("resonator_offset_um")] += rng.normal(0, tolerances.resonator_thickness, n)
     log_lambda = rng.normal(0, tolerances.wavelength / float(plate.wavelength), n)
     offset = rng.normal(0, tolerances.ceramic_thickness, n)
-    return np.column_stack([log_lambda, theta, offset])
+    return np.column_stack([log_lambda, theta, offset, rng.normal(0, calibration.discrepancy[chosen])])
 
 
 def _robust_plate(plate: Plate, names: Sequence[str], point) -> Plate:
@@ -217,14 +221,14 @@ class RobustSurrogate:
     evaluations: int
 
     def sample(self, log_lambda: float, draws: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
-        """ln f_r and ln w of ``draws`` (deviations, :func:`scattered_draws`) about the design ln lambda, each
-        with its surrogate's error drawn from ``seed``."""
+        """ln f_r and ln w of ``draws`` (deviations and discrepancies, :func:`scattered_draws`) about the design
+        ln lambda, each with its surrogate's error drawn from ``seed`` and its discrepancy added."""
         rng = np.random.default_rng(seed)
-        shifted = draws.copy()
+        shifted, discrepancy = draws[:, :-2].copy(), draws[:, -2:]
         shifted[:, 0] += log_lambda
         inside = np.clip(shifted, self.bounds[:, 0], self.bounds[:, 1])
-        return (self.log_frequency(inside) + rng.normal(0, self.frequency_sigma, len(draws)),
-                self.log_deflection(inside) + rng.normal(0, self.log_deflection.loo_rms, len(draws)))
+        return (self.log_frequency(inside) + rng.normal(0, self.frequency_sigma, len(draws)) + discrepancy[:, 0],
+                self.log_deflection(inside) + rng.normal(0, self.log_deflection.loo_rms, len(draws)) + discrepancy[:, 1])
 
 
 def robust_surrogate(calibration: Calibration, plate: Plate, settings: RobustSettings, evaluate: Evaluate) -> RobustSurrogate:
@@ -293,6 +297,8 @@ def robust_candidate(calibration: Calibration, plate: Plate, settings: RobustSet
         evaluations=surrogate.evaluations + 1,
         lambda_at_edge=bool(too_low or too_high),
     )
+
+
 
 
 def mode_separation(result, settings: RobustSettings) -> tuple[dict | None, bool]:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from workflow.calibration.calibration import Calibration, MeasuredPlate, measured_plate, predict
+from workflow.calibration.calibration import Calibration, MeasuredPlate, interval_contents, measured_plate, predict
 from workflow.calibration.logs import read_built_plate
 from workflow.calibration.measurements import scan_shape
 from workflow.calibration.parameters import CalibrationSettings
@@ -143,6 +143,8 @@ def calibration_summary(calibration: Calibration, nominal_frequencies, files: di
         "diagnostics": calibration.diagnostics.to_dict(),
         "identifiability": calibration.identifiability(),
         "at_prior_bound": calibration.at_prior_bounds(),
+        "check": calibration.check(),
+        "intervals": interval_contents(calibration.settings),
         "fem_evaluations": calibration.evaluations + len(calibration.plates),
         "fem_surface_evaluations": sum(s.evaluations for s in calibration.surrogates if s.shape is not None),
         "wall_time_s": seconds,
@@ -178,6 +180,7 @@ def calibrated_record(calibration: Calibration, plate, evaluate, source: str) ->
         "w_dyn_um": w[1] / UM, "w_dyn_um_p05": w[0] / UM, "w_dyn_um_p95": w[2] / UM,
         "calibration": {"file": source, "surrogate_error": surrogate.log_frequency.loo_rms,
                         "fem_evaluations": surrogate.evaluations, "samples": len(calibration.samples)},
+        "intervals": interval_contents(calibration.settings),
     }
 
 

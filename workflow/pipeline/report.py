@@ -134,6 +134,7 @@ def recommendation_section(recommendation) -> str:
         f"optimum with Q(v). A transverse-mixing mode is a computed mode whose transverse indicator exceeds "
         f"{TRANSVERSE_THRESHOLD:g} (the share of its deflection varying across the width); the distance is its "
         "frequency minus the working mode's. A working mode marked *mixed* is itself partly transverse.",
+        INTERVAL_MEANING,
     ]
     fem = [(label, d) for label, _, d in rows if d.model == "FEM"]
     if fem:
@@ -141,6 +142,16 @@ def recommendation_section(recommendation) -> str:
     text.append(_beam_and_fem(designs))
     return "## Recommended design\n\n" + "\n\n".join(t for t in text if t)
 
+
+INTERVAL_MEANING = (
+    "What these intervals contain: the measurement noise of the interferometer logs and the uncertainty of Q(v), "
+    "its parameters and its law's shape (the damping fit's band, section \"Q(v) fit\"). What they do not contain: "
+    "how a built plate differs from the nominal model (the published plates resonated 5–8 % below what the "
+    "uncalibrated FEM predicts for them; the section on the calibration, where there is one, holds that), the "
+    "manufacturing tolerances, and the FEM's discretisation error (the margin column and the mesh note). f_r is the "
+    "model's, without an interval."
+)
+"""What the recommended-design table's intervals contain and not (issue 29)."""
 
 _SOURCES = {"FEM": "FEM", "beam": "beam model"}
 """How the table names the model behind a row."""
@@ -346,9 +357,16 @@ def _calibrated_designs(context: RunContext, designs) -> str:
         f"With the calibration `{source}` (posterior of `tactile calibrate`, docs/calibration.md), the recommended "
         "designs above are predicted as follows: posterior median and 90 % interval, through a surrogate of the FEM "
         "built at each design.  Designs whose interval reaches below the frequency limit need the robust design "
-        "(`tactile optimize --model fem --calibration …`).\n\n"
+        "(`tactile optimize --model fem --calibration …`).  "
+        + _contents(next(iter(designs.values()))["intervals"]) + "\n\n"
         + table(("h_p [mm]", "nominal FEM f_r [kHz]", "calibrated f_r [kHz] (90 %)", "calibrated w_dyn [µm] (90 %)"), rows)
     )
+
+
+def _contents(intervals: dict, subject: str = "The intervals") -> str:
+    """An interval's ``contains`` / ``does_not_contain`` lists in one sentence each."""
+    return (f"{subject} contain: " + "; ".join(intervals["contains"]) + ". They do not contain: "
+            + "; ".join(intervals["does_not_contain"]) + ".")
 
 
 def _analytical_optima(context: RunContext, optima) -> str:
@@ -420,10 +438,11 @@ def _damping_fit(context: RunContext, fit) -> str:
         for name, c in summary["checks"].items()
     ]
     choice = {
-        "best": f"the preferred law alone (every other law is more than {CLOSE_DSE:g} dse behind)",
-        "stacking": "the stacking-weighted mixture of the laws (a law is within "
-        f"{CLOSE_DSE:g} dse of the preferred one), weights "
-        + ", ".join(f"{name} {w:.2f}" for name, w in summary["weights"].items()),
+        "best": f"the preferred law alone (every other law is more than {CLOSE_DSE:g} dse behind, or fails its checks)",
+        "mixture": f"the laws the data do not tell apart (PSIS-LOO within {CLOSE_DSE:g} dse of the preferred one, misfit "
+        "checks passed) in equal shares, "
+        + ", ".join(f"{name} {w:.2f}" for name, w in summary["shares"].items())
+        + ", so that where they disagree on Q(v) the band covers each",
         "fallback": "the flexible law, because the preferred law failed its misfit checks",
     }[summary["selection"]]
     warning = f"**Warning: {summary['warning']}.**\n\n" if summary["warning"] else ""
@@ -461,17 +480,21 @@ def _interval_text(p: dict, digits: int = 4) -> str:
 
 
 def _effects(summary: dict) -> str:
-    """The softening and drift of the resonance fitted beyond Q(v), in words (empty when neither was fitted)."""
-    forward, parameters = summary["forward_model"], summary["parameters"]
+    """The softening and drift of the resonance fitted beyond Q(v), in words, whether the logs show them, and what the
+    band of Q(v) contains."""
+    effects, parameters = summary["effects"], summary["parameters"]
     parts = []
-    if forward["softening"]:
-        parts.append(f"amplitude softening f_r(v) = f_r0 (1 − κ v²), κ = {_interval_text(parameters['kappa'])}")
-    if forward["drift"]:
-        parts.append(f"drift of the resonance within a sweep β = {_interval_text(parameters['drift_rate'], 3)}")
-    if not parts:
-        return ""
-    return ("Fitted beyond Q(v) (median [90 % interval]; docs/damping.md#softening-and-drift-within-a-sweep): "
-            + "; ".join(parts) + ".\n\n")
+    for name, text, key, digits in (("softening", "amplitude softening f_r(v) = f_r0 (1 − κ v²), κ", "kappa", 4),
+                                    ("drift", "drift of the resonance within a sweep β", "drift_rate", 3)):
+        if effects[name]["fitted"]:
+            shown = "shown by the logs" if effects[name]["detected"] else "not resolved by the logs"
+            parts.append(f"{text} = {_interval_text(parameters[key], digits)} ({shown}: {effects[name]['rule']})")
+        elif "not_fitted_because" in effects[name]:
+            parts.append(f"{name} within a sweep not fitted: {effects[name]['not_fitted_because']}")
+    interval = summary["q_of_v"]["interval"]
+    fitted = ("Beyond Q(v) (median [90 % interval]; docs/damping.md#softening-and-drift-within-a-sweep): "
+              + "; ".join(parts) + ".\n\n") if parts else ""
+    return fitted + _contents(interval, "The 90 % band of Q(v) (the figure's) and the draws the design uses") + "\n\n"
 
 
 def _ringdowns(summary: dict) -> str:

@@ -13,7 +13,8 @@ from functools import lru_cache
 import numpy as np
 import scipy.sparse as sp
 
-from workflow.models.fem.mesh import CERAMIC, GLUE, RESONATOR, BrickMesh, symmetry_dofs
+from workflow.models.fem.mesh import CERAMIC, GLUE, GLUE_UNDER, RESONATOR, BrickMesh, symmetry_dofs
+from workflow.models.materials import VaryingGlue
 from workflow.models.plate import Plate
 
 
@@ -50,7 +51,9 @@ class PlateSystem:
 
 
 def _materials(plate: Plate):
-    return {RESONATOR: plate.resonator, CERAMIC: plate.ceramic, GLUE: plate.glue}
+    varying = {GLUE_UNDER + k: plate.glue.under_ceramic(k) for k in range(plate.n_ceramics)
+               } if isinstance(plate.glue, VaryingGlue) else {}
+    return {RESONATOR: plate.resonator, CERAMIC: plate.ceramic, GLUE: plate.glue, **varying}
 
 
 def element_dofs(mesh: BrickMesh) -> np.ndarray:

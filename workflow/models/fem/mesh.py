@@ -15,10 +15,13 @@ import numpy as np
 from workflow.errors import TactileError
 from workflow.models.fem.elements import ReferenceBrick, brick
 from workflow.models.fem.settings import FemSettings
+from workflow.models.materials import VaryingGlue
 from workflow.models.plate import Plate
 
 RESONATOR, CERAMIC, GLUE = 0, 1, 2
 """Material ids of the elements."""
+GLUE_UNDER = 3
+"""Material id of the bond under ceramic k of a :class:`~workflow.models.materials.VaryingGlue`: GLUE_UNDER + k."""
 GLUE_ELEMENTS = 1
 """Elements through the glue layer's thickness (tens of um: one quadratic element) [-]."""
 MEMORY_BUDGET = 8 * 2**30
@@ -72,7 +75,7 @@ class BrickMesh:
     cells : (n, 3) int array
         Grid indices (i_x, i_y, i_z) of the kept elements.
     material : (n,) int array
-        RESONATOR, CERAMIC or GLUE per element.
+        RESONATOR, CERAMIC or GLUE per element (GLUE_UNDER + k under ceramic k of a varying bond).
     polarity : (n,) float array
         +1/-1 poling sign of ceramic elements, 0 for the resonator [-].
     node_number : 3D int array
@@ -215,6 +218,8 @@ def quarter_plate_mesh(plate: Plate, settings: FemSettings) -> BrickMesh:
     layer = np.where(cells[:, 2] < n_layer, CERAMIC, np.where(cells[:, 2] < n_layer + n_glue, GLUE, RESONATOR))
     keep = (layer == RESONATOR) | (cell_ceramic >= 0)
     cells, cell_ceramic, material = cells[keep], cell_ceramic[keep], layer[keep]
+    if isinstance(plate.glue, VaryingGlue):
+        material = np.where(material == GLUE, GLUE_UNDER + cell_ceramic, material)
     polarity = np.where(material == CERAMIC, np.asarray(plate.polarities)[cell_ceramic], 0).astype(float)
 
     return brick_mesh(brick(settings.element), (x_edges, y_edges, z_edges), cells, material, polarity)

@@ -91,9 +91,9 @@ def q_of_v_figure(fit: DampingFit, draws: int = 200, seed: int = 0):
                             zorder=order)
         bottom.plot(velocity, 100 * np.transpose([q05 / q50 - 1, q95 / q50 - 1]), color=line.get_color(), lw=1, zorder=order)
         lines[name] = (line, q95 - q05, (q95 - q05) / q50)
-    if fit.selection == "stacking":
+    if fit.selection == "mixture":
         q05, q50, q95 = np.quantile(fit.answer.law_from_samples().quality_factor(velocity[:, None]), (0.05, 0.5, 0.95), axis=1)
-        top.plot(velocity, q50, "k:", lw=2, label="stacking mixture (what the design uses): median")
+        top.plot(velocity, q50, "k:", lw=2, label="the close laws in equal shares (what the design uses): median, 90 %")
         top.plot(velocity, np.transpose([q05, q95]), "k:", lw=1)
     best = fit.best
     model_curves = dataclasses.replace(fit.log, velocity=np.median(_predicted_rows(best, fit.log, draws, seed), axis=0))

@@ -1,0 +1,54 @@
+"""Seeded small versions of issue 29's coverage studies (bench/bench_damping_coverage.py and
+bench/bench_calibration_coverage.py): a few hidden truths each, short chains and a coarse mesh."""
+
+import importlib.util
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from calibration_setup import COARSE, FAST
+
+BENCH = Path(__file__).resolve().parent.parent / "bench"
+
+
+def bench_module(name: str):
+    spec = importlib.util.spec_from_file_location(name, BENCH / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_damping_study_the_threshold_truth_of_issue_29_is_inside_its_band_and_its_softening_found():
+    """Truth 1 of the study's seed: a threshold whose onset width (0.19 of v_t) is not the old fixed 0.2 ... with
+    softening (kappa 0.081) and drift (-0.13 Hz/s) on the bench simulator, fitted with the default options."""
+    study = bench_module("bench_damping_coverage")
+    truth = study.truths(2, 2029)[1]
+    assert truth.law.name == "threshold" and truth.softening > 0 and truth.drift_rate != 0
+    record = study.study_truth(truth, max_steps=1500)
+    assert record["coverage"] >= 0.7 and record["width"] < 0.10, record
+    softening = record["effects"]["softening"]
+    assert softening["fitted"] and softening["detected"]
+    assert record["kappa"]["p05"] <= truth.softening <= record["kappa"]["p95"]
+    assert record["effects"]["drift"]["fitted"]
+    summary = study.summarise([record])
+    assert summary["softening"] == {"campaigns_carrying_it": 1, "fitted_when_carried": 1, "fitted_when_absent": 0,
+                                    "detected_when_carried": 1, "detected_when_absent": 0}
+
+
+def test_calibration_study_on_a_coarse_mesh(monkeypatch, calibration_cache_dir):
+    """One campaign of three built plates with deviations beyond the parameters, on the coarse mesh: calibrated on
+    two, the third's measured resonance lies in the predictive band, which the discrepancy term widens."""
+    monkeypatch.setenv("TACTILE_CACHE", str(calibration_cache_dir))
+    study = bench_module("bench_calibration_coverage")
+    settings = replace(FAST, kept_samples=2000)
+    runs = {kind: study.study(1, 2029, COARSE, COARSE, settings, discrepancy=kind, scheduler="synchronous")
+            for kind in (False, True)}
+    (before,), (after,) = (runs[kind]["records"] for kind in (False, True))
+    assert after["deviations"] == before["deviations"] and after["measured_f_hz"] == before["measured_f_hz"]
+    # seed 2029's campaign: P1 and B calibrate, C is predicted; a bond partly cured (0.57) and varying from ceramic
+    # to ceramic, width and ceramic-length errors; without the term the band (1.8 %) misses C by 3 %
+    assert not before["inside"] and after["inside"], (before, after)
+    assert after["width"] > 2 * before["width"]
+    assert before["check"]["discrepancy"] == {} and "frequency" in after["check"]["discrepancy"]
+    assert np.all(np.array(after["discrepancy_median"]) > 0)
