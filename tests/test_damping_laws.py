@@ -140,6 +140,7 @@ def test_stacked_posterior_mixes_the_laws_by_weight_and_round_trips_through_the_
     assert isinstance(loaded.median_law(), ThresholdLoss)
 
 
+@pytest.mark.slow  # 16 s; the misfit check behind the fallback stays in the default suite (test_misfit_check_flags_...)
 def test_a_wrong_only_law_is_flagged_and_the_answer_falls_back_to_the_flexible_law(threshold_campaign):
     fit = fit_damping(threshold_campaign, laws=("quadratic",), seed=2, max_steps=1500, stated_noise=NOISE,
                       forward=ForwardModel())

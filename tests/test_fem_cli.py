@@ -8,7 +8,8 @@ from user_facing import assert_readable, run_cli
 
 
 def test_fem_evaluate_json_lists_the_modes(capsys):
-    status, out, _ = run_cli(capsys, "evaluate", "--model", "fem", "--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "1", "--b-mm", "55", "--json")
+    status, out, _ = run_cli(capsys, "evaluate", "--model", "fem", "--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "1", "--b-mm", "55",
+                          "--accuracy", "0.01", "--json")
     assert status == 0
     record = json.loads(out.strip().splitlines()[-1])
     for key in ("lambda_mm", "h_i_mm", "h_p_mm", "b_mm", "q", "voltage_v", "w_dyn_um", "f_r_khz", "modes"):

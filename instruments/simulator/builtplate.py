@@ -19,15 +19,14 @@ from instruments.simulator.physics import PlateResponse, default_law
 from instruments.simulator.thermal import thermal_model
 from workflow.models.builtplate import BuiltPlate, PlateDeviations, deviated_plate
 from workflow.models.fem import FemResult
-from workflow.models.fem.accuracy import FemAccuracy
+from workflow.models.fem.accuracy import SIMULATION_ACCURACY_TARGET, FemAccuracy
 from workflow.models.fem.settings import FemSettings
 from workflow.models.fem.surface import SurfaceModes, evaluate_surface
 from workflow.models.materials import DESIGN_VOLTAGE, PLATE_Q
 from workflow.models.plate import Plate
 
-SIMULATION_ACCURACY = FemAccuracy(target=0.01)
-"""FEM accuracy of a simulated built plate (1 % in frequency, degree 3: a few seconds, once per plate) [-]; the
-simulator's plate is a discretisation of its own, as a built plate is a plate of its own."""
+SIMULATION_ACCURACY = FemAccuracy(target=SIMULATION_ACCURACY_TARGET)
+"""FEM accuracy of a simulated built plate (:data:`~workflow.models.fem.accuracy.SIMULATION_ACCURACY_TARGET`)."""
 
 
 @dataclass(frozen=True, eq=False)

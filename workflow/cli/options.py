@@ -8,12 +8,11 @@ import math
 import signal
 from contextlib import contextmanager
 
-from instruments.simulator.builtplate import SIMULATION_ACCURACY
 from workflow.damping.posterior import load_posterior
 from workflow.errors import GeometryError, TactileError
 from workflow.models import materials
 from workflow.models.analytical import resonance_frequency
-from workflow.models.fem.accuracy import ACCURACY_RANGE, DEFAULT_ACCURACY, FemAccuracy
+from workflow.models.fem.accuracy import ACCURACY_RANGE, DEFAULT_ACCURACY, SIMULATION_ACCURACY_TARGET, FemAccuracy
 from workflow.models.fem.settings import PIEZO_MODELS
 from workflow.models.limits import LIMITS, point_problem, problem, unit
 from workflow.models.plate import ORIGINAL_PLATE, Plate, check_design_space
@@ -394,7 +393,7 @@ def add_built_plate_arguments(parser) -> None:
     ):
         group.add_argument(flag, type=bounded(float, *LIMITS[key], unit(key)),
                            help=f"simulator: {text}, {limit_text(key, unit(key))} (demo {value:g})")
-    default = SIMULATION_ACCURACY.target
+    default = SIMULATION_ACCURACY_TARGET
     group.add_argument("--sim-accuracy", type=bounded(float, *ACCURACY_RANGE), default=default, metavar="REL",
                        help="FEM accuracy of the simulated built plate and of the nominal map a scan is compared "
                        f"with (default {default:g})")

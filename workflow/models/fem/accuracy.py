@@ -50,6 +50,9 @@ DEFAULT_ACCURACY = 2e-3
 """Default target relative frequency error of an FEM evaluation [-] (0.2 %)."""
 SURVEY_ACCURACY = 5e-3
 """Default target of maps and width sweeps (many geometries) [-] (0.5 %)."""
+SIMULATION_ACCURACY_TARGET = 1e-2
+"""Default target of the bench simulator's built plate (1 % in frequency, degree 3: a few seconds, once per plate)
+[-]; the simulator's plate is a discretisation of its own, as a built plate is a plate of its own."""
 ACCURACY_RANGE = LIMITS["fem_accuracy"]
 """Accepted targets [-]."""
 
