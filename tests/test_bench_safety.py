@@ -78,7 +78,10 @@ def data_rows(path) -> int:
     return sum(1 for line in path.read_text().splitlines() if line and not line.startswith("#")) - 1
 
 
-@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT], ids=lambda s: signal.Signals(s).name)
+@pytest.mark.parametrize("signum", [signal.SIGTERM,
+                                    pytest.param(signal.SIGHUP, marks=pytest.mark.slow),  # one handler for the three:
+                                    pytest.param(signal.SIGINT, marks=pytest.mark.slow)],  # SIGTERM by default
+                         ids=lambda s: signal.Signals(s).name)
 def test_a_stop_signal_mid_campaign_leaves_the_output_off_at_the_lowest_amplitude(pty_bench, tmp_path, signum):
     out = tmp_path / "c.csv"
     process = subprocess.Popen(campaign(pty_bench, out, "--points", "200"), stdout=subprocess.PIPE,
