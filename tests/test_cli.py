@@ -4,6 +4,7 @@ import argparse
 import json
 import re
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -178,3 +179,17 @@ def test_the_readme_table_shows_every_option_with_its_default():
                 shown = _shown(action.default)
                 abridged = re.sub(r"^([^,]+,[^,]+),.*,([^,]+)$", r"\1,…,\2", shown)
                 assert shown in segments[option] or abridged in segments[option], f"{command} --{option} {shown}"
+
+
+def test_a_command_loads_only_its_own_module_and_help_lists_them_all():
+    """``tactile measure`` starts without the fit's and the calibration's libraries (each bench test and each user
+    pays the start); ``tactile --help`` and a misspelt command still see every command."""
+    probe = ("import sys; from workflow.cli import main\n"
+             "try: main(['measure', 'campaign', '--help'])\n"
+             "except SystemExit: pass\n"
+             "print(sorted(m for m in ('arviz', 'emcee', 'workflow.cli.fit_damping', 'workflow.cli.run') if m in sys.modules))")
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=60)
+    assert done.stdout.strip().splitlines()[-1] == "[]", done.stdout + done.stderr
+    for argv in (["--help"], ["fit-dampin"]):
+        done = subprocess.run(TACTILE + argv, capture_output=True, text=True, timeout=60)
+        assert all(command in done.stdout + done.stderr for command in ("fit-damping", "measure", "run", "calibrate"))
