@@ -13,6 +13,7 @@ from user_facing import HIDDEN_REFERENCE
 from workflow import progress
 from workflow.cli import main
 from workflow.errors import TactileError
+from workflow.pipeline.figures import damping as damping_figures
 from workflow.pipeline.config import default_config, tomllib
 from workflow.pipeline.outputs import RECORD
 from workflow.pipeline.steps import STEPS, sweep_widths
@@ -33,14 +34,24 @@ def tiny_run(tmp_path_factory):
     return status, out, config, stderr.getvalue()
 
 
-def test_a_rerun_reuses_the_cached_steps(tiny_run, capsys, monkeypatch):
+def test_a_rerun_reuses_the_cached_steps_and_their_files(tiny_run, capsys, monkeypatch):
+    """A cached step's files come back from the cache as they were written (not drawn again), also when deleted."""
     _, out, config, _ = tiny_run
     monkeypatch.setenv("TACTILE_CACHE", str(out.parent / "cache"))
+    corner, fit = out / "damping" / "corner_quadratic.png", out / "damping" / "fit.json"
+    written, report = corner.read_bytes(), (out / "report.md").read_text()
+    corner.unlink()
+    monkeypatch.setattr(damping_figures, "fit_figures", lambda fit: pytest.fail("the fit's figures drawn again"))
     capsys.readouterr()
     assert main(["run", "--config", str(config), "--out", str(out), "--json"]) == 0
     record = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert "Q(v) fit (emcee)" in record["from_cache"]
-    assert (out / "report.md").is_file()
+    assert corner.read_bytes() == written and str(corner) in json.loads(fit.read_text())["files"]["figures"]
+    assert _figure_links((out / "report.md").read_text()) == _figure_links(report)
+
+
+def _figure_links(report: str) -> list:
+    return re.findall(r"!\[[^\]]*\]\(([^)]+)\)", report)
 
 
 def test_the_run_records_every_file_it_wrote(tiny_run):

@@ -25,7 +25,7 @@ ringdown_samples = 40
 [damping]
 laws = ["quadratic"]
 walkers = 32
-max_steps = 3000
+max_steps = 1500
 posterior_draws = 8
 [loop]
 enabled = false

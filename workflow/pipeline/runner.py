@@ -9,9 +9,11 @@ themselves are in :mod:`workflow.pipeline.steps`.
 import hashlib
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional
+
+import numpy as np
 
 import instruments
 import workflow
@@ -116,16 +118,50 @@ def _step_key(context: RunContext, step: Step) -> str:
 
 
 def _compute(context: RunContext, step: Step):
-    """(result, from cache) of a step, through the cache when it may be used."""
+    """(result, from cache, key) of a step, through the cache when it may be used (key None when not)."""
     if not (step.cacheable and context.cache is not None):
-        return step.compute(context), False
+        return step.compute(context), False, None
     key = _step_key(context, step)
     found, value = context.cache.load(key)
     if found:
-        return value, True
+        return value, True, key
     value = step.compute(context)
     context.cache.store(key, value)
-    return value, False
+    return value, False, key
+
+
+def _stat(folder: Path) -> Dict[str, tuple]:
+    """Path relative to ``folder`` -> (size, modification time) of every file under it."""
+    return {path.relative_to(folder).as_posix(): (stat.st_size, stat.st_mtime_ns)
+            for path in folder.rglob("*") if path.is_file() and (stat := path.stat())}
+
+
+def _write_files(context: RunContext, step: Step, result, key: Optional[str], cached: bool) -> None:
+    """Write the step's files (figures, posteriors, JSON) into the output folder.
+
+    The files of a cacheable step are kept in the cache beside its result, keyed by the result's key and the output
+    folder (some files name their own paths), so that a rerun of a cached step copies them instead of drawing its
+    figures again (the Q(v) fit's corner and trace plots alone take seconds).
+    """
+    if key is None:
+        step.figures(context, result)
+        return
+    files_key = content_key({"files": key, "out": str(context.out.resolve())})
+    if cached:
+        found, stored = context.cache.load(files_key)
+        if found:
+            for name, data in stored["files"].items():
+                path = context.out / name
+                path.parent.mkdir(parents=True, exist_ok=True)
+                path.write_bytes(data.tobytes())
+            for figure in stored["figures"]:
+                context.figures[figure.name] = replace(figure, step=step.key)
+            return
+    before = _stat(context.out)
+    step.figures(context, result)
+    written = sorted(name for name, state in _stat(context.out).items() if before.get(name) != state)
+    files = {name: np.frombuffer((context.out / name).read_bytes(), dtype=np.uint8) for name in written}
+    context.cache.store(files_key, {"files": files, "figures": context.figures_of(step.key)})
 
 
 def run_steps(context: RunContext, steps: List[Step], stream=None) -> RunContext:
@@ -142,10 +178,10 @@ def run_steps(context: RunContext, steps: List[Step], stream=None) -> RunContext
         start = time.perf_counter()
         context.step = step.key
         try:
-            result, cached = _compute(context, step)
+            result, cached, key = _compute(context, step)
             context.results[step.key] = result
             if step.figures is not None:
-                step.figures(context, result)
+                _write_files(context, step, result, key, cached)
         except StepError:
             raise
         except TactileError as error:
