@@ -81,7 +81,7 @@ def autocorrelation() -> dict:
     """This code's autocorrelation estimate against emcee's on an AR(1) chain of the joint fit's size."""
     from emcee.autocorr import integrated_time
 
-    from workflow.damping.fit import autocorrelation_times
+    from workflow.sampling import autocorrelation_times
 
     rng = np.random.default_rng(0)
     noise = rng.standard_normal((6500, 42, 20))

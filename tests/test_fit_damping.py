@@ -227,7 +227,7 @@ def test_damping_option_on_evaluate_and_optimize(tmp_path, capsys):
 def test_autocorrelation_times_are_emcee_s_over_every_lag_or_the_lags_the_window_needs():
     from emcee.autocorr import integrated_time
 
-    from workflow.damping.fit import autocorrelation_times
+    from workflow.sampling import autocorrelation_times
 
     rng = np.random.default_rng(0)
     noise = rng.standard_normal((3000, 12, 3))

@@ -15,7 +15,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 BASE = (
     "workflow", "workflow.errors", "workflow.units", "workflow.serialise", "workflow.logformat", "workflow.progress",
-    "workflow.inputfiles", "workflow.resonance",
+    "workflow.inputfiles", "workflow.resonance", "workflow.sampling",
     "instruments",
 )
 LAYER_PREFIXES = {

@@ -15,7 +15,6 @@ from workflow.calibration.measurements import ScanShape
 from workflow.calibration.parameters import DISCREPANCIES, CalibrationSettings, Parameter, checked_settings
 from workflow.calibration.plate_surrogate import Evaluate, EvaluateSurfaces, PlateSurrogate, build_plate_surrogate
 from workflow.calibration.posterior import (
-    ChainDiagnostics,
     calibration_data,
     identifiability,
     parameter_summary,
@@ -28,6 +27,7 @@ from workflow.errors import InputFileError, TactileError
 from workflow.models import materials
 from workflow.models.fem.settings import PIEZO_MODELS
 from workflow.models.limits import LIMITS, plate_problem, problem
+from workflow.sampling import ChainDiagnostics
 from workflow.models.plate import Plate
 
 FORMAT = "tactile-calibration"

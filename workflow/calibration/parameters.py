@@ -151,6 +151,7 @@ class CalibrationSettings:
         FEM evaluations of each surrogate's design and the polynomial degree (1 or 2) [-].
     surrogate_seed, sampler_seed : int
     walkers, steps, kept_samples : int
+        Walkers, the chain's step cap (it stops earlier once converged) and the draws kept [-].
     frequency_discrepancy, deflection_discrepancy : float
         Scales of the half-normal priors of the model-discrepancy terms: the relative standard deviation by which a
         built plate's ln f_r and ln g may differ from the FEM at every value of the parameters (what the parameters
@@ -165,7 +166,7 @@ class CalibrationSettings:
     surrogate_degree: int = 2
     surrogate_seed: int = 1
     walkers: int = 32
-    steps: int = 4000
+    steps: int = 10000
     sampler_seed: int = 2
     kept_samples: int = 4000
     frequency_discrepancy: float = 0.01

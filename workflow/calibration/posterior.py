@@ -20,21 +20,17 @@ of a plate adds N(0, (tau_f u_f)^2) to ln f_r at each posterior sample.
 Priors from :class:`~workflow.calibration.parameters.CalibrationSettings`.  Samples are SI values.
 """
 
-import math
-import time
 from dataclasses import dataclass
 from typing import Sequence
 
-import emcee
 import numpy as np
 from scipy import stats
 
 from workflow.calibration.measurements import aligned_misfit
 from workflow.calibration.parameters import DISCREPANCIES, CalibrationSettings
 from workflow.calibration.plate_surrogate import PlateSurrogate
+from workflow.sampling import ChainDiagnostics, evenly_kept, quantile_summary, run_ensemble
 
-CHAIN_TAUS = 50
-"""A chain counts as converged when it is at least this many autocorrelation times long [-]."""
 CONSTRAINED_RATIO = 0.5
 """A direction is constrained when its posterior standard deviation is below this share of the prior's [-]."""
 BOUND_ZONE = 0.1
@@ -129,72 +125,14 @@ def split_state(state: np.ndarray, settings: CalibrationSettings) -> tuple[np.nd
         return state[..., :n], np.exp(state[..., n:])
 
 
-@dataclass(frozen=True)
-class ChainDiagnostics:
-    """Convergence of the sampler.
-
-    Attributes
-    ----------
-    tau : tuple of float
-        Integrated autocorrelation time per parameter [steps].
-    n_steps, n_walkers, burn_in : int
-    acceptance : float
-        Mean acceptance fraction [-].
-    seconds : float
-        Wall time of the sampling [s].
-    """
-
-    tau: tuple
-    n_steps: int
-    n_walkers: int
-    burn_in: int
-    acceptance: float
-    seconds: float
-
-    def __post_init__(self):
-        counts = (self.n_steps, self.n_walkers, self.burn_in)
-        if not (self.tau and all(math.isfinite(t) and t > 0 for t in self.tau)):
-            raise ValueError(f"chain diagnostics: tau must be positive finite times, got {self.tau!r}")
-        if not (all(isinstance(n, int) and n >= 0 for n in counts) and 0 <= self.acceptance <= 1
-                and math.isfinite(self.seconds) and self.seconds >= 0):
-            raise ValueError("chain diagnostics: steps, walkers and burn-in must be counts, acceptance in [0, 1]")
-
-    @property
-    def steps_per_tau(self) -> float:
-        """Run length over the largest autocorrelation time [-]."""
-        return self.n_steps / max(self.tau)
-
-    @property
-    def converged(self) -> bool:
-        """At least :data:`CHAIN_TAUS` autocorrelation times and a sane acceptance (0.1 to 0.9)."""
-        return self.steps_per_tau >= CHAIN_TAUS and 0.1 <= self.acceptance <= 0.9
-
-    def to_dict(self) -> dict:
-        return {
-            "tau": list(self.tau),
-            "tau_max": max(self.tau),
-            "n_steps": self.n_steps,
-            "n_walkers": self.n_walkers,
-            "burn_in": self.burn_in,
-            "steps_per_tau": self.steps_per_tau,
-            "acceptance": self.acceptance,
-            "converged": self.converged,
-            "rule": f"n_steps >= {CHAIN_TAUS} tau_max and acceptance in [0.1, 0.9]",
-            "seconds": self.seconds,
-        }
-
-    @classmethod
-    def from_dict(cls, data: dict) -> "ChainDiagnostics":
-        return cls(tuple(data["tau"]), data["n_steps"], data["n_walkers"], data["burn_in"], data["acceptance"], data["seconds"])
-
-
 def sample_posterior(data: CalibrationData) -> tuple[np.ndarray, np.ndarray, ChainDiagnostics]:
-    """Run emcee for ``settings.steps`` steps from prior draws; keep ``settings.kept_samples`` after burn-in.
+    """Run emcee (:func:`~workflow.sampling.run_ensemble`, at most ``settings.steps`` steps) from prior draws; keep
+    ``settings.kept_samples`` evenly spaced after burn-in.
 
     Returns
     -------
     samples : numpy.ndarray
-        (kept, n) posterior samples of the parameters [SI], evenly thinned after a burn-in of 2 tau_max.
+        (kept, n) posterior samples of the parameters [SI].
     discrepancy : numpy.ndarray
         (kept, 2) the discrepancy terms' relative standard deviations tau u at the same samples [-].
     diagnostics : ChainDiagnostics
@@ -204,37 +142,15 @@ def sample_posterior(data: CalibrationData) -> tuple[np.ndarray, np.ndarray, Cha
     rng = np.random.default_rng(settings.sampler_seed)
     units = np.abs(rng.normal(size=(settings.walkers, len(DISCREPANCIES))))
     start = np.column_stack([np.stack([p.draw(settings.walkers, rng) for p in settings.parameters], axis=1), np.log(units)])
-    moves = [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
-    sampler = emcee.EnsembleSampler(settings.walkers, start.shape[1], log_probability, args=(data,),
-                                    vectorize=True, moves=moves)
-    sampler.random_state = np.random.RandomState(settings.sampler_seed).get_state()
-    began = time.perf_counter()
-    sampler.run_mcmc(start, settings.steps, progress=False)
-    seconds = time.perf_counter() - began
-    tau = sampler.get_autocorr_time(tol=0)
-    tau = np.where(np.isfinite(tau), tau, settings.steps)
-    burn_in = int(min(2 * np.max(tau), settings.steps // 2))
-    chain = sampler.get_chain(discard=burn_in, flat=True)
-    kept = chain[np.linspace(0, len(chain) - 1, min(settings.kept_samples, len(chain))).astype(int)]
-    diagnostics = ChainDiagnostics(
-        tau=tuple(float(t) for t in tau),
-        n_steps=settings.steps,
-        n_walkers=settings.walkers,
-        burn_in=burn_in,
-        acceptance=float(np.mean(sampler.acceptance_fraction)),
-        seconds=seconds,
-    )
-    theta, units = split_state(kept, settings)
+    sampler, diagnostics = run_ensemble(log_probability, start, settings.sampler_seed, (data,), settings.steps)
+    theta, units = split_state(evenly_kept(sampler, diagnostics, settings.kept_samples), settings)
     return theta, units * settings.discrepancy_scales, diagnostics
 
 
 def parameter_summary(settings: CalibrationSettings, samples: np.ndarray) -> dict:
     """name -> {median, p05, p95} in display units (factors [-], lengths [um])."""
-    summary = {}
-    for k, parameter in enumerate(settings.parameters):
-        p05, p50, p95 = np.percentile(samples[:, k], [5, 50, 95]) / parameter.display_scale
-        summary[parameter.name] = {"median": float(p50), "p05": float(p05), "p95": float(p95), "unit": parameter.unit}
-    return summary
+    return {parameter.name: quantile_summary(samples[:, k], parameter.display_scale, parameter.unit)
+            for k, parameter in enumerate(settings.parameters)}
 
 
 def prior_bounds(settings: CalibrationSettings, samples: np.ndarray, seed: int = 0) -> dict:

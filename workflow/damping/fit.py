@@ -3,30 +3,23 @@
 Steps, for each law: model-free estimates per sweep (peak, half-power bandwidth) give a
 start; L-BFGS-B finds the maximum a posteriori (MAP) with a gradient from one batched
 finite-difference evaluation; a finite-difference Hessian there gives a Laplace
-covariance from which the walkers start; emcee (vectorised log-probability, seeded) then
-runs in chunks until the chain is at least 50 integrated autocorrelation times long and
-the tau estimate changed by less than 1 % since the previous check (emcee's documented
-criterion), or until the step cap.
+covariance from which the walkers start; emcee then runs until the project's one convergence
+rule holds (:mod:`workflow.sampling`: 50 integrated autocorrelation times, tau stable to 1 %),
+or until the step cap.
 
 :func:`fit_damping` screens the laws at their MAP (BIC within :data:`SCREEN_BIC` of the
 best are sampled, and the flexible law always), compares the sampled laws by PSIS-LOO
 (:mod:`workflow.damping.comparison`), checks their misfit (:mod:`workflow.damping.checks`) and picks
 the answer the design uses: the best law, the laws the data do not tell apart mixed in equal shares, or
 the flexible law when the best law fails its checks.  BIC at the MAP is also given for every law.
-
-Moves: differential evolution (80 %) and its snooker variant (20 %), as the emcee
-documentation suggests for roughly Gaussian posteriors; on the synthetic campaign their
-autocorrelation times are about 2.5 times shorter than the default stretch move's.
 """
 
-import time
 from dataclasses import dataclass, field, replace
 from typing import Callable, Dict, Optional, Sequence, Tuple
 
 import arviz as az
-import emcee
 import numpy as np
-from scipy import fft, optimize
+from scipy import optimize
 from threadpoolctl import threadpool_limits
 
 from workflow.damping.checks import MisfitCheck, misfit_check
@@ -48,8 +41,8 @@ from workflow.damping.likelihood import (
 )
 from workflow.damping.logs import CampaignLog, drop_short_sweeps
 from workflow.damping.posterior import DampingPosterior, stacked_posterior
-from workflow.progress import Progress
 from workflow.resonance import half_power_bandwidth
+from workflow.sampling import CHAIN_TAUS, ChainDiagnostics, quantile_summary, run_ensemble
 
 DEFAULT_LAWS = SAMPLED_LAWS
 """The laws screened and sampled by default; every law of :data:`~workflow.damping.laws.LAWS` gets a MAP and a BIC."""
@@ -60,8 +53,6 @@ SCREEN_BIC = 10.0
 about e^5 = 150 to 1 against them (a law that only adds parameters to a law that fits lands here)."""
 VELOCITY_CONVENTION = "v: peak velocity amplitude at the antinodes (measured velocities divided by |phi| at their point)"
 """The velocity Q(v) is a function of (docs/damping.md)."""
-CHAIN_TAUS = 50
-"""A converged chain is at least this many autocorrelation times long [-] (one law, :func:`fit_law`)."""
 COMPARISON_TAUS = 25
 """The same for each law of :func:`fit_damping` [-]: with 32-72 walkers, 25 tau give 800-1800
 effectively independent draws, plenty for 90 % bands and LOO.  The rule's other half (tau stable
@@ -73,11 +64,6 @@ STACKED_DRAWS = 4000
 single_threaded_blas = threadpool_limits.wrap(limits=1, user_api="blas")
 """Decorator: BLAS on one thread while a fit runs.  Its matrices are tiny (L-BFGS-B's, the Laplace covariance's), and
 a threaded BLAS spins on them: the MAP's L-BFGS-B steps took 2.5 ms each instead of 0.05 ms on the 2 shared cores."""
-
-
-def convergence_rule(chain_taus: float = CHAIN_TAUS) -> str:
-    """The convergence rule in words."""
-    return f"n_steps >= {chain_taus:g} tau_max and every tau changed < 1 % since the previous check"
 
 
 _FD_STEP = 1e-4
@@ -104,40 +90,6 @@ class SweepEstimates:
     peak_frequency: np.ndarray
     peak_velocity: np.ndarray
     quality_factor: np.ndarray
-
-
-@dataclass(frozen=True)
-class ChainDiagnostics:
-    """Convergence of one emcee run.
-
-    Attributes
-    ----------
-    tau : numpy.ndarray
-        Integrated autocorrelation time per parameter [steps].
-    n_steps, n_walkers, burn_in, thin : int
-    acceptance : float
-        Mean acceptance fraction [-].
-    converged : bool
-        Whether :func:`convergence_rule` held before the step cap.
-    seconds : float
-        Wall time of the sampling [s].
-    chain_taus : float
-        The chain length the rule asked for, in autocorrelation times [-].
-    """
-
-    tau: np.ndarray
-    n_steps: int
-    n_walkers: int
-    burn_in: int
-    thin: int
-    acceptance: float
-    converged: bool
-    seconds: float
-    chain_taus: float = CHAIN_TAUS
-
-    @property
-    def tau_max(self) -> float:
-        return float(np.max(self.tau))
 
 
 @dataclass(frozen=True)
@@ -370,50 +322,6 @@ def _maximise(data: FitData, start: np.ndarray, scale: np.ndarray, free: np.ndar
     return np.clip(theta_of(result.x), data.lower, data.upper)
 
 
-AUTOCORRELATION_WINDOW = 5.0
-"""Sokal's window: the autocorrelation is summed up to the first lag M >= this many times tau(M) [-] (emcee's c)."""
-
-
-def autocorrelation_times(chain: np.ndarray, window: float = AUTOCORRELATION_WINDOW, lags: Optional[int] = None) -> np.ndarray:
-    """Integrated autocorrelation time per parameter [steps]; nan where a parameter has not moved yet.
-
-    emcee's estimator (``emcee.autocorr.integrated_time``: the normalised autocorrelation of
-    each walker, averaged over walkers, summed up to Sokal's window), computed for all walkers
-    of a parameter in one real FFT in single precision after centring in double: 4-5 times
-    faster than emcee's, equal to it within 1e-6 (tested); the check runs every 100 steps.
-
-    Parameters
-    ----------
-    chain : numpy.ndarray (S, W, D)
-        Steps, walkers, parameters.
-    window : float
-    lags : int, optional
-        Autocorrelation computed up to this lag only (FFTs of S + lags points instead of 2 S): the same estimate
-        when Sokal's window lies within them (a few tau suffice), else every lag is computed.
-    """
-    n = len(chain)
-    lags = n if lags is None else min(lags, n)
-    size = fft.next_fast_len(n + lags - 1, real=True)
-    mean_acf = np.empty((chain.shape[2], lags))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        for d in range(chain.shape[2]):
-            centred = chain[:, :, d].T - chain[:, :, d].mean(axis=0)[:, None]
-            spectrum = fft.rfft(centred.astype(np.float32), n=size, axis=-1)
-            acf = fft.irfft(spectrum.real**2 + spectrum.imag**2, n=size, axis=-1)[:, :lags]
-            mean_acf[d] = np.mean(acf / acf[:, :1], axis=0)
-    taus = 2 * np.cumsum(mean_acf, axis=1) - 1
-    short = np.arange(lags) < window * taus
-    if lags < n and not np.all(short.any(axis=1) & ~short.all(axis=1)):  # a window beyond the lags computed
-        return autocorrelation_times(chain, window)
-    lag = np.where(short.any(axis=1), np.argmin(short, axis=1), n - 1)
-    return np.take_along_axis(taus, lag[:, None], axis=1)[:, 0]
-
-
-AUTOCORRELATION_LAGS = 4 * AUTOCORRELATION_WINDOW
-"""Lags the convergence check computes, in the previous check's largest tau [-]: Sokal's window (5 tau) lies within
-them unless tau grew by 4/5 since (then every lag is computed)."""
-
-
 def laplace_covariance(data: FitData, theta: np.ndarray, scale: np.ndarray) -> np.ndarray:
     """Covariance -H^-1 of the log-posterior at ``theta`` (finite-difference Hessian, one batch).
 
@@ -457,74 +365,6 @@ def initial_walkers(data: FitData, theta: np.ndarray, covariance: np.ndarray, n_
             return walkers
         covariance = 0.25 * covariance
     raise RuntimeError("could not place the walkers inside the prior around the MAP")
-
-
-def sample_posterior(
-    data: FitData,
-    walkers: np.ndarray,
-    seed: int,
-    check_every: int = 100,
-    max_steps: int = 20000,
-    max_seconds: Optional[float] = None,
-    progress: bool = False,
-    description: str = "emcee",
-    chain_taus: float = CHAIN_TAUS,
-):
-    """Run emcee in chunks until :func:`convergence_rule` (``chain_taus``) holds or a cap is reached.
-
-    With ``progress``, the steps run are shown on stderr against the chain length the rule
-    needs (``chain_taus`` tau_max, revised as tau is estimated), not against the cap.
-
-    Returns
-    -------
-    sampler : emcee.EnsembleSampler
-    diagnostics : ChainDiagnostics
-    """
-    n_walkers, n_dim = walkers.shape
-    moves = [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
-    sampler = emcee.EnsembleSampler(n_walkers, n_dim, log_probability, args=(data, WarmStarts()), vectorize=True,
-                                    moves=moves)
-    sampler.random_state = np.random.RandomState(seed).get_state()
-    state = walkers
-    previous = tau = np.full(n_dim, np.inf)  # tau: of the final chain, computed in the loop's last pass
-    converged = False
-    start = time.perf_counter()
-    with Progress(None, description, unit="steps", enabled=progress) as shown:
-        while sampler.iteration < max_steps:
-            chunk = min(check_every, max_steps - sampler.iteration)
-            state = sampler.run_mcmc(state, chunk, progress=False)
-            lags = int(AUTOCORRELATION_LAGS * np.max(previous)) + 1 if np.all(np.isfinite(previous)) else None
-            tau = autocorrelation_times(sampler.get_chain(), lags=lags)
-            needed = chain_taus * np.max(tau)
-            if np.all(np.isfinite(tau)) and needed <= sampler.iteration and np.all(np.abs(previous - tau) < 0.01 * tau):
-                converged = True
-                shown.update(chunk, total=sampler.iteration, note="converged")
-                break
-            if np.isfinite(needed) and needed > sampler.iteration:
-                shown.update(chunk, total=int(np.ceil(needed)), note=f"tau {np.max(tau):.0f}, {chain_taus:g} tau needed")
-            elif np.isfinite(needed):
-                shown.update(chunk, total=sampler.iteration + check_every, note=f"{chain_taus:g} tau reached, tau still settling")
-            else:
-                shown.update(chunk)
-            previous = tau
-            if max_seconds is not None and time.perf_counter() - start > max_seconds:
-                break
-    seconds = time.perf_counter() - start
-    finite_tau = np.where(np.isfinite(tau), tau, sampler.iteration)
-    burn_in = int(min(2 * np.max(finite_tau), sampler.iteration // 2))
-    thin = max(1, int(0.5 * np.min(finite_tau)))
-    diagnostics = ChainDiagnostics(
-        tau=tau,
-        n_steps=sampler.iteration,
-        n_walkers=n_walkers,
-        burn_in=burn_in,
-        thin=thin,
-        acceptance=float(np.mean(sampler.acceptance_fraction)),
-        converged=converged,
-        seconds=seconds,
-        chain_taus=chain_taus,
-    )
-    return sampler, diagnostics
 
 
 def bic(log_likelihood: float, n_parameters: int, n_points: int) -> float:
@@ -599,9 +439,9 @@ def fit_law(
     n_walkers += n_walkers % 2
     covariance = laplace_covariance(data, theta_map, scale)
     walkers = initial_walkers(data, theta_map, covariance, n_walkers, rng)
-    sampler, diagnostics = sample_posterior(
-        data, walkers, int(rng.integers(2**31)), check_every, max_steps, max_seconds, progress, f"emcee, {law_name} law",
-        chain_taus,
+    sampler, diagnostics = run_ensemble(
+        log_probability, walkers, int(rng.integers(2**31)), (data, WarmStarts()), max_steps, chain_taus, check_every,
+        max_seconds, progress, f"emcee, {law_name} law",
     )
     kept = sampler.get_chain(discard=diagnostics.burn_in, thin=diagnostics.thin)
     chain = sampler.get_chain()
@@ -810,30 +650,13 @@ def parameter_unit(law_name: str, name: str) -> str:
 
 def parameter_summary(law_fit: LawFit) -> dict:
     """Name -> {median, p05, p95, unit} in natural units (f_r_k in Hz)."""
-    summary = {}
-    for name, values in law_fit.data.layout.natural(law_fit.samples).items():
-        p05, median, p95 = np.quantile(values, [0.05, 0.5, 0.95])
-        unit = parameter_unit(law_fit.law_name, name)
-        summary[name] = {"median": float(median), "p05": float(p05), "p95": float(p95), "unit": unit}
-    return summary
+    return {name: quantile_summary(values, unit=parameter_unit(law_fit.law_name, name))
+            for name, values in law_fit.data.layout.natural(law_fit.samples).items()}
 
 
 def diagnostics_summary(law_fit: LawFit) -> dict:
     """The chain's convergence figures, JSON-able."""
-    d = law_fit.diagnostics
-    return {
-        "tau_max": d.tau_max,
-        "tau": dict(zip(law_fit.data.layout.names, (float(t) for t in d.tau))),
-        "n_steps": d.n_steps,
-        "n_walkers": d.n_walkers,
-        "burn_in": d.burn_in,
-        "thin": d.thin,
-        "n_samples": len(law_fit.samples),
-        "acceptance": d.acceptance,
-        "converged": d.converged,
-        "rule": convergence_rule(d.chain_taus),
-        "seconds": d.seconds,
-    }
+    return {**law_fit.diagnostics.to_dict(law_fit.data.layout.names), "n_samples": len(law_fit.samples)}
 
 
 def velocity_grid(log: CampaignLog, n: int = 50) -> np.ndarray:
