@@ -195,3 +195,18 @@ def test_the_flexible_law_summed_as_hinges_is_its_clipped_segments():
         for j, (rise, low, high) in enumerate(zip(rises, squared, squared[1:]))
     )
     assert np.allclose(law.loss(velocity), expected, rtol=1e-13, atol=0)
+
+
+def test_each_law_carries_the_units_of_its_parameters_and_the_exponent_of_its_loss():
+    """One place for a law's facts: its units name exactly its parameters, and its loss grows as |v|^p with its own
+    exponent p (the threshold law's far above its threshold); the fit's parameter units are the law's."""
+    from workflow.damping.fit import parameter_unit
+    from workflow.damping.laws import LAWS, ConstantQ, LinearLoss, QuadraticLoss, ThresholdLoss, parameter_names
+
+    for law in LAWS.values():
+        assert set(law.units) == set(parameter_names(law)), law.name
+        assert all(parameter_unit(law.name, name) == unit for name, unit in law.units.items())
+    for law in (QuadraticLoss(50.0, 30.0), LinearLoss(50.0, 3.0), ThresholdLoss(50.0, 30.0, 1e-4, 0.05)):
+        extra = [law.loss(v) - 1 / 50.0 for v in (0.2, 0.4)]
+        assert extra[1] / extra[0] == pytest.approx(2.0**law.velocity_exponent, rel=2e-3), law.name
+    assert ConstantQ.velocity_exponent == 0

@@ -232,7 +232,7 @@ def initial_guess(data: FitData, sweeps: SweepEstimates) -> Tuple[np.ndarray, np
     velocity = ok_v if ok_v.size else np.array([np.max(data.velocity)])
     loss = 1 / q
     start, scale = {}, {}
-    exponent = {"quadratic": 2, "linear": 1, "threshold": 2, "flexible": 2}.get(layout.law_name)
+    exponent = LAWS[layout.law_name].velocity_exponent or None
     alpha_upper = data.upper[layout.names.index("alpha")] if "alpha" in layout.names else 0.0
     if exponent is None or len(q) < 2:
         intercept, slope = float(np.mean(loss)), 0.01 * alpha_upper
@@ -638,14 +638,15 @@ def ringdown_agreement(log: CampaignLog, law_name: str, forward: ForwardModel = 
     return RingdownAgreement(law_name, velocity, *sides, (sides[0][1] - sides[1][1]) / sigma)
 
 
-_UNITS = {"q0": "-", "gain": "m/V", "sigma_rel": "-", "sigma_abs": "m/s", "kappa": "s^2/m^2", "drift_rate": "Hz/s",
-          "sigma_decay_rel": "-", "sigma_decay_abs": "m/s", "v_t": "m/s", "onset": "-", **{d: "-" for d in MonotoneSpline.INCREMENTS}}
-_ALPHA_UNITS = {"quadratic": "s^2/m^2", "linear": "s/m", "threshold": "s^2/m^2"}
+_UNITS = {"gain": "m/V", "sigma_rel": "-", "sigma_abs": "m/s", "kappa": "s^2/m^2", "drift_rate": "Hz/s",
+          "sigma_decay_rel": "-", "sigma_decay_abs": "m/s"}
+"""Units of the fitted parameters beside the law's own (the law's are in its ``units``)."""
 
 
 def parameter_unit(law_name: str, name: str) -> str:
     """Unit of the fitted parameter ``name`` of the law ``law_name`` (``"-"`` when dimensionless)."""
-    return "Hz" if name.startswith("f_r_") else "m/s" if name.startswith("v0_") else _ALPHA_UNITS.get(law_name) if name == "alpha" else _UNITS[name]
+    law_units = LAWS[law_name].units
+    return "Hz" if name.startswith("f_r_") else "m/s" if name.startswith("v0_") else law_units.get(name) or _UNITS[name]
 
 
 def parameter_summary(law_fit: LawFit) -> dict:

@@ -28,6 +28,10 @@ class QuadraticLoss:
     q0: float
     alpha: float
     name: ClassVar[str] = "quadratic"
+    velocity_exponent: ClassVar[int] = 2
+    """p of the law's loss term alpha |v|^p [-]."""
+    units: ClassVar[dict] = {"q0": "-", "alpha": "s^2/m^2"}
+    """Parameter -> unit."""
 
     def quality_factor(self, velocity):
         """Q at the peak velocity amplitude ``velocity`` [m/s] -> [-]."""
@@ -53,6 +57,8 @@ class LinearLoss:
     q0: float
     alpha: float
     name: ClassVar[str] = "linear"
+    velocity_exponent: ClassVar[int] = 1
+    units: ClassVar[dict] = {"q0": "-", "alpha": "s/m"}
 
     def quality_factor(self, velocity):
         """Q at the peak velocity amplitude ``velocity`` [m/s] -> [-]."""
@@ -75,6 +81,8 @@ class ConstantQ:
 
     q0: float
     name: ClassVar[str] = "constant"
+    velocity_exponent: ClassVar[int] = 0
+    units: ClassVar[dict] = {"q0": "-"}
 
     def quality_factor(self, velocity):
         """Q0, broadcast to the shape of ``velocity`` [-]."""
@@ -115,6 +123,9 @@ class ThresholdLoss:
     v_t: float
     onset: float = 0.2
     name: ClassVar[str] = "threshold"
+    velocity_exponent: ClassVar[int] = 2
+    """p of the loss term far above the threshold, alpha (|v| - v_t)^p [-]."""
+    units: ClassVar[dict] = {"q0": "-", "alpha": "s^2/m^2", "v_t": "m/s", "onset": "-"}
     ONSET_RANGE: ClassVar[tuple] = (0.05, 1.0)
     """Range of the onset width the fit explores, s / v_t [-]: from a sharp corner to an onset spread over the whole
     threshold."""
@@ -172,6 +183,9 @@ class MonotoneSpline:
     v_first: float = None
     name: ClassVar[str] = "flexible"
     INCREMENTS: ClassVar[tuple] = ("d1", "d2", "d3", "d4", "d5", "d6", "d7", "d8")
+    velocity_exponent: ClassVar[int] = 2
+    """The law is piecewise linear in v^p [-]."""
+    units: ClassVar[dict] = {"q0": "-", **{d: "-" for d in INCREMENTS}, "v_top": "m/s", "v_first": "m/s"}
 
     @classmethod
     def knots(cls, v_top, v_first=None) -> np.ndarray:

@@ -273,7 +273,7 @@ def fit_data(log: CampaignLog, law_name: str, forward: ForwardModel = ForwardMod
     antinode = np.concatenate([log.velocity / factor] + ([decays.velocity / decays.mode_factor] if decays else []))
     v_max = float(np.max(antinode))
     layout = replace(layout, fixed=spline_knots(log, v_max)) if law_name == MonotoneSpline.name else layout
-    exponent = {"quadratic": 2, "linear": 1}
+    law = LAWS[law_name]
     bounds = {
         "ln_q0": np.log(Q0_RANGE),
         "ln_gain": np.log(GAIN_RANGE),
@@ -283,8 +283,8 @@ def fit_data(log: CampaignLog, law_name: str, forward: ForwardModel = ForwardMod
         "ln_sigma_decay_abs": np.log(np.asarray(SIGMA_ABS_RANGE) * v_max),
         "kappa": (0.0, SOFTENING_MAX_SHIFT / v_max**2),
     }
-    if law_name in exponent:
-        bounds["alpha"] = (0.0, 1.0 / MIN_Q_AT_MAX_VELOCITY / v_max ** exponent[law_name])
+    if "alpha" in law.units:  # Q(v_max) >= MIN_Q_AT_MAX_VELOCITY by the loss term alone (the threshold's: below)
+        bounds["alpha"] = (0.0, 1.0 / MIN_Q_AT_MAX_VELOCITY / v_max**law.velocity_exponent)
     if law_name == ThresholdLoss.name:
         onset = (1 - THRESHOLD_RANGE[1]) * v_max
         bounds["alpha"] = (0.0, 1.0 / MIN_Q_AT_MAX_VELOCITY / onset**2)
