@@ -1,12 +1,14 @@
-"""Interferometer log format, version 1 (docs/log-format.md): the names, once, and the metadata reader.
+"""Interferometer log format, version 1 (docs/log-format.md): the names, once, its one reader and its text.
 
 UTF-8 CSV.  Optional leading metadata lines ``# key: value`` (the first may be a title
-line), then one header row and the data rows.  A metadata line is read by :func:`metadata_entry` and written by
-:func:`metadata_line` (every reader and the writer use them).  Readers live in
-:mod:`workflow.damping.logs`; the writer in :mod:`instruments.procedures.logwriter`.
+line), then one header row and the data rows.  :class:`LogReader` is the one reader of the format
+(:func:`read_metadata`, the fit's :func:`~workflow.damping.logs.read_table` and the resume's
+:func:`~instruments.procedures.logwriter.read_log` are views of it); :func:`head_text` and :func:`rows_text`
+are its text, written to a file by the one writer, :class:`~instruments.procedures.logwriter.LogWriter`.
 """
 
-import io
+import codecs
+import csv
 import math
 from pathlib import Path
 
@@ -84,14 +86,21 @@ BUILT_PLATE_KEYS = (LAMBDA_MM, HI_MM, HP_MM, B_MM)
 
 
 MAX_HEADER_LINES = 10_000
-"""Most metadata lines read before the header row [-]."""
+"""Most lines read before the header row [-]."""
 MAX_LINE_LENGTH = 10_000
 """Longest accepted line [characters]; a data row is under 200."""
 
 
-def metadata_line(key: str, text: str) -> str:
-    """The ``# key: value`` line of a metadata entry (no line end)."""
-    return f"{METADATA_PREFIX}{key}: {text}"
+def metadata_text(value) -> str:
+    """A metadata value as written: a list as comma-separated items (floats as ``%g``), white space folded."""
+    if isinstance(value, (list, tuple)):
+        value = ",".join(f"{item:g}" if isinstance(item, float) else str(item) for item in value)
+    return " ".join(str(value).split())
+
+
+def metadata_line(key: str, value) -> str:
+    """The ``# key: value`` line of a metadata entry (:func:`metadata_text`; no line end)."""
+    return f"{METADATA_PREFIX}{key}: {metadata_text(value)}"
 
 
 def metadata_entry(line: str) -> tuple[str, str] | None:
@@ -103,36 +112,136 @@ def metadata_entry(line: str) -> tuple[str, str] | None:
     return (key.strip(), value.strip()) if separator and key.strip() else None
 
 
-def read_metadata(path: Path) -> dict:
-    """key -> (value, line number) of the ``# key: value`` lines before a log's header row.
+def head_text(title: str, metadata: dict, columns) -> str:
+    """The lines a log starts with: ``# title``, a ``# key: value`` line per metadata item, the header row."""
+    lines = [METADATA_PREFIX + title, *(metadata_line(key, value) for key, value in metadata.items()), ",".join(columns)]
+    return "\n".join(lines) + "\n"
+
+
+def rows_text(rows) -> str:
+    """Rows of field texts (names and numbers: never quoted) as comma-separated lines, each ending with ``\\n``."""
+    return "".join(",".join(row) + "\n" for row in rows)
+
+
+class LogReader:
+    """The one reader of the format, a context manager: one pass over a log, one line in memory at a time.
+
+    It iterates over ``(line number, fields, complete)`` of the header row (its names stripped), then of each
+    data row; ``# key: value`` lines before the header go to :attr:`metadata` (key -> (value, line number), a
+    key's first), other ``#`` lines and blank lines are skipped.  Only the last line may lack its newline
+    (``complete`` False); cut short into no row (not UTF-8, another number of fields than the header), it comes
+    with ``fields`` None.  :attr:`empty`: no line read holds text; :attr:`length`: bytes up to the end of the
+    last complete line read [bytes]; :attr:`tail`: the unterminated last line.  ``max_line_length``: longest
+    line accepted [characters] (None: any, within the file's :data:`MAX_LOG_BYTES`).
 
     Raises
     ------
     InputFileError
-        If the file cannot be read (or is no regular file, or is too large: :func:`~workflow.inputfiles.open_input`),
-        is not UTF-8, has a line over :data:`MAX_LINE_LENGTH` or more than :data:`MAX_HEADER_LINES` lines before its header.
+        Naming the file and line: those of :func:`~workflow.inputfiles.open_input`; UTF-16, binary (NUL bytes)
+        or not UTF-8; a line over ``max_line_length``; no header row within :data:`MAX_HEADER_LINES` lines; a
+        carriage return inside a line; any other line that is no CSV row of the header's width.
     """
-    metadata = {}
-    with io.TextIOWrapper(open_input(path, str(path), MAX_LOG_BYTES), encoding="utf-8-sig", newline="") as stream:
-        try:
-            for number in range(1, MAX_HEADER_LINES + 2):
-                line = stream.readline(MAX_LINE_LENGTH + 3)
-                if not line:
-                    break
-                if number > MAX_HEADER_LINES:
-                    raise InputFileError(f"{path}, line {number}: no header row within {MAX_HEADER_LINES} lines")
-                if len(line.rstrip("\r\n")) > MAX_LINE_LENGTH:
-                    raise InputFileError(f"{path}, line {number}: longer than the {MAX_LINE_LENGTH} characters accepted per line")
-                if line.strip() and not line.lstrip().startswith("#"):
-                    break
-                entry = metadata_entry(line)
-                if entry:
-                    metadata.setdefault(entry[0], (entry[1], number))
-        except OSError as error:
-            raise InputFileError(f"{path}: cannot read ({error.strerror or error})") from None
-        except UnicodeDecodeError as error:
-            raise InputFileError(f"{path}: not UTF-8 (byte {error.start} of a line)") from None
-    return metadata
+
+    def __init__(self, path, max_line_length: int | None = MAX_LINE_LENGTH):
+        self.path, self.max_line_length = Path(path), max_line_length
+        self.metadata, self.empty, self.length, self.tail = {}, True, 0, b""
+        self._stream = open_input(self.path, str(self.path), MAX_LOG_BYTES)
+        self._lines = self._read()
+
+    def __enter__(self) -> "LogReader":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stream.close()
+
+    def __iter__(self):
+        return self._lines
+
+    def __next__(self) -> tuple:
+        return next(self._lines)
+
+    def _read(self):
+        path, stream, limit = self.path, self._stream, self.max_line_length
+        line_bytes = -1 if limit is None else 4 * limit + 8  # a line of ``limit`` UTF-8 characters and its end
+        head = stream.peek(4 * MAX_LINE_LENGTH + 8)  # the first block: a binary file is named so even if not UTF-8
+        if head.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
+            raise InputFileError(f"{path}: UTF-16 text, not UTF-8 (save the log as UTF-8)")
+        if b"\x00" in head:
+            raise InputFileError(f"{path}: binary data (NUL bytes), not a CSV log")
+        number, width = 0, None  # width: the header's number of fields, once read
+        while True:
+            try:
+                raw = stream.readline(line_bytes)
+            except OSError as error:
+                raise InputFileError(f"{path}: cannot read ({error.strerror or error})") from None
+            if not raw:
+                return
+            number += 1
+            if width is None and number > MAX_HEADER_LINES:
+                raise InputFileError(f"{path}, line {number}: no header row within {MAX_HEADER_LINES} lines")
+            if b"\x00" in raw:
+                raise InputFileError(f"{path}, line {number}: binary data (NUL bytes), not a CSV log")
+            complete = raw.endswith(b"\n")
+            if not complete and len(raw) == line_bytes:
+                raise InputFileError(f"{path}, line {number}: longer than the {limit} characters accepted per line")
+            self.tail = b"" if complete else raw
+            try:
+                line = raw.decode("utf-8-sig" if number == 1 else "utf-8")
+            except UnicodeDecodeError as error:
+                if complete or width is None:
+                    raise InputFileError(f"{path}, line {number}: not UTF-8 (byte 0x{raw[error.start]:02x} at offset "
+                                         f"{self.length + error.start})") from None
+                yield number, None, False
+                return
+            self.length += len(raw) if complete else 0
+            line = line[:-1] if complete else line
+            if limit is not None and len(line) > limit:
+                raise InputFileError(f"{path}, line {number}: {len(line)} characters, longer than the {limit} accepted "
+                                     "per line")
+            self.empty = self.empty and not line.strip()
+            line = line.rstrip("\r")
+            comment = not line.strip() or line.lstrip().startswith("#")
+            if comment and width is not None:
+                continue
+            try:
+                if "\r" in line:
+                    raise InputFileError(f"{path}, line {number}: a carriage return inside the line (CR line ends? "
+                                         "expected LF or CRLF)")
+                if comment:
+                    entry = metadata_entry(line)
+                    if entry:
+                        self.metadata.setdefault(entry[0], (entry[1], number))
+                    continue
+                try:
+                    fields = next(csv.reader([line]))
+                except csv.Error as error:
+                    raise InputFileError(f"{path}, line {number}: not a CSV row ({error})") from None
+                if width is not None and len(fields) != width:
+                    raise InputFileError(f"{path}, line {number}: expected {width} fields, got {len(fields)}")
+            except InputFileError:
+                if complete or width is None:
+                    raise
+                fields = None
+            if width is None:
+                width, fields = len(fields), [name.strip() for name in fields]
+            yield number, fields, complete
+
+
+def column_names(path) -> list:
+    """The names in a log's header row ([] without one), reading no further (:class:`LogReader`; an empty file is
+    refused)."""
+    with LogReader(path) as log:
+        names = next(log, (0, [], True))[1]
+    if log.empty:
+        raise InputFileError(f"{log.path}: empty file")
+    return names
+
+
+def read_metadata(path) -> dict:
+    """key -> (value, line number) of the ``# key: value`` lines before a log's header row (:class:`LogReader`)."""
+    with LogReader(path) as log:
+        next(log, None)
+    return log.metadata
 
 
 def metadata_number(metadata: dict, key: str, source) -> float:

@@ -19,9 +19,7 @@ appended to nor overwritten, and only regular files are logs.
 """
 
 import contextlib
-import csv
 import fcntl
-import io
 import math
 import os
 import stat
@@ -33,7 +31,6 @@ import numpy as np
 
 from workflow import logformat
 from workflow.errors import InputFileError
-from workflow.inputfiles import MAX_LOG_BYTES, read_input
 
 TITLE = "tactile interferometer log"
 _FORMATS = {
@@ -78,12 +75,6 @@ def point_key(values: dict, keys: tuple = KEY_COLUMNS) -> tuple:
 def row_key(row: dict, keys: tuple = KEY_COLUMNS) -> tuple:
     """The :func:`point_key` of a logged row (column -> text, already normalised by :func:`read_log`)."""
     return tuple(row[column] for column in keys if column in row)
-
-
-def _metadata_text(value) -> str:
-    if isinstance(value, (list, tuple)):
-        value = ",".join(f"{item:g}" if isinstance(item, float) else str(item) for item in value)
-    return " ".join(str(value).split())
 
 
 def check_output(path: Path) -> None:
@@ -211,19 +202,9 @@ class LoggedRows:
     tail_is_row: bool = False
 
 
-def _fields(path: Path, number: int, line: str) -> list:
-    """The comma-separated fields of line ``number``."""
-    try:
-        return next(csv.reader([line]), [])
-    except csv.Error as error:
-        raise InputFileError(f"{path}, line {number}: not a CSV row ({error}); not resuming a damaged log") from None
-
-
-def _row(path: Path, number: int, fields: list, columns: tuple) -> dict:
-    """A row of ours (column -> text), its key columns normalised; :class:`InputFileError` naming the line."""
-    if len(fields) != len(columns):
-        raise InputFileError(f"{path}, line {number}: expected {len(columns)} fields, got {len(fields)}; "
-                             "not resuming a damaged log (fix or remove the line, or choose another --out)")
+def _row(path: Path, number: int, fields: list, columns: tuple, complete: bool) -> dict | None:
+    """A row of ours (column -> text), its key columns normalised; :class:`InputFileError` naming the line, or None
+    for an unterminated last line that is no row."""
     row = dict(zip(columns, fields))
     for column, text in row.items():
         if not text.strip() and column not in REQUIRED:
@@ -233,64 +214,47 @@ def _row(path: Path, number: int, fields: list, columns: tuple) -> dict:
         except ValueError:
             value = math.nan
         if not math.isfinite(value) or (column == logformat.SWEEP and value != round(value)):
+            if not complete:
+                return None
             kind = "an integer" if column == logformat.SWEEP else "a finite number"
-            raise InputFileError(f"{path}, line {number}: {column} {text!r} is not {kind}; not resuming a damaged "
-                                 "log (fix the line, or choose another --out)")
+            raise InputFileError(f"{path}, line {number}: {column} {text!r} is not {kind}")
         if column in KEY_COLUMNS:
             row[column] = format_value(column, value)
     return row
 
 
 def read_log(path: Path, columns: tuple = logformat.COLUMNS) -> LoggedRows:
-    """The metadata and rows of a log we wrote with ``columns``, within :data:`~workflow.inputfiles.MAX_LOG_BYTES`.
+    """The metadata and rows of a log we wrote with ``columns`` (:class:`~workflow.logformat.LogReader`, lines of
+    any length).
 
-    Blank lines and ``#`` comment lines after the header are skipped.  An unterminated last line is a
-    row when it is a complete one, else ignored (:attr:`LoggedRows.tail` holds it).
+    Blank lines and ``#`` comment lines after the header are skipped.  An unterminated last line is a row when it
+    is a complete one, else ignored (:attr:`LoggedRows.tail` holds it).
 
     Raises
     ------
     InputFileError
-        If the header row is not ours, the file is not UTF-8 or a complete line is no row of ours
-        (wrong number of fields, a value that is not a number, a sweep id that is not an integer),
-        naming the file and line.
+        Those of the reader; a header row that is not ours; a complete line that is no row of ours (wrong number
+        of fields, a value that is not a number, a sweep id that is not an integer), naming the file and line.
     """
-    data = read_input(path, str(path), MAX_LOG_BYTES)
-    cut = data.rfind(b"\n") + 1
-    complete, tail = data[:cut], data[cut:]
-    try:
-        text = complete.decode("utf-8")
-    except UnicodeDecodeError as error:
-        raise InputFileError(f"{path}: not a UTF-8 text log (byte {error.start}); not resuming it") from None
-    metadata, rows, lines, header = {}, [], [], None
-    for number, line in enumerate(text.split("\n")[:-1], start=1):
-        line = line.removesuffix("\r")
-        if header is None and line.startswith("#"):
-            entry = logformat.metadata_entry(line)
-            if entry:
-                metadata[entry[0]] = entry[1]
-            continue
-        if header is not None and (not line.strip() or line.startswith("#")):
-            continue
-        fields = _fields(path, number, line)
-        if header is None:
-            if tuple(fields) != columns:
-                raise InputFileError(f"{path}, line {number}: header {fields} is not {list(columns)}; not a log this "
-                                     "writer can resume")
-            header = fields
-            continue
-        rows.append(_row(path, number, fields, columns))
-        lines.append(number)
-    if header is None:
-        return LoggedRows(metadata, [], [], 0, tail)
-    if not tail:
-        return LoggedRows(metadata, rows, lines, len(complete))
-    number = text.count("\n") + 1
-    try:
-        rows.append(_row(path, number, _fields(path, number, tail.decode("utf-8")), columns))
-    except (InputFileError, UnicodeDecodeError):
-        return LoggedRows(metadata, rows, lines, len(complete), tail)
-    lines.append(number)
-    return LoggedRows(metadata, rows, lines, len(complete), tail, tail_is_row=True)
+    rows, lines = [], []
+    with logformat.LogReader(path, max_line_length=None) as log:
+        number, header, complete = next(log, (0, None, False))
+        metadata = {key: value for key, (value, _) in log.metadata.items()}
+        if not complete:  # no header row, or one cut short: a log that holds no row
+            return LoggedRows(metadata, [], [], 0, log.tail)
+        if tuple(header) != columns:
+            raise InputFileError(f"{path}, line {number}: header {header} is not {list(columns)}; not a log this "
+                                 "writer can resume")
+        try:
+            for number, fields, complete in log:
+                row = None if fields is None else _row(path, number, fields, columns, complete)
+                if row:
+                    rows.append(row)
+                    lines.append(number)
+        except InputFileError as error:
+            raise InputFileError(f"{error}; not resuming a damaged log (fix or remove the line, or choose another "
+                                 "--out)") from None
+    return LoggedRows(metadata, rows, lines, log.length, log.tail, tail_is_row=not complete and lines[-1:] == [number])
 
 
 def _same_value(old: str | None, new: str) -> bool:
@@ -365,14 +329,13 @@ class LogWriter:
     def _open(self, restart: bool) -> None:
         if not (self.path.exists() and not restart and self._resume()):
             self._file = open(self.path, "w", encoding="utf-8", newline="")
-            lines = [f"# {TITLE}"] + [logformat.metadata_line(key, _metadata_text(value)) for key, value in self.metadata.items()]
-            self._write("\n".join(lines) + "\n" + ",".join(self.columns) + "\n")
+            self._write(logformat.head_text(TITLE, self.metadata, self.columns))
 
     def _resume(self) -> bool:
         logged = read_log(self.path, self.columns)
         if not logged.length:
             return False
-        wanted = {key: _metadata_text(value) for key, value in self.metadata.items() if key == "procedure" or key.startswith("plan_")}
+        wanted = {key: logformat.metadata_text(value) for key, value in self.metadata.items() if key == "procedure" or key.startswith("plan_")}
         for key, value in wanted.items():
             if not _same_value(logged.metadata.get(key), value):
                 raise InputFileError(
@@ -434,14 +397,9 @@ class LogWriter:
 
     def append_rows(self, rows: list[dict]) -> None:
         """Write several rows in one write (a ring-down's samples), durably."""
-        buffer = io.StringIO()
-        writer = csv.writer(buffer, lineterminator="\n")
-        texts = []
-        for row in rows:
-            text = {column: format_value(column, row[column]) if row.get(column) is not None else "" for column in self.columns}
-            writer.writerow(text[column] for column in self.columns)
-            texts.append(text)
-        self._write(buffer.getvalue())
+        texts = [{column: format_value(column, row[column]) if row.get(column) is not None else "" for column in self.columns}
+                 for row in rows]
+        self._write(logformat.rows_text([text[column] for column in self.columns] for text in texts))
         for text in texts:
             self.rows.append(text)
             self.lines.append(0)

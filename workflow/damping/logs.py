@@ -8,8 +8,6 @@ dropouts) are dropped and counted, and an incomplete last line without a newline
 writer interrupted mid-row) is ignored.
 """
 
-import codecs
-import csv
 import math
 from array import array
 from dataclasses import dataclass
@@ -21,7 +19,6 @@ import numpy as np
 from workflow import logformat
 from workflow.damping.mode_shape import BeamMode, measurement_factor
 from workflow.errors import InputFileError
-from workflow.inputfiles import MAX_LOG_BYTES, open_input
 from workflow.models import materials
 from workflow.models.builtplate import BuiltPlate
 from workflow.models.limits import LIMITS, problem
@@ -36,8 +33,6 @@ _QUANTITY_STEMS = {
 
 _MISSING = {"", "nan", "NaN", "NAN"}
 
-_MAX_LINE_BYTES = 4 * logformat.MAX_LINE_LENGTH + 8
-"""Bytes read at most for one line: any line of :data:`~workflow.logformat.MAX_LINE_LENGTH` UTF-8 characters and its line end."""
 MAX_ROWS = 1_000_000
 """Most data rows accepted in one log (a campaign is a few hundred; 200 000 are read in 2.4 to 5 s)."""
 MIN_PEAK_VELOCITY = 1e-6
@@ -283,7 +278,8 @@ class LogTable:
 
 
 def read_table(path, required: tuple = logformat.REQUIRED_COLUMNS, phase: bool = False) -> LogTable:
-    """The known columns of a log, read line by line (memory: the rows' numbers, about 50 bytes a row).
+    """The known columns of a log, read line by line (:class:`~workflow.logformat.LogReader`; memory: the rows'
+    numbers, about 50 bytes a row).
 
     Rows without a velocity reading (empty or ``nan``: vibrometer dropouts) are dropped with a warning.
     Every value is checked against its plausible range (:data:`~workflow.models.limits.LIMITS`).
@@ -305,13 +301,12 @@ def read_table(path, required: tuple = logformat.REQUIRED_COLUMNS, phase: bool =
         of fields; a non-numeric or implausible value.
     """
     path = Path(path)
-    warnings, metadata = [], {}
-    with open_input(path, str(path), MAX_LOG_BYTES) as stream:
-        lines = _content_lines(path, stream, warnings, metadata)
-        header_number, header_line, _ = next(lines, (None, None, True))
-        if header_line is None:
-            raise InputFileError(f"{path}: no header row (expected columns {', '.join(required)})")
-        header = [name.strip() for name in _fields(path, header_number, header_line)]
+    warnings = []
+    with logformat.LogReader(path) as log:
+        header_number, header, _ = next(log, (None, None, True))
+        if header is None:
+            raise InputFileError(f"{path}: empty file" if log.empty else
+                                 f"{path}: no header row (expected columns {', '.join(required)})")
         separator = next((mark for mark in ";\t" if len(header) == 1 and mark in header[0]), None)
         if separator:
             raise InputFileError(
@@ -326,14 +321,17 @@ def read_table(path, required: tuple = logformat.REQUIRED_COLUMNS, phase: bool =
         columns = _column_indices(path, header_number, header, required, phase)
         table = {name: array("d") for name in columns}
         line_numbers, rows, dropouts = array("q"), 0, 0
-        for number, line, complete in lines:
+        for number, cells, complete in log:
             if rows == MAX_ROWS:
                 raise InputFileError(f"{path}, line {number}: more than the {MAX_ROWS} data rows accepted in one log")
             try:
-                values = _values(path, number, line, header, columns)
+                values = None if cells is None else {name: _number(path, number, name, cells[index])
+                                                     for name, index in columns.items()}
             except InputFileError:
                 if complete:
                     raise
+                values = None
+            if values is None:  # an unterminated last line that is no row
                 warnings.append(f"{path}, line {number}: ignored an incomplete last line (no newline; interrupted writer?)")
                 break
             rows += 1
@@ -352,15 +350,7 @@ def read_table(path, required: tuple = logformat.REQUIRED_COLUMNS, phase: bool =
     arrays = {name: np.frombuffer(values, dtype=float) for name, values in table.items()}
     line_numbers = np.frombuffer(line_numbers, dtype=np.int64)
     _check_physical(path, arrays, line_numbers)
-    return LogTable(arrays, line_numbers, metadata, warnings)
-
-
-def header_columns(path) -> list:
-    """The column names of a log's header row (empty when it has none), reading no further."""
-    path = Path(path)
-    with open_input(path, str(path), MAX_LOG_BYTES) as stream:
-        number, line, _ = next(_content_lines(path, stream, [], {}), (None, None, True))
-        return [] if line is None else [name.strip() for name in _fields(path, number, line)]
+    return LogTable(arrays, line_numbers, log.metadata, warnings)
 
 
 def read_log(path):
@@ -473,71 +463,6 @@ def _mode_factor(path: Path, arrays: dict, metadata: dict, warnings: list):
                                   position.get(logformat.Y_POSITION, zeros) * MM)
     except ValueError as error:
         raise InputFileError(f"{path}: {error}") from None
-
-
-def _content_lines(path: Path, stream, warnings: list, metadata: dict):
-    """(line number, text, whether it ends with a newline) of the header and data lines of a UTF-8 file read
-    from ``stream``, one line in memory at a time: comments and blank lines skipped (``# key: value`` lines
-    before the header collected into ``metadata`` as key -> (value, line number)).  Only the last line can
-    lack its newline (a row whose writing was cut short, or a file saved without a final line end)."""
-    head = stream.peek(_MAX_LINE_BYTES)  # the file's first block: a binary file is named so even if its first line is not UTF-8
-    if head.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
-        raise InputFileError(f"{path}: UTF-16 text, not UTF-8 (save the log as UTF-8)")
-    if b"\x00" in head:
-        raise InputFileError(f"{path}: binary data (NUL bytes), not a CSV log")
-    number, offset, seen_text, header_seen = 0, 0, False, False
-    while True:
-        raw = stream.readline(_MAX_LINE_BYTES)
-        if not raw:
-            break
-        number += 1
-        if b"\x00" in raw:
-            raise InputFileError(f"{path}, line {number}: binary data (NUL bytes), not a CSV log")
-        complete = raw.endswith(b"\n")
-        if not complete and len(raw) == _MAX_LINE_BYTES:
-            raise InputFileError(f"{path}, line {number}: longer than the {logformat.MAX_LINE_LENGTH} characters accepted per line")
-        try:
-            line = raw.decode("utf-8-sig" if number == 1 else "utf-8")
-        except UnicodeDecodeError as error:
-            raise InputFileError(
-                f"{path}, line {number}: not UTF-8 (byte 0x{raw[error.start]:02x} at offset {offset + error.start})"
-            ) from None
-        offset += len(raw)
-        line = line[:-1] if complete else line
-        if len(line) > logformat.MAX_LINE_LENGTH:
-            raise InputFileError(f"{path}, line {number}: {len(line)} characters, longer than the "
-                                 f"{logformat.MAX_LINE_LENGTH} accepted per line")
-        seen_text = seen_text or bool(line.strip())
-        line = line.rstrip("\r")
-        if not line.strip() or line.lstrip().startswith("#"):
-            entry = logformat.metadata_entry(line)
-            if entry and not header_seen:
-                metadata.setdefault(entry[0], (entry[1], number))
-            continue
-        header_seen = True
-        yield number, line, complete
-    if not seen_text:
-        raise InputFileError(f"{path}: empty file")
-
-
-def _values(path: Path, number: int, line: str, header: list, columns: dict) -> dict:
-    """Column name -> value of the data line ``number`` (:func:`_number`), checked against the header's width."""
-    cells = _fields(path, number, line)
-    if len(cells) != len(header):
-        raise InputFileError(f"{path}, line {number}: expected {len(header)} fields, got {len(cells)}")
-    return {name: _number(path, number, name, cells[index]) for name, index in columns.items()}
-
-
-def _fields(path: Path, number: int, line: str) -> list:
-    """The comma-separated fields of line ``number``."""
-    if "\r" in line:
-        raise InputFileError(
-            f"{path}, line {number}: a carriage return inside the line (CR line ends? expected LF or CRLF)"
-        )
-    try:
-        return next(csv.reader([line]))
-    except csv.Error as error:
-        raise InputFileError(f"{path}, line {number}: not a CSV row ({error})") from None
 
 
 def _column_indices(path: Path, line: int, header, required: tuple, phase: bool) -> dict:

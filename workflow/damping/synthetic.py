@@ -95,9 +95,8 @@ def simulate_campaign(
 
 def campaign_csv(log: CampaignLog, title: str = "synthetic Q(v) campaign") -> str:
     """The campaign as log-format text (docs/log-format.md), timestamps one second apart."""
-    header = ",".join((logformat.SWEEP, logformat.TIMESTAMP, logformat.FREQUENCY, logformat.DRIVE_VOLTAGE, logformat.VELOCITY))
-    lines = [f"{logformat.METADATA_PREFIX}{title}", f"{logformat.METADATA_PREFIX}format_version: {logformat.FORMAT_VERSION}", header]
+    columns = (logformat.SWEEP, logformat.TIMESTAMP, logformat.FREQUENCY, logformat.DRIVE_VOLTAGE, logformat.VELOCITY)
     times = np.arange(len(log.velocity), dtype=float) if log.timestamp is None else log.timestamp
-    for k, t, f, v, u in zip(log.sweep, times, log.frequency, log.drive_voltage, log.velocity):
-        lines.append(f"{k},{t:.1f},{f:.3f},{v:.6g},{u:.8g}")
-    return "\n".join(lines) + "\n"
+    rows = ((f"{k}", f"{t:.1f}", f"{f:.3f}", f"{v:.6g}", f"{u:.8g}")
+            for k, t, f, v, u in zip(log.sweep, times, log.frequency, log.drive_voltage, log.velocity))
+    return logformat.head_text(title, {"format_version": logformat.FORMAT_VERSION}, columns) + logformat.rows_text(rows)

@@ -19,10 +19,9 @@ import numpy as np
 from instruments import simulator
 from instruments.simulator import builtplate as simulated
 from workflow import logformat
-from workflow.damping.logs import MIN_PEAK_VELOCITY, header_columns, read_table
+from workflow.damping.logs import MIN_PEAK_VELOCITY, read_table
 from workflow.errors import InputFileError
 from workflow.execution.cache import EvaluationCache, content_key, package_directory, source_version
-from workflow.logformat import read_metadata
 from workflow.models import fem
 from workflow.models.builtplate import BuiltPlate, PlateDeviations
 from workflow.models.fem.accuracy import FemAccuracy
@@ -35,12 +34,12 @@ from workflow.units import MM
 
 def is_scan_log(path) -> bool:
     """Whether the log's column header names the scan's ``x_mm`` and ``y_mm`` columns (docs/log-format.md)."""
-    return {logformat.X_POSITION, logformat.Y_POSITION} <= set(header_columns(path))
+    return {logformat.X_POSITION, logformat.Y_POSITION} <= set(logformat.column_names(path))
 
 
 def read_built_plate(path) -> BuiltPlate:
     """The nominal geometry a built-plate log names (``# lambda_mm``, ``# h_i_mm``, ``# h_p_mm``, ``# b_mm``, ...)."""
-    return BuiltPlate.from_metadata(read_metadata(Path(path)), str(path))
+    return BuiltPlate.from_metadata(logformat.read_metadata(path), str(path))
 
 
 @dataclass(frozen=True)
