@@ -136,13 +136,32 @@ def test_resume_with_another_plan_is_refused(tmp_path):
     assert path.read_text() == text  # nothing left to measure, nothing changed
 
 
-def test_log_writer_restarts_a_log_cut_inside_its_header(tmp_path):
+@pytest.mark.parametrize("cut", [b"# format_ver", "# plate: λ".encode()[:-1], b"\x00" * 32],
+                         ids=["ascii", "inside-a-character", "nul-padded"])
+def test_log_writer_restarts_a_log_cut_inside_its_header(tmp_path, cut):
     path = tmp_path / "c.csv"
-    path.write_text("# tactile interferometer log\n# format_ver")
+    path.write_bytes(b"# tactile interferometer log\n" + cut)
     with LogWriter(path, {"procedure": "campaign"}) as log:
         log.append({logformat.FREQUENCY: 1.0, logformat.DRIVE_VOLTAGE: 2.0, logformat.VELOCITY: 0.1})
     rows = list(csv.reader(line for line in path.read_text().splitlines() if not line.startswith("#")))
     assert rows == [list(logformat.COLUMNS), ["1", "2", "0.1", "", "", ""]]
+
+
+@pytest.mark.parametrize("cut", [b"32126.3,15,0.2", b"32126.3,15,0." + b"\x00" * 4000, b"\x00" * 512],
+                         ids=["mid-row", "nul-padded-row", "nul-padding"])
+def test_a_log_cut_by_a_power_loss_resumes_with_every_complete_row(tmp_path, cut):
+    """A power loss may leave the last block of a file padded with NUL bytes: that unterminated tail is a write cut
+    short like any other (kept, reported, the point measured again), not a binary file."""
+    path = tmp_path / "c.csv"
+    simulate_campaign(path, voltages=(5.0,), points_per_sweep=5)
+    complete = path.read_bytes()
+    written = keys(path)
+    rows = [line for line in complete.splitlines(keepends=True) if not line.startswith(b"#")]
+    path.write_bytes(complete[: complete.index(rows[-2])] + cut)  # the last two rows lost, the file cut in the next
+    assert len(read_for_fit(path).velocity) == len(written) - 2  # the fit reads the complete rows, with a warning
+    result = simulate_campaign(path, voltages=(5.0,), points_per_sweep=5, restart=False)
+    assert result.resumed == len(written) - 2 and result.truncated_bytes == len(cut)
+    assert keys(path) == written
 
 
 def run_cli(capsys, *argv):

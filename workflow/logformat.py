@@ -166,8 +166,10 @@ class LogReader:
         head = stream.peek(4 * MAX_LINE_LENGTH + 8)  # the first block: a binary file is named so even if not UTF-8
         if head.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
             raise InputFileError(f"{path}: UTF-16 text, not UTF-8 (save the log as UTF-8)")
-        if b"\x00" in head:
+        lines_end = head.rfind(b"\n") + 1  # NULs in an unterminated last line are judged below, as its other bytes
+        if b"\x00" in head[:lines_end]:
             raise InputFileError(f"{path}: binary data (NUL bytes), not a CSV log")
+        binary_tail = b"\x00" in head[lines_end:]
         number, width = 0, None  # width: the header's number of fields, once read
         while True:
             try:
@@ -179,19 +181,24 @@ class LogReader:
             number += 1
             if width is None and number > MAX_HEADER_LINES:
                 raise InputFileError(f"{path}, line {number}: no header row within {MAX_HEADER_LINES} lines")
-            if b"\x00" in raw:
-                raise InputFileError(f"{path}, line {number}: binary data (NUL bytes), not a CSV log")
             complete = raw.endswith(b"\n")
             if not complete and len(raw) == line_bytes:
                 raise InputFileError(f"{path}, line {number}: longer than the {limit} characters accepted per line")
             self.tail = b"" if complete else raw
+            if b"\x00" in raw:  # in the unterminated last line: a write cut short (a file padded after a power loss)
+                if complete:
+                    raise InputFileError(f"{path}, line {number}: binary data (NUL bytes), not a CSV log")
+                yield number, None, False
+                return
             try:
                 line = raw.decode("utf-8-sig" if number == 1 else "utf-8")
             except UnicodeDecodeError as error:
-                if complete or width is None:
+                if complete and binary_tail:
+                    raise InputFileError(f"{path}: binary data (NUL bytes), not a CSV log") from None
+                if complete:
                     raise InputFileError(f"{path}, line {number}: not UTF-8 (byte 0x{raw[error.start]:02x} at offset "
                                          f"{self.length + error.start})") from None
-                yield number, None, False
+                yield number, None, False  # cut inside a character
                 return
             self.length += len(raw) if complete else 0
             line = line[:-1] if complete else line

@@ -7,7 +7,8 @@ match its rows to their planned points by value, at the precision the log writes
 covers.  Rows that repeat a point are kept (a warning names them); a row that is no point of
 the plan, or a line that is not a row of this log, makes the resume refuse in one line and
 leaves the file byte for byte as it was.  An unterminated last line (a write cut short) is
-kept: as a row, its newline added, when it is a complete row, else as a comment line.  A log is
+kept: as a row, its newline added, when it is a complete row, else as a comment line (without the
+NUL bytes a power loss may pad the file's last block with).  A log is
 only resumed by the same procedure with the same plan (the ``plan_*`` metadata, compared by
 value); anything else is an error, not a guess.
 
@@ -257,6 +258,14 @@ def read_log(path: Path, columns: tuple = logformat.COLUMNS) -> LoggedRows:
     return LoggedRows(metadata, rows, lines, log.length, log.tail, tail_is_row=not complete and lines[-1:] == [number])
 
 
+def _kept_tail(tail: bytes) -> bytes:
+    """The comment line that keeps an unterminated last line which is no row (:data:`INCOMPLETE_ROW`): its text
+    without the NUL bytes a power loss may pad a file's last block with, a character cut in two replaced by U+FFFD;
+    nothing when only padding is left."""
+    text = tail.replace(b"\x00", b"").decode("utf-8", "replace")
+    return (INCOMPLETE_ROW + " ".join(text.split()) + "\n").encode() if text.strip() else b""
+
+
 def _same_value(old: str | None, new: str) -> bool:
     """Whether two metadata texts say the same: equal, or the same numbers (comma-separated) to 1e-9."""
     if old == new:
@@ -348,7 +357,7 @@ class LogWriter:
             self._tail_fix = (logged.length + len(logged.tail), b"\n")
             self.warnings.append(f"{self.path}, line {self.lines[-1]}: the last row has no line end; it is kept")
         elif logged.tail:
-            self._tail_fix = (logged.length, INCOMPLETE_ROW.encode() + logged.tail + b"\n")
+            self._tail_fix = (logged.length, _kept_tail(logged.tail))
             self.warnings.append(f"{self.path}: an incomplete last line ({len(logged.tail)} bytes, a write cut short) "
                                  "is kept as a comment line; its point is measured again")
         return True
@@ -384,6 +393,7 @@ class LogWriter:
                 offset, fix = self._tail_fix
                 with open(self.path, "r+b") as file:
                     os.pwrite(file.fileno(), fix, offset)
+                    os.ftruncate(file.fileno(), offset + len(fix))  # past the fix: the rest of the tail, rewritten
                 self._tail_fix = None
             self._file = open(self.path, "a", encoding="utf-8", newline="")
         self._file.write(text)
