@@ -130,14 +130,15 @@ def study(n: int, seed: int, fem_settings, sim_settings, settings: CalibrationSe
     """The study over ``n`` campaigns (see the module): the calibration's surrogates on ``fem_settings``, the simulated
     plates on ``sim_settings`` (each a :class:`FemAccuracy` or a fixed mesh's :class:`FemSettings`), the calibration's
     ``settings`` (default: ``tactile calibrate``'s), without the model-discrepancy terms unless ``discrepancy``; the
-    simulated plates' FEM on ``scheduler`` (:func:`~workflow.execution.parallel.map_evaluations`: the local cores)."""
+    surrogates' and the simulated plates' FEM on ``scheduler`` (:func:`~workflow.execution.parallel.map_evaluations`: the
+    local cores)."""
     settings = settings or load_settings()
     if not discrepancy:
         settings = replace(settings, frequency_discrepancy=0.0, deflection_discrepancy=0.0)
     cache = EvaluationCache()
     accuracy = getattr(fem_settings, "target", None)
     fem = {"q": materials.PLATE_Q, "voltage_v": materials.DESIGN_VOLTAGE, "accuracy": accuracy or 0.01, "piezo": "eigenstrain"}
-    model = FemModel(q=fem["q"], voltage=fem["voltage_v"], settings=fem_settings, cache=cache)
+    model = FemModel(q=fem["q"], voltage=fem["voltage_v"], settings=fem_settings, cache=cache, scheduler=scheduler)
     drawn = campaigns(n, seed)
     started = time.perf_counter()
     used = sorted({plate.design for plates in drawn for plate in plates})

@@ -44,7 +44,16 @@ def pytest_sessionstart(session):
 
 @pytest.fixture(scope="session")
 def calibration_cache_dir(tmp_path_factory):
-    """One FEM cache for every calibration test (the coarse evaluations are shared between modules)."""
+    """One FEM cache for every calibration test (the coarse evaluations are shared between modules).
+
+    Under pytest-xdist it is one folder for all the workers of the run (beside their own temporary folders): a module
+    then finds what a module on another worker has already evaluated (the same plates' surrogates recur from module to
+    module).  The evaluations are deterministic and the cache's writes atomic, so workers evaluating the same plate at
+    the same time only both compute it.  Each run starts with an empty cache."""
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        folder = tmp_path_factory.getbasetemp().parent / "calibration-cache"
+        folder.mkdir(exist_ok=True)
+        return folder
     return tmp_path_factory.mktemp("calibration-cache")
 
 

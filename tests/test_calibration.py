@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from calibration_setup import FAST, FEM_RECORD, P1, P2, TRUTH
+from calibration_setup import FAST, FEM_RECORD, P1, P2, SHORT, SHORT_CONFIG, TRUTH
 
 from workflow.calibration.calibration import Calibration, MeasuredPlate, calibrate, nominal_theta, predict
 from workflow.calibration.case_study import cross_predictions
@@ -102,7 +102,7 @@ def test_calibrate_cli_contract_and_evaluate_with_the_calibration(tmp_path, caps
     log = write_log(tmp_path / "p1.csv", P1, measured)
     before = log.read_bytes()
     config = tmp_path / "fast.toml"
-    config.write_text("[sampler]\nsteps = 2000\n[surrogate]\npoints = 18\n", encoding="utf-8")
+    config.write_text(SHORT_CONFIG, encoding="utf-8")
     assert main(["calibrate", str(log), "--out", str(tmp_path / "cal"), "--config", str(config), "--json"]) == 0
     record = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert log.read_bytes() == before
@@ -169,7 +169,7 @@ def test_case_study_predicts_one_built_plate_from_the_other(coarse_model):
     """Built plates sharing the hidden deviations: each calibrated alone predicts the other inside its interval."""
     first = MeasuredPlate("P1", P1, built_plate_frequency(coarse_model, P1))
     second = MeasuredPlate("P2", P2, built_plate_frequency(coarse_model, P2))
-    directions = cross_predictions(first, second, FAST, coarse_model.evaluate_plates, {})
+    directions = cross_predictions(first, second, SHORT, coarse_model.evaluate_plates, {})
     assert [d["predicted"] for d in directions] == ["P2", "P1"]
     for d in directions:
         assert d["inside"], d
@@ -278,7 +278,7 @@ def test_run_step_predicts_the_recommended_designs_with_the_calibration(tmp_path
     from workflow.pipeline.steps import calibrated_designs
 
     plate = MeasuredPlate("P1", P1, built_plate_frequency(coarse_model, P1))
-    calibration = calibrate([plate], FAST, coarse_model.evaluate_plates, {**FEM_RECORD, "accuracy": 0.05})
+    calibration = calibrate([plate], SHORT, coarse_model.evaluate_plates, {**FEM_RECORD, "accuracy": 0.05})
     files = write_calibration(calibration, tmp_path, figures=False)
     designs = {1e-3: SimpleNamespace(plate=P1, frequency=25.1e3)}
     context = SimpleNamespace(calibration=Path(files["calibration"]), config=default_config(), cache=None, scheduler=None,

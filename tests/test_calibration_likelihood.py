@@ -10,7 +10,7 @@ import json
 
 import numpy as np
 import pytest
-from calibration_setup import FAST, FEM_RECORD, P1, TRUTH
+from calibration_setup import FAST, FEM_RECORD, P1, SHORT_CONFIG, TRUTH
 
 from instruments.procedures.scan import grid_points
 from instruments.simulator.physics import plate_response
@@ -165,7 +165,7 @@ def _write_logs(folder, built) -> tuple:
 def test_calibrate_cli_uses_deflection_and_scan_and_says_so(tmp_path, capsys, coarse_cli, built):
     resonance, scan = _write_logs(tmp_path, built)
     config = tmp_path / "fast.toml"
-    config.write_text("[sampler]\nsteps = 2000\n[surrogate]\npoints = 18\n", encoding="utf-8")
+    config.write_text(SHORT_CONFIG, encoding="utf-8")
     assert main(["calibrate", str(resonance), str(scan), "--out", str(tmp_path / "cal"), "--config", str(config),
                  "--no-figures", "--json"]) == 0
     record = json.loads(capsys.readouterr().out.strip().splitlines()[-1])

@@ -79,7 +79,17 @@ def threshold_campaign():
 
 @pytest.fixture(scope="module")
 def threshold_fit(threshold_campaign):
-    return fit_law(threshold_campaign, "threshold", seed=2, max_steps=3000)
+    """A short chain (1000 steps, ~20 tau; was 3000): on fit seeds 2-6 the truth sits at the 22nd-29th (q0), 72nd-81st
+    (alpha) and 79th-85th (v_t) percentiles, the band covers it at every velocity, and the misfit and LOO tests below
+    pass with the quadratic fit's 600 steps (measured)."""
+    return fit_law(threshold_campaign, "threshold", seed=2, max_steps=1000)
+
+
+@pytest.fixture(scope="module")
+def quadratic_fit(threshold_campaign):
+    """The wrong law on the threshold campaign, one fit for the misfit check and the LOO comparison (600 steps; they
+    ran 1500 and 800 steps: the quadratic law's misfit and its LOO deficit, 4.9 dse, are the same on seeds 2-6)."""
+    return fit_law(threshold_campaign, "quadratic", seed=2, max_steps=600)
 
 
 def test_threshold_law_recovers_its_own_truth(threshold_fit, threshold_campaign):
@@ -106,8 +116,8 @@ def test_posterior_nc_reads_back_and_arviz_loo_works_on_it(threshold_fit, tmp_pa
         load_inference_data(tmp_path / "bad.nc")
 
 
-def test_misfit_check_flags_the_quadratic_law_on_a_threshold_campaign_and_passes_the_true_law(threshold_campaign, threshold_fit):
-    quadratic = fit_law(threshold_campaign, "quadratic", seed=2, max_steps=1500)
+def test_misfit_check_flags_the_quadratic_law_on_a_threshold_campaign_and_passes_the_true_law(quadratic_fit, threshold_fit):
+    quadratic = quadratic_fit
     wrong = misfit_check(quadratic.samples, quadratic.data, stated_noise=NOISE)
     right = misfit_check(threshold_fit.samples, threshold_fit.data, stated_noise=NOISE)
     assert not wrong.passed and any("absorbed as noise" in reason for reason in wrong.reasons)
@@ -116,9 +126,8 @@ def test_misfit_check_flags_the_quadratic_law_on_a_threshold_campaign_and_passes
     assert unstated.passed and "skipped" in unstated.reasons[0]
 
 
-def test_loo_prefers_the_threshold_law_over_the_quadratic_on_a_threshold_campaign(threshold_campaign, threshold_fit):
-    quadratic = fit_law(threshold_campaign, "quadratic", seed=2, max_steps=800)
-    comparison = compare_laws({"quadratic": quadratic.inference_data, "threshold": threshold_fit.inference_data})
+def test_loo_prefers_the_threshold_law_over_the_quadratic_on_a_threshold_campaign(quadratic_fit, threshold_fit):
+    comparison = compare_laws({"quadratic": quadratic_fit.inference_data, "threshold": threshold_fit.inference_data})
     assert comparison.best == "threshold" and comparison.close == ("threshold",)
     assert comparison.laws["quadratic"]["elpd_diff"] > 2 * comparison.laws["quadratic"]["dse"]
     assert sum(comparison.weights.values()) == pytest.approx(1.0)

@@ -125,14 +125,15 @@ def test_an_unmet_accuracy_says_so(small_thin_ladder):
     assert result.error.level == 5 and not result.error.met
 
 
-def test_a_level_starts_its_eigen_solve_from_the_level_below_and_finds_the_same_modes():
-    """The warm start (the lower level's modes interpolated) changes how ARPACK gets there, not where."""
+def test_a_level_starts_its_eigen_solve_from_the_level_below_and_finds_the_same_modes(small_thin_ladder):
+    """The warm start (the lower level's modes interpolated) changes how ARPACK gets there, not where (the ladder's
+    levels 3 and 4 are the cold solves)."""
     from workflow.models.fem.evaluate import discretise
     from workflow.models.fem.prolongation import node_interpolation
 
     low, high = mesh_for_level(SMALL_THIN, 3), mesh_for_level(SMALL_THIN, 4)
-    coarse = evaluate_fem(SMALL_THIN, 54.0, 15.0, low)
-    cold, warm = evaluate_fem(SMALL_THIN, 54.0, 15.0, high), evaluate_fem(SMALL_THIN, 54.0, 15.0, high, coarse.solution)
+    coarse, cold = small_thin_ladder[3], small_thin_ladder[4]
+    warm = evaluate_fem(SMALL_THIN, 54.0, 15.0, high, coarse.solution)
     np.testing.assert_allclose(warm.probe_model.eigenvalues, cold.probe_model.eigenvalues, rtol=1e-12)
     assert warm.deflection == pytest.approx(cold.deflection, rel=1e-9)
     # the interpolation is exact on the coarse space: a coarse-level polynomial is reproduced at the fine nodes

@@ -1,5 +1,7 @@
 """The Q(v) fit: recovery of a known law, model comparison, the CLI and its bad input."""
 
+import contextlib
+import io
 import json
 import math
 import os
@@ -90,17 +92,35 @@ def test_half_power_estimates_fall_with_voltage(campaign):
     assert np.all(np.diff(estimates.peak_velocity) > 0)
 
 
-def test_cli_writes_posterior_figures_and_leaves_the_log_alone(tmp_path, capsys):
+@pytest.fixture(scope="module")
+def cli_fit(tmp_path_factory):
+    """One ``tactile fit-damping`` run for the two tests below (quadratic law, 600 steps, figures; stderr piped, its
+    progress shown at every check): a campaign with a vibrometer dropout, the log's bytes and mtime before the run,
+    the output folder, the exit status, stdout and stderr."""
+    folder = tmp_path_factory.mktemp("cli-fit")
     text = campaign_csv(simulate_campaign(seed=5, **SMALL))
     lines = text.splitlines(keepends=True)
     lines[10] = lines[10].rsplit(",", 1)[0] + ",nan\n"  # a vibrometer dropout
-    log = tmp_path / "campaign.csv"
+    log = folder / "campaign.csv"
     log.write_text("".join(lines))
     before = (log.read_bytes(), os.stat(log).st_mtime_ns)
-    out_dir = tmp_path / "fit"
-    status, out, err = run_cli(capsys, "fit-damping", log, "--out", out_dir, "--law", "quadratic", "--max-steps", "600", "--json")
+    out_dir = folder / "fit"
+    stdout, stderr = io.StringIO(), io.StringIO()
+    with pytest.MonkeyPatch.context() as patch, contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+        patch.setattr(progress, "LINE_INTERVAL", 0.0)  # a short chain, yet every 10 % shown
+        patch.setattr(progress, "QUIET_TASK", 0.0)
+        try:
+            status = main(["fit-damping", str(log), "--out", str(out_dir), "--law", "quadratic", "--max-steps", "600", "--json"])
+        except SystemExit as exit_:
+            status = exit_.code
+    return {"log": log, "before": before, "out_dir": out_dir, "status": status, "out": stdout.getvalue(),
+            "err": stderr.getvalue()}
+
+
+def test_cli_writes_posterior_figures_and_leaves_the_log_alone(cli_fit):
+    log, out_dir, status, out, err = (cli_fit[key] for key in ("log", "out_dir", "status", "out", "err"))
     assert status == 0, err
-    assert (log.read_bytes(), os.stat(log).st_mtime_ns) == before
+    assert (log.read_bytes(), os.stat(log).st_mtime_ns) == cli_fit["before"]
     warnings = [line for line in err.splitlines() if "warning" in line]
     assert len(warnings) == 1 and "dropped 1 row" in warnings[0]
     summary = json.loads(out.strip().splitlines()[-1])
@@ -114,15 +134,10 @@ def test_cli_writes_posterior_figures_and_leaves_the_log_alone(tmp_path, capsys)
     assert set(json.loads((out_dir / RECORD).read_text())["files"]) == written  # a rerun may overwrite them all
 
 
-def test_cli_shows_the_chain_progress_towards_convergence_on_a_piped_stderr(tmp_path, capsys, monkeypatch):
-    """Not a terminal: plain lines counting the steps run against the 25 tau the rule needs, not the cap."""
-    monkeypatch.setattr(progress, "LINE_INTERVAL", 0.0)  # a short chain, yet every 10 % shown
-    monkeypatch.setattr(progress, "QUIET_TASK", 0.0)
-    log = tmp_path / "campaign.csv"
-    log.write_text(campaign_csv(simulate_campaign(seed=5, **SMALL)))
-    status, out, err = run_cli(
-        capsys, "fit-damping", log, "--out", tmp_path / "fit", "--law", "quadratic", "--max-steps", "600", "--no-figures", "--json"
-    )
+def test_cli_shows_the_chain_progress_towards_convergence_on_a_piped_stderr(cli_fit):
+    """Not a terminal: plain lines counting the steps run against the 25 tau the rule needs, not the cap (the run of
+    ``cli_fit``, which draws its figures after the chain: the progress is still the last thing on stderr)."""
+    status, out, err = cli_fit["status"], cli_fit["out"], cli_fit["err"]
     assert status == 0, err
     chain = json.loads(out.strip().splitlines()[-1])["diagnostics"]
     shown = [tuple(map(int, m)) for m in re.findall(r"^emcee, quadratic law: (\d+)/(\d+) steps", err, re.M)]

@@ -177,8 +177,11 @@ def _ringdown_interval_hits(seed, tmp_path, max_steps=20000):
 
 
 def test_ringdown_intervals_hold_the_truth(tmp_path):
-    """The white-noise envelope likelihood matches the simulated record: its 90 % intervals hold the truth (seeded)."""
-    assert _ringdown_interval_hits(0, tmp_path, max_steps=3000) == (True, True)
+    """The white-noise envelope likelihood matches the simulated record: its 90 % intervals hold the truth (seeded).
+
+    1000 steps (was 3000): the truth sits at the same place in the intervals on fit seeds 0-4 at 1000, 1500 and 3000
+    steps (Q0 at 0.10-0.13 of the way from p05 to p95, alpha at 0.25-0.30; measured): the record sets it, not the chain."""
+    assert _ringdown_interval_hits(0, tmp_path, max_steps=1000) == (True, True)
 
 
 @pytest.mark.slow
