@@ -188,7 +188,7 @@ def test_read_built_plate_takes_materials_and_glue_from_the_metadata(tmp_path):
 @pytest.mark.slow
 def test_robust_optimum_probability_checked_by_direct_fem_sampling(tmp_path, capsys, coarse_cli, coarse_model):
     """The robust optimum of 'optimize --calibration' meets 25 kHz on most direct FEM draws of posterior and scatter."""
-    from workflow.optimise.robust import Tolerances, scattered_draws
+    from workflow.optimise.robust import Tolerances, robust_inputs, scattered_draws
 
     log = write_log(tmp_path / "p1.csv", P1, built_plate_frequency(coarse_model, P1))
     config = tmp_path / "fast.toml"
@@ -209,10 +209,12 @@ def test_robust_optimum_probability_checked_by_direct_fem_sampling(tmp_path, cap
     calibration = load_calibration(tmp_path / "cal")
     design = P1.with_(wavelength=record["lambda_mm"] * MM, resonator_thickness=record["h_i_mm"] * MM)
     draws = scattered_draws(calibration, design, Tolerances(), 12, seed=5)
-    names = calibration.settings.names
+    names = robust_inputs(calibration)  # columns: ln lambda, these parameters, h_p offset, discrepancy of ln f and ln w
+    k = len(names)
     plates = [deviated_plate(design.with_(wavelength=design.wavelength * np.exp(d[0]),
-                                          ceramic_thickness=design.ceramic_thickness + d[-1]), names, d[1:-1]) for d in draws]
-    frequencies = np.array([r.frequency for r in coarse_model.evaluate_plates(plates)])
+                                          ceramic_thickness=design.ceramic_thickness + d[1 + k]), names, d[1 : 1 + k])
+              for d in draws]
+    frequencies = np.array([r.frequency for r in coarse_model.evaluate_plates(plates)]) * np.exp(draws[:, 2 + k])
     assert np.sum(frequencies >= 25e3) >= 10, frequencies  # P(at most 9 of 12 | p = 0.95) = 2 %
 
 

@@ -138,7 +138,9 @@ def test_ringdown_alone_recovers_q_of_v(tmp_path):
 def test_joint_sweeps_and_ringdowns_recover_the_law_softening_and_drift(tmp_path):
     from workflow.damping.likelihood import ForwardModel
 
-    settings = default_bench_settings(seed=4, softening=0.08, drift_rate=-0.3)
+    # the plate's warming (issue 30) off: a known truth within the fit's model; the warming's effect on the intervals is
+    # the subject of bench/bench_damping_coverage.py (issue 29)
+    settings = default_bench_settings(seed=4, softening=0.08, drift_rate=-0.3, heating=False)
     simulate_campaign(tmp_path / "s.csv", settings)
     simulate_ringdown(tmp_path / "r.csv", settings, voltages=(3.0, 6.0, 9.0, 12.0, 15.0), interval=40e-6)
     log = read_logs([tmp_path / "s.csv", tmp_path / "r.csv"])
@@ -169,7 +171,7 @@ def test_laws_without_a_closed_form_decay_are_integrated():
 
 def _ringdown_interval_hits(seed, tmp_path, max_steps=20000):
     """Whether the 90 % intervals of Q0 and alpha from the ring-downs alone of bench seed ``seed`` hold the truth."""
-    settings = default_bench_settings(seed=100 + seed, softening=0.08, drift_rate=-0.3)
+    settings = default_bench_settings(seed=100 + seed, softening=0.08, drift_rate=-0.3, heating=False)
     simulate_ringdown(tmp_path / f"r{seed}.csv", settings, voltages=(3.0, 6.0, 9.0, 12.0, 15.0), interval=40e-6)
     fit = fit_law(read_logs([tmp_path / f"r{seed}.csv"]), "quadratic", seed=seed, max_steps=max_steps, chain_taus=25)
     summary, law = parameter_summary(fit), settings.response.law
