@@ -5,7 +5,7 @@ The step as the run executes it (:func:`workflow.pipeline.steps.damping_fit` and
 ring-downs) for a configuration, fitted with softening and drift, every law's MAP, the laws' chains, LOO,
 checks, the ring-down agreement, then ``posterior*.npz``, ``posterior*.nc``, ``fit.json`` and the figures.
 
-Configurations: ``tiny`` (the test suite's tiny run, ``TINY`` of tests/test_run.py: 2 sweeps x 21 points,
+Configurations: ``tiny`` (the test suite's tiny run, ``TINY`` of tests/pipeline/test_run.py: 2 sweeps x 21 points,
 2 ring-downs x 40 samples, the quadratic law) and ``default`` (the embedded defaults: 6 sweeps x 51 points,
 3 ring-downs x 100 samples, four laws screened).
 
@@ -31,7 +31,7 @@ TESTS_RUN = Path(__file__).resolve().parent.parent / "tests" / "test_run.py"
 
 
 def tiny_configuration() -> str:
-    """The TOML text ``TINY`` of tests/test_run.py (read from the file: one source of truth)."""
+    """The TOML text ``TINY`` of tests/pipeline/test_run.py (read from the file: one source of truth)."""
     module = ast.parse(TESTS_RUN.read_text(encoding="utf-8"))
     for node in module.body:
         if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == "TINY" for t in node.targets):

@@ -4,7 +4,7 @@ The header names the folder ``workflow`` was imported from. With ``TACTILE_REQUI
 ``.ci/run``) the session stops at once when that folder is the checkout rather than an installed package,
 so CI always tests what a user installs.
 
-Hypothesis profiles (tests/test_fuzz.py): ``default`` runs a few dozen examples per property
+Hypothesis profiles (tests/cli/test_fuzz.py): ``default`` runs a few dozen examples per property
 (a few seconds in all); ``long`` runs thousands, for the tests marked ``slow`` or for every
 property with ``HYPOTHESIS_PROFILE=long``.
 """

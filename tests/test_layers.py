@@ -181,3 +181,16 @@ def test_the_cycle_checker_sees_a_cycle_inside_a_function(monkeypatch):
              loop: "def g():\n    from workflow.pipeline.steps import STEPS\n"}
     monkeypatch.setattr(Path, "read_text", lambda self, encoding=None: probe[self])
     assert import_cycles(import_graph([steps, loop])) == [["workflow.pipeline.loop", "workflow.pipeline.steps"]]
+
+
+TEST_FOLDERS = {"base", *LAYER_PREFIXES} - {"drivers", "simulator", "procedures"} | {"instruments"}
+"""The layer folders of ``tests/`` (the three instrument layers share one): a change's tests sit next to its layer."""
+PROJECT_TESTS = {"test_docs.py", "test_layers.py", "test_packaging.py", "test_bench.py", "test_fem_bench.py"}
+"""Tests of the whole project (documentation, architecture, packaging, benchmarks), at the top of ``tests/``."""
+
+
+def test_the_tests_mirror_the_code():
+    tests = ROOT / "tests"
+    folders = {path.name for path in tests.iterdir() if path.is_dir() and any(path.glob("test_*.py"))}
+    assert folders <= TEST_FOLDERS, folders - TEST_FOLDERS
+    assert {path.name for path in tests.glob("test_*.py")} == PROJECT_TESTS

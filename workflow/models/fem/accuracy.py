@@ -14,7 +14,7 @@ corners at the ceramic ends are singular: observed rates 2.15-2.5 on a thin one-
 more on the designs).  A result's error is estimated from the same geometry at a lower level by Richardson
 extrapolation in the degree with the conservative rate :data:`RICHARDSON_RATE`:
 e = (v_coarse - v_k) / ((k / k_coarse)^p - 1), the estimated v_k - v_converged (validated against
-converged solutions in tests/test_fem_accuracy.py and docs/fem.md).  :func:`evaluate_to_accuracy`
+converged solutions in tests/models/test_fem_accuracy.py and docs/fem.md).  :func:`evaluate_to_accuracy`
 raises the degree until the frequency estimate meets the target.
 """
 
@@ -44,7 +44,7 @@ WIDTH_ELEMENT_RATIO = 2.0
 """Element length across the width over the mean element length along a ceramic [-]."""
 RICHARDSON_RATE = 2.0
 """Assumed convergence rate p of the frequency and deflection in the degree [-]: below the lowest observed, 2.15 on a
-thin one-ceramic plate at degrees 4-6 (2.5 at degrees 3-5, 3 and more on the designs; tests/test_fem_accuracy.py
+thin one-ceramic plate at degrees 4-6 (2.5 at degrees 3-5, 3 and more on the designs; tests/models/test_fem_accuracy.py
 checks it)."""
 DEFAULT_ACCURACY = 2e-3
 """Default target relative frequency error of an FEM evaluation [-] (0.2 %)."""

@@ -4,7 +4,6 @@ the input files alone."""
 
 import json
 import os
-from pathlib import Path
 
 import numpy as np
 import pytest

@@ -10,11 +10,11 @@ the files listed in :data:`EXCEPTIONS` (which read or write files of another for
 
 import ast
 import re
-from pathlib import Path
 
 import pytest
+from paths import CHECKOUT
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = CHECKOUT
 READER = "workflow/logformat.py"
 """The one module that parses (and composes) the text of a log."""
 EXCEPTIONS = {

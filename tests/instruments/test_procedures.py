@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 import serial
 from user_facing import TACTILE
+from paths import CHECKOUT
 
 from instruments.drivers.errors import ConnectionLost, InstrumentError, SafetyLimitError
 from instruments.procedures.logwriter import LogWriter, read_log
@@ -26,7 +27,7 @@ from workflow.cli import main
 from workflow.damping.logs import read_log as read_for_fit
 from workflow.errors import InputFileError
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = CHECKOUT
 PLAN = CampaignPlan(32126.0, span=1200.0, points_per_sweep=21, voltages=(2.5, 7.5, 15.0))
 
 

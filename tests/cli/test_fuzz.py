@@ -4,7 +4,7 @@ the simulator's SCPI and vibrometer command parsers, and the generator driver's 
 
 Each property runs twice: under the default profile (40 examples per property, about two
 seconds in all) and, marked ``slow``, under the ``long`` profile (thousands of examples):
-``pytest -m slow tests/test_fuzz.py``.  ``HYPOTHESIS_PROFILE=long pytest tests/test_fuzz.py``
+``pytest -m slow tests/cli/test_fuzz.py``.  ``HYPOTHESIS_PROFILE=long pytest tests/cli/test_fuzz.py``
 runs the default-suite tests with the long profile too.  Profiles are registered in
 ``tests/conftest.py``.
 """

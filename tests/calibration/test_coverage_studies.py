@@ -6,13 +6,11 @@ at those lengths on the fit's own seed and on four other sampler seeds (measured
 
 import importlib.util
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
-import pytest
 from calibration_setup import COARSE, FAST
+from paths import BENCH
 
-BENCH = Path(__file__).resolve().parent.parent / "bench"
 
 
 def bench_module(name: str):

@@ -1,6 +1,5 @@
 """``tactile run`` gives the same numbers locally and on a Dask cluster (issue 6)."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest

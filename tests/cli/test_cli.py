@@ -5,10 +5,10 @@ import json
 import re
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 from user_facing import TACTILE, assert_readable, run_cli
+from paths import README
 
 from workflow.cli import build_parser, main
 
@@ -149,7 +149,6 @@ def _shown(default) -> str:
     return f"{default:g}" if isinstance(default, (int, float)) else str(default)
 
 
-README = Path(__file__).resolve().parents[1] / "README.md"
 
 
 def test_the_readme_examples_of_the_beam_model_print_what_the_readme_shows(capsys):
