@@ -8,6 +8,7 @@ of each measured row), ``observed_data`` (``velocity`` [m/s]) and ``constant_dat
 (the chain thinned further), which is what LOO and the checks use.
 """
 
+import warnings
 from pathlib import Path
 
 import arviz as az
@@ -46,6 +47,12 @@ def law_inference_data(chain: np.ndarray, log_prob: np.ndarray, pointwise: np.nd
     """InferenceData of one law's draws (the arrays of :func:`loo_draws`)."""
     n_steps, n_walkers, _ = chain.shape
     natural = data.layout.natural(chain.reshape(-1, chain.shape[-1]))
+    with warnings.catch_warnings():  # walkers are the chains: often more of them than thinned draws, which is right
+        warnings.filterwarnings("ignore", message=r"More chains \(\d+\) than draws", category=UserWarning)
+        return _from_dict(natural, n_steps, n_walkers, log_prob, pointwise, data)
+
+
+def _from_dict(natural: dict, n_steps: int, n_walkers: int, log_prob, pointwise, data: FitData) -> az.InferenceData:
     return az.from_dict(
         posterior={name: values.reshape(n_steps, n_walkers).T for name, values in natural.items()},
         sample_stats={"lp": log_prob.T},
