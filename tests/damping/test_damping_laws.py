@@ -219,3 +219,27 @@ def test_each_law_carries_the_units_of_its_parameters_and_the_exponent_of_its_lo
         extra = [law.loss(v) - 1 / 50.0 for v in (0.2, 0.4)]
         assert extra[1] / extra[0] == pytest.approx(2.0**law.velocity_exponent, rel=2e-3), law.name
     assert ConstantQ.velocity_exponent == 0
+
+
+def test_each_law_carries_the_prior_box_of_the_coordinates_it_is_sampled_in():
+    """The law, not the likelihood, says where its parameters may go: a box for every sampled coordinate but ln Q0,
+    low below high; the loss coefficient stops where the loss term alone brings Q at the highest velocity down to
+    MIN_Q_AT_MAX_VELOCITY; the fit's prior box is the law's."""
+    from workflow.damping.laws import LAWS, MIN_Q_AT_MAX_VELOCITY, LinearLoss, QuadraticLoss, parameter_names
+    from workflow.damping.likelihood import SAMPLED_LAW_PARAMETERS, fit_data
+    from workflow.damping.synthetic import simulate_campaign
+
+    v_max = 0.3
+    for law in LAWS.values():
+        box = law.prior_box(v_max)
+        sampled = {SAMPLED_LAW_PARAMETERS[name] for name in parameter_names(law) if name in SAMPLED_LAW_PARAMETERS}
+        assert set(box) == sampled - {"ln_q0"}, law.name
+        assert all(low < high for low, high in box.values()), law.name
+    for law in (QuadraticLoss, LinearLoss):
+        strongest = law(q0=np.inf, alpha=law.prior_box(v_max)["alpha"][1])
+        assert strongest.quality_factor(v_max) == pytest.approx(MIN_Q_AT_MAX_VELOCITY)
+    log = simulate_campaign(seed=1)  # measured at the antinode: the largest velocity is the antinode's
+    data = fit_data(log, "threshold")
+    for name, (low, high) in LAWS["threshold"].prior_box(float(np.max(log.velocity))).items():
+        i = data.layout.names.index(name)
+        assert (data.lower[i], data.upper[i]) == pytest.approx((low, high)), name

@@ -12,6 +12,18 @@ from typing import ClassVar
 
 import numpy as np
 
+MIN_Q_AT_MAX_VELOCITY = 1.0
+"""A law's loss coefficient's prior stops where Q at the highest measured velocity would fall to this [-]."""
+THRESHOLD_RANGE = (0.02, 0.9)
+"""Prior range of the threshold law's v_t, relative to the largest measured velocity [-]."""
+MAX_INCREMENT = 0.2
+"""Prior bound of each increment of the flexible law's 1/Q [-]."""
+
+
+def _loss_coefficient_box(law, v_max: float) -> dict:
+    """alpha from 0 to where the loss term alone brings Q(v_max) down to :data:`MIN_Q_AT_MAX_VELOCITY`."""
+    return {"alpha": (0.0, 1.0 / MIN_Q_AT_MAX_VELOCITY / v_max**law.velocity_exponent)}
+
 
 @dataclass(frozen=True)
 class QuadraticLoss:
@@ -32,6 +44,12 @@ class QuadraticLoss:
     """p of the law's loss term alpha |v|^p [-]."""
     units: ClassVar[dict] = {"q0": "-", "alpha": "s^2/m^2"}
     """Parameter -> unit."""
+
+    @classmethod
+    def prior_box(cls, v_max: float) -> dict:
+        """Flat prior ranges of the law's sampled parameters other than ln Q0, given the largest measured antinode
+        velocity ``v_max`` [m/s]: sampled name -> (low, high) in that parameter's unit."""
+        return _loss_coefficient_box(cls, v_max)
 
     def quality_factor(self, velocity):
         """Q at the peak velocity amplitude ``velocity`` [m/s] -> [-]."""
@@ -60,6 +78,11 @@ class LinearLoss:
     velocity_exponent: ClassVar[int] = 1
     units: ClassVar[dict] = {"q0": "-", "alpha": "s/m"}
 
+    @classmethod
+    def prior_box(cls, v_max: float) -> dict:
+        """As :meth:`QuadraticLoss.prior_box`."""
+        return _loss_coefficient_box(cls, v_max)
+
     def quality_factor(self, velocity):
         """Q at the peak velocity amplitude ``velocity`` [m/s] -> [-]."""
         return 1.0 / self.loss(velocity)
@@ -83,6 +106,11 @@ class ConstantQ:
     name: ClassVar[str] = "constant"
     velocity_exponent: ClassVar[int] = 0
     units: ClassVar[dict] = {"q0": "-"}
+
+    @classmethod
+    def prior_box(cls, v_max: float) -> dict:
+        """Nothing but ln Q0 is sampled."""
+        return {}
 
     def quality_factor(self, velocity):
         """Q0, broadcast to the shape of ``velocity`` [-]."""
@@ -129,6 +157,14 @@ class ThresholdLoss:
     ONSET_RANGE: ClassVar[tuple] = (0.05, 1.0)
     """Range of the onset width the fit explores, s / v_t [-]: from a sharp corner to an onset spread over the whole
     threshold."""
+
+    @classmethod
+    def prior_box(cls, v_max: float) -> dict:
+        """As :meth:`QuadraticLoss.prior_box`: v_t over :data:`THRESHOLD_RANGE` of ``v_max``, ln onset over
+        :data:`ONSET_RANGE`, and alpha up to Q(v_max) = :data:`MIN_Q_AT_MAX_VELOCITY` from the highest threshold."""
+        onset = (1 - THRESHOLD_RANGE[1]) * v_max
+        return {"alpha": (0.0, 1.0 / MIN_Q_AT_MAX_VELOCITY / onset**cls.velocity_exponent),
+                "v_t": tuple(np.asarray(THRESHOLD_RANGE) * v_max), "ln_onset": tuple(np.log(cls.ONSET_RANGE))}
 
     def quality_factor(self, velocity):
         """Q at the peak velocity amplitude ``velocity`` [m/s] -> [-]."""
@@ -186,6 +222,11 @@ class MonotoneSpline:
     velocity_exponent: ClassVar[int] = 2
     """The law is piecewise linear in v^p [-]."""
     units: ClassVar[dict] = {"q0": "-", **{d: "-" for d in INCREMENTS}, "v_top": "m/s", "v_first": "m/s"}
+
+    @classmethod
+    def prior_box(cls, v_max: float) -> dict:
+        """Each increment from 0 to :data:`MAX_INCREMENT` (the knots are fixed by the data, not sampled)."""
+        return {name: (0.0, MAX_INCREMENT) for name in cls.INCREMENTS}
 
     @classmethod
     def knots(cls, v_top, v_first=None) -> np.ndarray:

@@ -48,7 +48,7 @@ from workflow.damping.harmonic import (
     softened_amplitudes,
     softened_roots,
 )
-from workflow.damping.laws import LAWS, MonotoneSpline, ThresholdLoss, parameter_names
+from workflow.damping.laws import LAWS, MonotoneSpline, parameter_names
 from workflow.damping.logs import CampaignLog
 from workflow.damping.ringdown import burst_decays, decay_quality_factors
 from workflow.errors import InputFileError
@@ -89,18 +89,12 @@ trades against Q (a synthetic campaign without drift, its four sweeps upward, ga
 with the bound at the full rate)."""
 Q0_RANGE = (1.0, 1e5)
 """Prior range of Q0 [-]."""
-MIN_Q_AT_MAX_VELOCITY = 1.0
-"""alpha's prior stops where Q at the highest measured velocity would fall to this [-]."""
 GAIN_RANGE = (1e-15, 1e-3)
 """Prior range of the quasi-static deflection per volt [m/V]."""
 SIGMA_REL_RANGE = (1e-4, 1.0)
 """Prior range of the relative noise [-]."""
 SIGMA_ABS_RANGE = (1e-7, 1.0)
 """Prior range of the absolute noise, relative to the largest measured velocity [-]."""
-THRESHOLD_RANGE = (0.02, 0.9)
-"""Prior range of the threshold law's v_t, relative to the largest measured velocity [-]."""
-MAX_INCREMENT = 0.2
-"""Prior bound of each increment of the flexible law's 1/Q [-]."""
 RANDOM_WALK_SCALE = 0.01
 """Standard deviation of the step between consecutive slopes of the flexible law's 1/Q in (v / v_top)^2 [-]:
 a change of slope that would move 1/Q(v_top) by 0.01, above the 0.005-0.008 a threshold's onset makes
@@ -282,16 +276,8 @@ def fit_data(log: CampaignLog, law_name: str, forward: ForwardModel = ForwardMod
         "ln_sigma_decay_rel": np.log(SIGMA_REL_RANGE),
         "ln_sigma_decay_abs": np.log(np.asarray(SIGMA_ABS_RANGE) * v_max),
         "kappa": (0.0, SOFTENING_MAX_SHIFT / v_max**2),
+        **law.prior_box(v_max),
     }
-    if "alpha" in law.units:  # Q(v_max) >= MIN_Q_AT_MAX_VELOCITY by the loss term alone (the threshold's: below)
-        bounds["alpha"] = (0.0, 1.0 / MIN_Q_AT_MAX_VELOCITY / v_max**law.velocity_exponent)
-    if law_name == ThresholdLoss.name:
-        onset = (1 - THRESHOLD_RANGE[1]) * v_max
-        bounds["alpha"] = (0.0, 1.0 / MIN_Q_AT_MAX_VELOCITY / onset**2)
-        bounds["v_t"] = tuple(np.asarray(THRESHOLD_RANGE) * v_max)
-        bounds["ln_onset"] = tuple(np.log(ThresholdLoss.ONSET_RANGE))
-    for name in MonotoneSpline.INCREMENTS:
-        bounds[name] = (0.0, MAX_INCREMENT)
     for k in range(log.n_sweeps):
         f = log.frequency[log.sweep == k]
         span = max(f.max() - f.min(), 0.01 * f.mean())

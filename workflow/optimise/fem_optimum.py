@@ -12,7 +12,6 @@ import numpy as np
 from workflow.models.fem.accuracy import LEVELS, ErrorEstimate, FemAccuracy, mesh_for_level
 
 from workflow.optimise.problem import (
-    FREQUENCY_SLACK,
     DesignProblem,
     Optimum,
     PlateModel,
