@@ -62,6 +62,14 @@ def test_bad_input_gives_one_error_line_and_a_non_zero_exit(capsys, argv, words)
     assert "Traceback" not in err
 
 
+@pytest.mark.parametrize("name", ["two\nlines.csv", "next\x85line.csv", "sep\u2028arator.csv"])
+def test_a_file_name_that_breaks_lines_is_named_in_one_error_line(capsys, tmp_path, name):
+    """A file name may hold any character but / and NUL: the error line escapes those that would end it."""
+    status, _, err = run_cli(capsys, "fit-damping", str(tmp_path / name), "--out", str(tmp_path / "out"))
+    assert status == 2 and len(err.strip().splitlines()) == 1, err
+    assert repr(name)[1:-1] in err
+
+
 def test_console_script_error_has_no_traceback():
     result = subprocess.run(
         [*TACTILE, "evaluate", "--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "0.7"],

@@ -438,6 +438,15 @@ def damaged_calibrations(draw) -> str:
     return json.dumps(data)
 
 
+@pytest.mark.parametrize("name", ["\x85", "\u2028", "a\nb", "\x1c"])
+def test_a_parameter_named_with_a_line_break_is_refused_in_one_line(name):
+    """Found by the property below: a name holding a character that ends a line (NEL, LINE SEPARATOR, ...) was
+    quoted as is in the error, which then printed as two lines."""
+    data = copy.deepcopy(VALID_CALIBRATION)
+    data["settings"]["parameters"][0]["name"] = name
+    assert read_or_refused("calibration.json", json.dumps(data).encode(), load_calibration) is None
+
+
 @fuzz(text=damaged_calibrations())
 def test_the_calibration_reader_returns_a_checked_calibration_or_one_line_naming_the_file(text):
     """Any damage: a calibration whose priors are plausible, whose samples lie inside them and whose surrogates
