@@ -185,16 +185,21 @@ def test_read_built_plate_takes_materials_and_glue_from_the_metadata(tmp_path):
     assert log.frequency == pytest.approx(24e3, rel=1e-4)
 
 
-@pytest.mark.slow
-def test_robust_optimum_probability_checked_by_direct_fem_sampling(tmp_path, capsys, coarse_cli, coarse_model):
-    """The robust optimum of 'optimize --calibration' meets 25 kHz on most direct FEM draws of posterior and scatter."""
-    from workflow.optimise.robust import Tolerances, robust_inputs, scattered_draws
-
+def _calibrate_on_p1(tmp_path, capsys, coarse_model) -> None:
+    """``tactile calibrate`` on P1's simulated resonance log (2000 steps, 18 surrogate points) into tmp_path / cal."""
     log = write_log(tmp_path / "p1.csv", P1, built_plate_frequency(coarse_model, P1))
     config = tmp_path / "fast.toml"
     config.write_text("[sampler]\nsteps = 2000\n[surrogate]\npoints = 18\n", encoding="utf-8")
     assert main(["calibrate", str(log), "--out", str(tmp_path / "cal"), "--config", str(config), "--no-figures"]) == 0
     capsys.readouterr()
+
+
+@pytest.mark.slow
+def test_robust_optimum_probability_checked_by_direct_fem_sampling(tmp_path, capsys, coarse_cli, coarse_model):
+    """The robust optimum of 'optimize --calibration' meets 25 kHz on most direct FEM draws of posterior and scatter."""
+    from workflow.optimise.robust import Tolerances, robust_inputs, scattered_draws
+
+    _calibrate_on_p1(tmp_path, capsys, coarse_model)
     assert main(["optimize", "--model", "fem", "--hp-mm", "1", "--calibration", str(tmp_path / "cal"),
                  "--stock-hi-mm", "0.75,1.0", "--json"]) == 0
     record = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
@@ -220,11 +225,7 @@ def test_robust_optimum_probability_checked_by_direct_fem_sampling(tmp_path, cap
 
 @pytest.mark.slow
 def test_maps_with_a_calibration_scale_and_state_it(tmp_path, capsys, coarse_cli, coarse_model):
-    log = write_log(tmp_path / "p1.csv", P1, built_plate_frequency(coarse_model, P1))
-    config = tmp_path / "fast.toml"
-    config.write_text("[sampler]\nsteps = 2000\n[surrogate]\npoints = 18\n", encoding="utf-8")
-    assert main(["calibrate", str(log), "--out", str(tmp_path / "cal"), "--config", str(config), "--no-figures"]) == 0
-    capsys.readouterr()
+    _calibrate_on_p1(tmp_path, capsys, coarse_model)
     assert main(["maps", "--model", "fem", "--hp-mm", "1", "--grid", "2", "--out", str(tmp_path / "maps"),
                  "--calibration", str(tmp_path / "cal"), "--json"]) == 0
     record = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
