@@ -22,6 +22,7 @@ amplitude: ``AM:DEPT`` is a level command too, set through ``am_depth`` (at most
 
 import math
 import re
+from decimal import ROUND_DOWN, Decimal
 
 from instruments.drivers.arbitrary import ModulatedDrive
 from instruments.drivers.base import LineInstrument, control, measurement, parse_with
@@ -69,6 +70,17 @@ def _number(value: float) -> str:
     return f"{float(value):.9g}"
 
 
+def _level(value: float) -> str:
+    """A level [V] in 9 significant digits rounded toward zero: what the instrument sets is never above what the limit
+    was checked on (``:.9g`` rounds to nearest: 1.732421875 Vpp went out as 1.73242188, found by the driver's fuzz
+    test)."""
+    number = Decimal(repr(float(value)))
+    if not number:
+        return "0"
+    digits = number.quantize(Decimal(1).scaleb(number.adjusted() - 8), rounding=ROUND_DOWN)
+    return format(digits.normalize(), "f")
+
+
 def _sets_level(line: str) -> bool:
     """Whether a program line holds a command setting an output level (amplitude, offset, high/low, APPLy)."""
     for command in re.split(r"[;\r\n]", line):
@@ -85,7 +97,7 @@ def _open_circuit_gain(load_ohm: float) -> float:
 
 def amplitude_command(vpp: float) -> str:
     """The line that sets the amplitude to ``vpp`` [V peak-to-peak] whatever unit the instrument was left in."""
-    return f"VOLT:UNIT VPP;:VOLT {_number(vpp)}"
+    return f"VOLT:UNIT VPP;:VOLT {_level(vpp)}"
 
 
 def modulation_script(drive: ModulatedDrive) -> list:
@@ -177,7 +189,7 @@ class FunctionGenerator(LineInstrument):
     @offset.setter
     def offset(self, offset: float) -> None:
         self.check_peak_voltage(self.amplitude_vpp, offset)
-        self._send(f"VOLT:OFFS {_number(offset)}")
+        self._send(f"VOLT:OFFS {_level(offset)}")
 
     def write(self, command: str) -> None:
         """Send one command line that has no reply; :class:`SafetyLimitError` (nothing sent) if it sets a level.
@@ -224,7 +236,7 @@ class FunctionGenerator(LineInstrument):
         self._send("")
         self.discard_input()
         self._send("OUTP 0")
-        self._send(f"VOLT:UNIT VPP;:VOLT {_number(LOWEST_AMPLITUDE_VPP)}")
+        self._send(amplitude_command(LOWEST_AMPLITUDE_VPP))
         self._send("VOLT:OFFS 0;:BURS:STAT 0;:AM:STAT 0")
 
     def check_peak_voltage(self, vpp: float, offset: float, gain: float | None = None) -> None:

@@ -259,11 +259,13 @@ def read_log(path: Path, columns: tuple = logformat.COLUMNS) -> LoggedRows:
 
 
 def _kept_tail(tail: bytes) -> bytes:
-    """The comment line that keeps an unterminated last line which is no row (:data:`INCOMPLETE_ROW`): its text
-    without the NUL bytes a power loss may pad a file's last block with, a character cut in two replaced by U+FFFD;
-    nothing when only padding is left."""
+    """The comment line that keeps an unterminated last line which is no row (:data:`INCOMPLETE_ROW`): its text as it
+    was (spaces kept) but without the NUL bytes a power loss may pad a file's last block with, a character cut in two
+    replaced by U+FFFD and any character that would end a line (CR, NEL, ...) by a space; nothing when only padding
+    is left."""
     text = tail.replace(b"\x00", b"").decode("utf-8", "replace")
-    return (INCOMPLETE_ROW + " ".join(text.split()) + "\n").encode() if text.strip() else b""
+    kept = "".join(" " if (c + "x").splitlines()[0] != c + "x" else c for c in text)  # as it was, but on one line
+    return (INCOMPLETE_ROW + kept + "\n").encode() if text.strip() else b""
 
 
 def _same_value(old: str | None, new: str) -> bool:

@@ -380,6 +380,17 @@ def call(generator: FunctionGenerator, device: GeneratorDevice, name: str, value
         setattr(generator, name, value)
 
 
+def test_an_amplitude_at_the_limit_is_not_rounded_above_it():
+    """Found by the property below: 1.732421875 Vpp into 50 ohm, checked against a 1.732421875 V limit, went out as
+    '1.73242188' (9 digits rounded to nearest); levels are now rounded toward zero."""
+    device = GeneratorDevice(DRIVER_DEVICE_LIMIT)
+    device.state = GeneratorState(amplitude_vpp=1e-3, load=math.inf)
+    generator = FunctionGenerator(DevicePort(device), max_peak_voltage=1.732421875)
+    for name, value in [("load_ohm", 50.0), ("output", True), ("amplitude_vpp", 1.732421875), ("offset", 0.0)]:
+        call(generator, device, name, value)
+    assert device.state.output and device.state.peak_voltage <= 1.732421875
+
+
 @fuzz(calls=st.lists(driver_calls, max_size=25), limit=st.floats(min_value=0.01, max_value=10.0))
 def test_no_sequence_of_driver_calls_exceeds_the_drivers_limit(calls, limit):
     """Driver calls and raw commands in any order, unit and load changed behind its back: while the output
@@ -632,6 +643,20 @@ def edited_log(actions, cut: int) -> tuple[str, bool]:
 
 PLANNED_FREQUENCIES = {f"{point.frequency:.12g}" for point in RESUMED_PLAN.points()} | {
     f"{point.frequency:.12e}" for point in RESUMED_PLAN.points()}
+
+
+def test_a_cut_note_keeps_its_spaces_when_the_resume_keeps_it_as_a_comment():
+    """Found by the property below: a log cut inside a note ('# a ') resumed with the note kept as a comment but its
+    trailing space dropped, so the log's bytes were no longer all kept."""
+    text, spoiled = edited_log([("comment", 0, 12), ("delete", 0, 0), ("delete", 12, 0)], 40)
+    assert text.endswith("# a ") and not spoiled
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "campaign.csv"
+        path.write_text(text, encoding="utf-8")
+        station, _ = simulated_station(default_bench_settings(), settle_time=0.0)
+        q_campaign(station, path, RESUMED_PLAN, fsync=False)
+        cut_at = text.rfind("\n") + 1
+        assert path.read_text(encoding="utf-8").startswith(text[:cut_at] + INCOMPLETE_ROW + "# a \n")
 
 
 @fuzz(actions=edits, cut=st.integers(0, 80))
