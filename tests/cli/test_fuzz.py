@@ -636,9 +636,22 @@ def edited_log(actions, cut: int) -> tuple[str, bool]:
             rows[i] = ",".join(cells)
     text = "\n".join(head + rows) + "\n"
     text = text[: len(text) - cut] if cut else text
-    spoiled = any(line.split(",")[0] not in PLANNED_FREQUENCIES and line.count(",") == 5  # a last line cut in
-                  for line in text.splitlines()[header + 1:] if not line.startswith("#"))  # its phase is a row
+    spoiled = any(line.split(",")[0] not in PLANNED_FREQUENCIES and _six_numbers(line)  # a last line cut in its
+                  for line in text.splitlines()[header + 1:] if not line.startswith("#"))  # phase may still be a row
     return text, spoiled
+
+
+def _six_numbers(line: str) -> bool:
+    """Whether a line is a row: six fields, each a number or, in an optional column, empty (a last line cut to '-' in
+    its phase is no row but a write cut short; cut to an empty phase it is a row without a phase)."""
+    cells = line.split(",")
+    if len(cells) != len(logformat.COLUMNS):
+        return False
+    try:
+        return all(math.isfinite(float(cell)) for name, cell in zip(logformat.COLUMNS, cells)
+                   if cell or name not in logformat.OPTIONAL_COLUMNS)
+    except ValueError:
+        return False
 
 
 PLANNED_FREQUENCIES = {f"{point.frequency:.12g}" for point in RESUMED_PLAN.points()} | {
