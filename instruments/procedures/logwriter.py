@@ -258,13 +258,17 @@ def read_log(path: Path, columns: tuple = logformat.COLUMNS) -> LoggedRows:
     return LoggedRows(metadata, rows, lines, log.length, log.tail, tail_is_row=not complete and lines[-1:] == [number])
 
 
+LINE_BREAKS = "\n\r\x0b\x0c\x1c\x1d\x1e\x85\u2028\u2029"
+"""The characters that end a line for :meth:`str.splitlines`."""
+
+
 def _kept_tail(tail: bytes) -> bytes:
     """The comment line that keeps an unterminated last line which is no row (:data:`INCOMPLETE_ROW`): its text as it
     was (spaces kept) but without the NUL bytes a power loss may pad a file's last block with, a character cut in two
     replaced by U+FFFD and any character that would end a line (CR, NEL, ...) by a space; nothing when only padding
     is left."""
     text = tail.replace(b"\x00", b"").decode("utf-8", "replace")
-    kept = "".join(" " if (c + "x").splitlines()[0] != c + "x" else c for c in text)  # as it was, but on one line
+    kept = "".join(" " if c in LINE_BREAKS else c for c in text)  # as it was, but on one line
     return (INCOMPLETE_ROW + kept + "\n").encode() if text.strip() else b""
 
 
