@@ -458,6 +458,14 @@ def test_a_parameter_named_with_a_line_break_is_refused_in_one_line(name):
     assert read_or_refused("calibration.json", json.dumps(data).encode(), load_calibration) is None
 
 
+def test_a_surrogate_of_infinite_degree_is_refused_in_one_line():
+    """Found by the property below (long profile): a surrogate's degree of 1e999 (JSON's Infinity) raised an
+    OverflowError out of the reader instead of its one line."""
+    data = copy.deepcopy(VALID_CALIBRATION)
+    data["surrogates"][0]["log_frequency"]["degree"] = math.inf
+    assert read_or_refused("calibration.json", json.dumps(data).encode(), load_calibration) is None
+
+
 @fuzz(text=damaged_calibrations())
 def test_the_calibration_reader_returns_a_checked_calibration_or_one_line_naming_the_file(text):
     """Any damage: a calibration whose priors are plausible, whose samples lie inside them and whose surrogates

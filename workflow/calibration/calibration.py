@@ -203,7 +203,7 @@ class Calibration:
             discrepancy = None if data["version"] == 1 else _checked_discrepancy(data["discrepancy"], len(samples), origin)
         except InputFileError:
             raise
-        except (KeyError, TypeError, ValueError, IndexError, AttributeError, TactileError) as error:
+        except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError, TactileError) as error:
             raise InputFileError(f"{origin}: damaged calibration file, field '{field}' "
                                  f"({type(error).__name__}: {error})") from None
         if discrepancy is None:
