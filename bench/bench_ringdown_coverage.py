@@ -32,9 +32,9 @@ Z_90 = 3.29
 """Width of a normal 90 % interval in standard deviations [-]."""
 
 
-def positions(log_path: Path, truth: dict, seed: int, steps: int) -> dict:
+def positions(log, truth: dict, seed: int, steps: int) -> dict:
     """Parameter -> (truth's position in the 90 % interval, 0 at p05 and 1 at p95; relative width)."""
-    summary = parameter_summary(fit_law(read_logs([log_path]), "quadratic", seed=seed, max_steps=steps, chain_taus=25))
+    summary = parameter_summary(fit_law(log, "quadratic", seed=seed, max_steps=steps, chain_taus=25))
     return {name: ((value - summary[name]["p05"]) / (summary[name]["p95"] - summary[name]["p05"]),
                    (summary[name]["p95"] - summary[name]["p05"]) / summary[name]["median"]) for name, value in truth.items()}
 
@@ -61,9 +61,10 @@ def main(argv=None) -> dict:
             path = Path(folder) / f"ringdown{seed}.csv"
             simulate_ringdown(path, settings, voltages=VOLTAGES, interval=40e-6)
             truth = {"q0": float(settings.response.law.q0), "alpha": float(settings.response.law.alpha)}
-            shipped.append(positions(path, truth, seed, args.steps))
+            log = read_logs([path])
+            shipped.append(positions(log, truth, seed, args.steps))
             with mock.patch.object(likelihood, "envelope_reading", lambda envelope, sigma_abs: envelope):
-                reference.append(positions(path, truth, seed, args.steps))
+                reference.append(positions(log, truth, seed, args.steps))
     result = {"seeds": args.seeds, "steps": args.steps, "shipped": coverage(shipped), "reference": coverage(reference)}
     result["inside_ratio_shipped_over_reference"] = {
         name: result["shipped"][name]["inside_share"] / max(result["reference"][name]["inside_share"], 1e-9)

@@ -74,12 +74,12 @@ from run to run with the same CPU time.  Started first, the long modules overlap
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(session, config, items):
     """Put the modules of :data:`HEAVY_FIRST` first, in its order (the rest keep theirs)."""
-    tests = Path(__file__).resolve().parent
+    tests = Path(__file__).parent  # as pytest names the items' paths
     missing = [name for name in HEAVY_FIRST if not (tests / name).is_file()]
     if missing:
         raise pytest.UsageError(f"tests/conftest.py HEAVY_FIRST names modules that do not exist: {missing}")
-    rank = {str(tests / name): k for k, name in enumerate(HEAVY_FIRST)}
-    items.sort(key=lambda item: rank.get(str(Path(str(item.fspath)).resolve()), len(rank)))
+    rank = {tests / name: k for k, name in enumerate(HEAVY_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path, len(rank)))
 
 
 def pytest_sessionstart(session):

@@ -1,8 +1,17 @@
 """Exceptions the command line turns into one clear error line (no traceback)."""
 
 
+def one_line(message) -> str:
+    """``message`` with every control or line-breaking character escaped (``\\n`` -> ``\\\\n``, NEL -> ``\\\\x85``): an
+    error stays one line whatever a file name or a value quoted in it holds."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in str(message))
+
+
 class TactileError(Exception):
-    """Base class: an error a user can act on; its message is shown as is."""
+    """Base class: an error a user can act on; its message is shown as is, on one line (:func:`one_line`)."""
+
+    def __str__(self) -> str:
+        return one_line(super().__str__())
 
 
 class GeometryError(TactileError, ValueError):
@@ -15,15 +24,3 @@ class InfeasibleError(TactileError):
 
 class InputFileError(TactileError, ValueError):
     """A malformed input file (log, configuration, posterior)."""
-
-
-def shown(text: str) -> str:
-    """``text`` as an error line may quote it: as is when printable (no control or line-breaking character: the
-    message stays one line), else its ``repr`` (``'\\x85'``)."""
-    return text if text.isprintable() else repr(text)
-
-
-def one_line(message) -> str:
-    """``message`` with every control or line-breaking character escaped (``\\n`` -> ``\\\\n``): the error line the
-    command line prints stays one line whatever a file name or a value in it holds."""
-    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in str(message))

@@ -20,7 +20,7 @@ from importlib import resources
 import numpy as np
 from scipy import stats
 
-from workflow.errors import InputFileError, shown
+from workflow.errors import InputFileError
 from workflow.inputfiles import load_toml
 from workflow.models.limits import problem
 from workflow.models.builtplate import scaled_ceramic, scaled_material
@@ -278,7 +278,7 @@ def checked_settings(settings: CalibrationSettings, origin: str) -> CalibrationS
     if not settings.parameters:
         raise InputFileError(f"{origin}: no parameter to calibrate")
     for parameter in settings.parameters:
-        parameter.check(f"{origin}: parameter {shown(parameter.name)}")
+        parameter.check(f"{origin}: parameter {parameter.name}")
     for field, kind, low, high in SETTINGS_NUMBERS.values():
         _setting(getattr(settings, field), kind, low, high, f"{origin}: {field}")
     dimension = len(settings.parameters) + len(DISCREPANCIES)
@@ -289,7 +289,7 @@ def checked_settings(settings: CalibrationSettings, origin: str) -> CalibrationS
 
 
 def _parameter(name: str, record, origin: str) -> Parameter:
-    where = f"{origin}: [parameter.{shown(name)}]"
+    where = f"{origin}: [parameter.{name}]"
     if name not in FACTORS + LENGTHS:
         raise InputFileError(f"{where}: unknown parameter; known: {', '.join(FACTORS + LENGTHS)}")
     if not isinstance(record, dict) or record.get("prior") not in PRIORS:

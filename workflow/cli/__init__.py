@@ -13,7 +13,7 @@ import importlib
 import sys
 
 from workflow.cli.options import Stopped
-from workflow.errors import TactileError, one_line
+from workflow.errors import TactileError
 from workflow.serialise import json_line
 
 COMMANDS = ("evaluate", "optimize", "maps", "fit_damping", "calibrate", "simulate", "measure", "render", "run")
@@ -84,7 +84,7 @@ def main(argv=None) -> int:
     try:
         result = args.handler(args)
     except TactileError as error:
-        print(f"tactile {args.command.replace('_', '-')}: error: {one_line(error)}", file=sys.stderr)
+        print(f"tactile {args.command.replace('_', '-')}: error: {error}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         print(f"tactile {args.command.replace('_', '-')}: interrupted", file=sys.stderr)

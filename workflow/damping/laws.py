@@ -21,7 +21,9 @@ MAX_INCREMENT = 0.2
 
 
 def _loss_coefficient_box(law, v_max: float) -> dict:
-    """alpha from 0 to where the loss term alone brings Q(v_max) down to :data:`MIN_Q_AT_MAX_VELOCITY`."""
+    """Flat prior ranges of a law's sampled parameters other than ln Q0, given the largest measured antinode velocity
+    ``v_max`` [m/s] (sampled name -> (low, high) in that parameter's unit): alpha from 0 to where the loss term alone
+    brings Q(v_max) down to :data:`MIN_Q_AT_MAX_VELOCITY`."""
     return {"alpha": (0.0, 1.0 / MIN_Q_AT_MAX_VELOCITY / v_max**law.velocity_exponent)}
 
 
@@ -45,11 +47,7 @@ class QuadraticLoss:
     units: ClassVar[dict] = {"q0": "-", "alpha": "s^2/m^2"}
     """Parameter -> unit."""
 
-    @classmethod
-    def prior_box(cls, v_max: float) -> dict:
-        """Flat prior ranges of the law's sampled parameters other than ln Q0, given the largest measured antinode
-        velocity ``v_max`` [m/s]: sampled name -> (low, high) in that parameter's unit."""
-        return _loss_coefficient_box(cls, v_max)
+    prior_box = classmethod(_loss_coefficient_box)
 
     def quality_factor(self, velocity):
         """Q at the peak velocity amplitude ``velocity`` [m/s] -> [-]."""
@@ -78,10 +76,7 @@ class LinearLoss:
     velocity_exponent: ClassVar[int] = 1
     units: ClassVar[dict] = {"q0": "-", "alpha": "s/m"}
 
-    @classmethod
-    def prior_box(cls, v_max: float) -> dict:
-        """As :meth:`QuadraticLoss.prior_box`."""
-        return _loss_coefficient_box(cls, v_max)
+    prior_box = classmethod(_loss_coefficient_box)
 
     def quality_factor(self, velocity):
         """Q at the peak velocity amplitude ``velocity`` [m/s] -> [-]."""
