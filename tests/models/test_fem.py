@@ -11,7 +11,12 @@ from workflow.models.fem import FemResult, FemSettings, ModeResult, evaluate_fem
 from workflow.models.fem.assembly import assemble_matrices, assemble_piezo_load, reduce_system
 from workflow.models.fem.elements import BRICKS
 from workflow.models.fem.mesh import CERAMIC, quarter_plate_mesh
+from workflow.models.fem import modes as modes_module
+from workflow.models.fem.accuracy import mesh_for_level
+from workflow.models.fem.evaluate import discretise, evaluate_on_mesh
 from workflow.models.fem.modes import nearest_modes
+from workflow.models.fem.prolongation import start_block
+from workflow.models.fem.solvers import factorise
 from workflow.models.fem.probes import antinode_probe_points, mean_deflection, probe_matrix
 from workflow.models.fem.accuracy import FemAccuracy
 from workflow.models.plate import ORIGINAL_PLATE
@@ -202,3 +207,19 @@ def test_bad_settings_are_refused():
         FemSettings(elements_per_ceramic=3)
     with pytest.raises(TactileError, match="element"):
         FemSettings(element="tet4")
+
+
+def test_block_krylov_from_the_lower_level_finds_arpacks_modes(monkeypatch):
+    """The block method started from the degree-2 modes gives ARPACK's six degree-3 eigenpairs, without falling back."""
+    plate = ORIGINAL_PLATE
+    lower = evaluate_on_mesh(plate, 54.0, 15.0, mesh_for_level(plate, 2)).solution
+    mesh, system, _ = discretise(plate, 15.0, mesh_for_level(plate, 3))
+    shift = (2 * np.pi * float(analytical.resonance_frequency(plate))) ** 2
+    solve = factorise(system.shifted(shift)).solve
+    start = start_block(lower, mesh, system.free_dofs)
+    arpack = modes_module.shift_invert_modes(system, shift, solve, 6, start @ np.linspace(1, 2, 6))
+    monkeypatch.setattr(modes_module.sla, "eigsh", None)  # no fallback to ARPACK
+    block = modes_module.shift_invert_modes(system, shift, solve, 6, start)
+    np.testing.assert_allclose(block.eigenvalues, arpack.eigenvalues, rtol=1e-12)
+    match = np.abs(np.einsum("im,im->m", block.vectors, system.mass @ arpack.vectors))  # both mass-normalised
+    np.testing.assert_allclose(match, 1.0, atol=1e-10)

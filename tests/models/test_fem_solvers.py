@@ -2,11 +2,14 @@
 
 import numpy as np
 import pytest
+from threadpoolctl import threadpool_limits
 
 from workflow.models import analytical
 from workflow.models.fem import FemSettings
 from workflow.models.fem import solvers
+from workflow.models.fem.accuracy import mesh_for_level
 from workflow.models.fem.assembly import assemble_system
+from workflow.models.fem.evaluate import discretise
 from workflow.models.fem.mesh import quarter_plate_mesh
 from workflow.models.plate import ORIGINAL_PLATE
 
@@ -21,10 +24,40 @@ def test_pardiso_solves_the_indefinite_shifted_matrix_like_superlu_without_refin
     rhs = np.random.default_rng(0).standard_normal((matrix.shape[0], 3))
     factor = solvers.factorise(matrix)
     mine = factor.solve(rhs)
-    assert factor._iparm[7] == 0  # no iterative refinement steps in the solves
+    assert factor._analysis.iparm[7] == 0  # no iterative refinement steps in the solves
     # and still accurate, and a vector is solved like a column
     assert np.linalg.norm(matrix @ mine - rhs) <= 1e-10 * np.linalg.norm(rhs)
     assert np.allclose(factor.solve(rhs[:, 1]), mine[:, 1], rtol=1e-10, atol=0)
     monkeypatch.setenv(solvers.SOLVER_VARIABLE, "superlu")
     reference = solvers.factorise(matrix).solve(rhs)
     assert np.abs(mine - reference).max() <= 1e-8 * np.abs(reference).max()
+
+
+def _shifted_system(level: int):
+    _, system, _ = discretise(ORIGINAL_PLATE, 15.0, mesh_for_level(ORIGINAL_PLATE, level))
+    return system, (2 * np.pi * float(analytical.resonance_frequency(ORIGINAL_PLATE))) ** 2
+
+
+def test_factorisations_of_one_structure_share_its_analysis_and_each_solves_its_own_matrix():
+    system, shift = _shifted_system(2)
+    first, second = system.shifted(shift), system.shifted(1.1 * shift)
+    rhs = np.random.default_rng(1).standard_normal(first.shape[0])
+    factor_1 = solvers.factorise(first)
+    factor_2 = solvers.factorise(second)
+    assert factor_1._analysis is factor_2._analysis  # the pattern's structure is analysed once
+    for factor, matrix in ((factor_1, first), (factor_2, second), (factor_1, first)):  # numbers factorised again
+        assert np.linalg.norm(matrix @ factor.solve(rhs) - rhs) <= 1e-10 * np.linalg.norm(rhs)
+    private = first.copy()  # a writeable structure is not shared: its own analysis
+    assert solvers.factorise(private)._analysis is not factor_1._analysis
+
+
+def test_a_factorisation_after_solves_under_a_one_thread_limit_does_not_crash():
+    """Regression: PARDISO phases run with other MKL threads than the analysis made the next factorisation segfault
+    (a crash takes the test's worker down, which fails the run)."""
+    system, shift = _shifted_system(2)
+    rhs = np.ones(system.mass.shape[0])
+    factor = solvers.factorise(system.shifted(shift))
+    with threadpool_limits(limits=1, user_api="blas"):
+        factor.solve(rhs), factor.solve(np.column_stack([rhs, rhs]))
+    again = system.shifted(0.9 * shift)
+    assert np.linalg.norm(again @ solvers.factorise(again).solve(rhs) - rhs) <= 1e-10 * np.linalg.norm(rhs)

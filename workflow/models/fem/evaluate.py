@@ -9,7 +9,7 @@ from workflow.models.fem.harmonic import ModalSolution, modal_solution
 from workflow.models.fem.mesh import quarter_plate_mesh
 from workflow.models.fem.modes import ShiftedModes, nearest_modes
 from workflow.models.fem.piezoelectric import evaluate_fem_coupled
-from workflow.models.fem.prolongation import start_vector
+from workflow.models.fem.prolongation import start_block
 from workflow.models.fem.probes import antinode_probe_points, probe_matrix
 from workflow.models.fem.result import FemResult, fem_result
 from workflow.models.fem.settings import FemSettings
@@ -49,14 +49,14 @@ def evaluate_on_mesh(plate: Plate, q: float, voltage: float, settings: FemSettin
     if settings.piezo == "coupled":
         return evaluate_fem_coupled(plate, q, voltage, settings, start)
     mesh, system, probes = discretise(plate, voltage, settings)
-    modes = working_modes(plate, system, settings, start_vector(start, mesh, system.free_dofs))
+    modes = working_modes(plate, system, settings, start_block(start, mesh, system.free_dofs))
     solution = modal_solution(mesh, system, modes)
     return replace(fem_result(solution.probe_model(probes), q, voltage, system), solution=solution)
 
 
 def working_modes(plate: Plate, system: PlateSystem, settings: FemSettings, start=None) -> ShiftedModes:
-    """The ``settings.n_modes`` modes nearest the analytical beam resonance of the plate (``start``: ARPACK's first
-    vector, default all ones)."""
+    """The ``settings.n_modes`` modes nearest the analytical beam resonance of the plate (``start``: the lower level's
+    modes, :func:`~workflow.models.fem.prolongation.start_block`)."""
     return nearest_modes(system, float(analytical.resonance_frequency(plate)), settings.n_modes, start)
 
 

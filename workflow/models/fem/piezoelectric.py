@@ -34,7 +34,7 @@ from workflow.models.fem.harmonic import ModalSolution, modal_solution
 from workflow.models.fem.mesh import CERAMIC, BrickMesh, quarter_plate_mesh
 from workflow.models.fem.modes import ShiftedModes, shift_invert_modes
 from workflow.models.fem.probes import antinode_probe_points, probe_matrix
-from workflow.models.fem.prolongation import start_vector
+from workflow.models.fem.prolongation import start_block
 from workflow.models.fem.result import QUARTERS, FemResult, fem_result
 from workflow.models.fem.solvers import factorise
 from workflow.models.fem.settings import DEFAULT_SETTINGS, FemSettings
@@ -206,7 +206,7 @@ def electromechanical_system(mesh: BrickMesh, mechanical: PlateSystem, ceramic: 
 
 def coupled_modes(system: PiezoSystem, frequency: float, n_modes: int, start: np.ndarray | None = None) -> CoupledModes:
     """Short-circuit modes nearest ``frequency`` [Hz] and their charges, from one saddle-point factorisation
-    (``start``: ARPACK's first vector, default all ones)."""
+    (``start``: the lower level's modes, :func:`~workflow.models.fem.prolongation.start_block`)."""
     mechanical = system.mechanical
     shift = (2 * np.pi * frequency) ** 2
     n_u = mechanical.stiffness.shape[0]
@@ -220,10 +220,10 @@ def coupled_modes(system: PiezoSystem, frequency: float, n_modes: int, start: np
         format="csc",
     )
     factor = factorise(saddle)
-    padding = np.zeros(saddle.shape[0] - n_u)
+    n_potentials = saddle.shape[0] - n_u
 
     def solve_short(rhs):
-        return factor.solve(np.concatenate([rhs, padding]))[:n_u]
+        return factor.solve(np.concatenate([rhs, np.zeros((n_potentials,) + rhs.shape[1:])]))[:n_u]
 
     response = solve_short(system.drive)  # (K_sc - sigma M)^-1 Gamma
     static_charge = system.drive @ response
@@ -276,7 +276,7 @@ def evaluate_fem_coupled(
     system = electromechanical_system(mesh, assemble_system(mesh, plate, voltage), plate.ceramic, voltage)
     free = system.mechanical.free_dofs
     modes = coupled_modes(system, float(analytical.resonance_frequency(plate)), settings.n_modes,
-                          start_vector(start, mesh, free))
+                          start_block(start, mesh, free))
     probes = probe_matrix(mesh, antinode_probe_points(plate))[:, free]
     solution = modal_solution(mesh, system.mechanical, modes.short_circuit)
     result = fem_result(solution.probe_model(probes), q, voltage, system.mechanical)

@@ -2,8 +2,8 @@
 
 The levels of the accuracy control share their cells (:mod:`workflow.models.fem.accuracy`), so a mode
 shape of degree k is exactly a function of degree k + 1: interpolating it at the higher level's nodes
-loses nothing.  A combination of the lower level's modes starts ARPACK inside the space of the modes it
-is asked for, which saves about a third of its solves (docs/fem.md, "Speed").
+loses nothing.  The lower level's modes start a block Krylov space already close to the modes asked for
+(:func:`~workflow.models.fem.modes.block_krylov_modes`; docs/fem.md, "Speed").
 """
 
 import numpy as np
@@ -43,9 +43,9 @@ def _local_order(mesh: BrickMesh) -> np.ndarray:
     return np.ravel_multi_index(tuple(mesh.brick.local_nodes.T), shape)
 
 
-def start_vector(lower: ModalSolution | None, mesh: BrickMesh, free_dofs: np.ndarray) -> np.ndarray | None:
-    """A start for the eigen solve on ``mesh``: the modes of the ``lower`` level interpolated there, combined with
-    unequal weights (so that no mode cancels); None without a lower level or when its cells differ."""
+def start_block(lower: ModalSolution | None, mesh: BrickMesh, free_dofs: np.ndarray) -> np.ndarray | None:
+    """A start for the eigen solve on ``mesh``: the modes of the ``lower`` level interpolated there, shape
+    (n_free, n_modes); None without a lower level or when its cells differ."""
     if lower is None or not same_cells(lower.mesh, mesh):
         return None
     full = np.zeros((lower.mesh.n_dofs, lower.vectors.shape[1]))
@@ -53,5 +53,4 @@ def start_vector(lower: ModalSolution | None, mesh: BrickMesh, free_dofs: np.nda
     nodal = full.reshape(lower.mesh.n_nodes, 3, -1)
     interpolation = node_interpolation(lower.mesh, mesh)
     fine = np.stack([interpolation @ nodal[:, component] for component in range(3)], axis=1).reshape(mesh.n_dofs, -1)
-    weights = np.linspace(1.0, 2.0, fine.shape[1])
-    return fine[free_dofs] @ weights
+    return fine[free_dofs]

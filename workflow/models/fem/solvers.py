@@ -9,7 +9,9 @@ SuperLU is the fallback wherever pypardiso does not install.  ``$TACTILE_SPARSE_
 
 import ctypes
 import os
+import threading
 import weakref
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
@@ -51,26 +53,67 @@ def _mkl_pardiso():
     return PyPardisoSolver()._mkl_pardiso
 
 
+@lru_cache(maxsize=1)
+def _mkl_threads():
+    """MKL's (``mkl_get_max_threads``, ``mkl_set_num_threads_local``) of the library pypardiso found."""
+    library = PyPardisoSolver().libmkl
+    get, set_local = library.MKL_Get_Max_Threads, library.MKL_Set_Num_Threads_Local
+    get.restype, set_local.restype, set_local.argtypes = ctypes.c_int, ctypes.c_int, [ctypes.c_int]
+    return get, set_local
+
+
 UPPER_STRUCTURES = 4
-"""Upper-triangle selections kept, one per sparsity structure (the assembly shares its structures) [-]."""
+"""Upper-triangle structures kept with their PARDISO analyses, one per sparsity structure (the assembly shares its
+structures between evaluations of one mesh topology) [-]."""
 _upper_structures: list = []
 
 
-def _upper_selection(matrix: sp.csc_matrix):
-    """(entries kept, CSR indices, CSR indptr) of the upper triangle of a canonical CSC structure, remembered for
-    structures that are shared and read-only (those of :mod:`~workflow.models.fem.assembly`'s patterns)."""
+@dataclass(eq=False)
+class _UpperStructure:
+    """The upper triangle of a symmetric CSC structure: which entries it keeps and its CSR arrays (0-based), and the
+    PARDISO analysis of it once made (kept for shared structures only)."""
+
+    keep: np.ndarray
+    indices: np.ndarray
+    indptr: np.ndarray
+    analysis: "_Analysis | None" = None
+
+
+def _upper_selection(matrix: sp.csc_matrix) -> _UpperStructure:
+    """The upper triangle of a canonical CSC structure, remembered for structures that are shared and read-only
+    (those of :mod:`~workflow.models.fem.assembly`'s patterns; a matrix built on them holds views of their arrays,
+    recognised by the array that owns the memory)."""
     indptr, indices = matrix.indptr, matrix.indices
-    for held_indptr, held_indices, selection in _upper_structures:
-        if held_indptr() is indptr and held_indices() is indices:
-            return selection
+    for held_indptr, held_indices, structure in _upper_structures:
+        if _same_memory(held_indptr, indptr) and _same_memory(held_indices, indices):
+            return structure
     rows = np.repeat(np.arange(matrix.shape[0], dtype=indices.dtype), np.diff(indptr))
     keep = np.flatnonzero(indices >= rows)
     upper_indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[keep], minlength=matrix.shape[0]))])
-    selection = (keep, indices[keep], upper_indptr)
+    structure = _UpperStructure(keep, indices[keep], upper_indptr)
     if not indices.flags.writeable and not indptr.flags.writeable:
-        _upper_structures.insert(0, (weakref.ref(indptr), weakref.ref(indices), selection))
+        _upper_structures.insert(0, (_memory(indptr), _memory(indices), structure))
         del _upper_structures[UPPER_STRUCTURES:]
-    return selection
+    return structure
+
+
+def _owner(array: np.ndarray) -> np.ndarray:
+    """The array that owns the memory of ``array`` (itself, or the base of its views)."""
+    while isinstance(array.base, np.ndarray):
+        array = array.base
+    return array
+
+
+def _memory(array: np.ndarray) -> tuple:
+    """(weak reference to the owner, first byte, length, dtype) of a read-only array."""
+    return weakref.ref(_owner(array)), array.__array_interface__["data"][0], array.size, array.dtype
+
+
+def _same_memory(held: tuple, array: np.ndarray) -> bool:
+    """Whether ``array`` is the read-only array described by ``held`` (:func:`_memory`), its owner still alive."""
+    owner, start, size, dtype = held
+    return (owner() is _owner(array) and start == array.__array_interface__["data"][0] and size == array.size
+            and dtype == array.dtype and not array.flags.writeable)
 
 
 def upper_triangle(matrix) -> sp.csr_matrix:
@@ -78,8 +121,8 @@ def upper_triangle(matrix) -> sp.csr_matrix:
     matrix = sp.csc_matrix(matrix)
     if not matrix.has_canonical_format:
         matrix.sum_duplicates()
-    keep, indices, indptr = _upper_selection(matrix)
-    return sp.csr_matrix((matrix.data[keep], indices, indptr), shape=matrix.shape)
+    structure = _upper_selection(matrix)
+    return sp.csr_matrix((matrix.data[structure.keep], structure.indices, structure.indptr), shape=matrix.shape)
 
 
 def _pardiso(handle, phase: int, matrix: tuple, iparm, rhs, solution) -> None:
@@ -90,7 +133,7 @@ def _pardiso(handle, phase: int, matrix: tuple, iparm, rhs, solution) -> None:
     handle : (64,) int64 array
         PARDISO's internal pointer array of this factorisation.
     phase : int
-        12 analysis and factorisation, 33 solve, -1 release.
+        11 analysis, 22 numeric factorisation, 33 solve, 0 release of the factorisation, -1 release of all.
     matrix : tuple
         (size, data, ia, ja) of the upper triangle.
     iparm : (64,) int32 array
@@ -122,33 +165,90 @@ def _pardiso(handle, phase: int, matrix: tuple, iparm, rhs, solution) -> None:
         raise TactileError(f"PARDISO phase {phase} failed with error {error.value}; set {SOLVER_VARIABLE}=superlu")
 
 
+class _Analysis:
+    """PARDISO's analysis (fill-reducing ordering and symbolic factorisation) of one upper-triangle structure, and the
+    one numeric factorisation it holds at a time.
+
+    The analysis costs about twice the numeric factorisation (0.8 s against 0.4 s at degree 4; docs/fem.md, "Speed")
+    and depends only on the structure, which every evaluation of one mesh topology shares: it is made once and
+    each factorisation of that structure only factorises its numbers.  A factor whose numbers were replaced by
+    another's factorises them again before its next solve, so a solve always uses its own matrix.
+    """
+
+    def __init__(self, structure: _UpperStructure, data: np.ndarray):
+        self.size = len(structure.indptr) - 1
+        self.ia, self.ja = structure.indptr.astype(np.int32) + 1, structure.indices.astype(np.int32) + 1
+        self.handle = np.zeros(64, dtype=np.int64)
+        self.iparm = np.zeros(64, dtype=np.int32)  # iparm(1) = 0: PARDISO fills in its defaults
+        self.lock = threading.Lock()
+        self.holder = None  # the factor whose numbers are factorised
+        self.threads = _mkl_threads()[0]()
+        self._call(11, data)
+        self.iparm[7] = 0  # iparm(8): no iterative refinement in the solves (the default does 2 steps)
+        weakref.finalize(self, _pardiso, self.handle, -1, (self.size, data[:0], self.ia, self.ja), self.iparm,
+                         np.zeros(0), np.zeros(0)).atexit = False  # at exit the process's memory goes anyway
+
+    def _call(self, phase: int, data: np.ndarray, rhs=None, solution=None) -> None:
+        """One PARDISO phase on this handle, with the MKL threads of its analysis: a phase run with other threads
+        than the analysis's (e.g. a solve under a one-thread limit) makes the next factorisation crash."""
+        rhs = np.zeros(self.size) if rhs is None else rhs
+        set_local = _mkl_threads()[1]
+        previous = set_local(self.threads)
+        try:
+            _pardiso(self.handle, phase, (self.size, data, self.ia, self.ja), self.iparm, rhs,
+                     rhs.copy() if solution is None else solution)
+        finally:
+            set_local(previous)
+
+    def factorise(self, factor: "_Pardiso") -> None:
+        """Factorise the numbers of ``factor`` (they replace those held)."""
+        with self.lock:
+            self._call(22, factor.data)
+            self.holder = weakref.ref(factor)
+
+    def solve(self, factor: "_Pardiso", rhs: np.ndarray) -> np.ndarray:
+        """``factor``'s matrix^-1 rhs, its numbers factorised again if another factor's replaced them."""
+        with self.lock:
+            if self.holder is None or self.holder() is not factor:
+                self._call(22, factor.data)
+                self.holder = weakref.ref(factor)
+            solution = np.zeros_like(rhs)
+            self._call(33, factor.data, rhs, solution)
+            return solution
+
+    def release(self, factor_reference) -> None:
+        """Free the numeric factorisation's memory if the factor (now gone) of ``factor_reference`` still holds it."""
+        with self.lock:
+            if self.holder is factor_reference:
+                self._call(0, np.zeros(0))
+                self.holder = None
+
+
 class _Pardiso:
     """A PARDISO factorisation of a symmetric matrix kept for repeated solves (MKL called directly).
 
     PARDISO's defaults, but without iterative refinement in the solves: residuals stay ~1e-12 and a
-    solve costs a third.
+    solve costs a third.  Shared structures reuse their analysis (:class:`_Analysis`).
     """
 
     def __init__(self, matrix):
-        upper = upper_triangle(matrix)
-        self._matrix = (
-            upper.shape[0],
-            np.ascontiguousarray(upper.data, dtype=float),
-            upper.indptr.astype(np.int32) + 1,
-            upper.indices.astype(np.int32) + 1,
-        )
-        self._handle = np.zeros(64, dtype=np.int64)
-        self._iparm = np.zeros(64, dtype=np.int32)  # iparm(1) = 0: PARDISO fills in its defaults
-        empty = np.zeros(upper.shape[0])
-        _pardiso(self._handle, 12, self._matrix, self._iparm, empty, empty.copy())
-        self._iparm[7] = 0  # iparm(8): no iterative refinement in the solves (the default does 2 steps)
-        weakref.finalize(self, _pardiso, self._handle, -1, self._matrix, self._iparm, empty, empty)
+        matrix = sp.csc_matrix(matrix)
+        if not matrix.has_canonical_format:
+            matrix.sum_duplicates()
+        structure = _upper_selection(matrix)
+        self.data = np.ascontiguousarray(matrix.data[structure.keep], dtype=float)
+        analysis = structure.analysis or _Analysis(structure, self.data)
+        if not matrix.indices.flags.writeable:
+            structure.analysis = analysis
+        self._analysis = analysis
+        analysis.factorise(self)
+        reference = analysis.holder
+        finalizer = weakref.finalize(self, analysis.release, reference)
+        finalizer.atexit = False
 
     def solve(self, rhs):
         rhs = np.asfortranarray(rhs, dtype=float)
-        solution = np.zeros_like(rhs)
-        _pardiso(self._handle, 33, self._matrix, self._iparm, rhs, solution)
-        return np.ascontiguousarray(solution)
+        return np.ascontiguousarray(self._analysis.solve(self, rhs))
 
 
 class _SuperLU:
