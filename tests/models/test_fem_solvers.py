@@ -1,5 +1,6 @@
 """The sparse direct solvers of the FEM: PARDISO (MKL called directly) against SuperLU."""
 
+import threading
 import numpy as np
 import pytest
 from threadpoolctl import threadpool_limits
@@ -61,3 +62,24 @@ def test_a_factorisation_after_solves_under_a_one_thread_limit_does_not_crash():
         factor.solve(rhs), factor.solve(np.column_stack([rhs, rhs]))
     again = system.shifted(0.9 * shift)
     assert np.linalg.norm(again @ solvers.factorise(again).solve(rhs) - rhs) <= 1e-10 * np.linalg.norm(rhs)
+
+
+def test_a_factor_released_while_its_analysis_is_busy_does_not_deadlock():
+    """Regression: a factor's finalizer (which releases its numbers) can run inside a call on the same analysis, when
+    memory is allocated; with a plain lock the test's worker hung."""
+    system, shift = _shifted_system(2)
+    factor = solvers.factorise(system.shifted(shift))
+    analysis = factor._analysis
+    finished = threading.Event()
+
+    def release_inside_a_call():
+        with analysis.lock:
+            analysis.release(analysis.holder)
+        finished.set()
+
+    worker = threading.Thread(target=release_inside_a_call, daemon=True)
+    worker.start()
+    worker.join(timeout=30)
+    assert finished.is_set()
+    rhs = np.ones(system.mass.shape[0])  # the released numbers are factorised again for the next solve
+    assert np.linalg.norm(system.shifted(shift) @ factor.solve(rhs) - rhs) <= 1e-10 * np.linalg.norm(rhs)

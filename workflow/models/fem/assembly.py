@@ -276,6 +276,15 @@ def lumped_mass(mesh: BrickMesh, types, which, free) -> sp.csc_matrix:
     return sp.diags(nodal[free], format="csc")
 
 
+def reduced_matrices(mesh: BrickMesh, free: np.ndarray, stiffness_types, mass_types, which) -> tuple:
+    """(K, M) on the free dofs from distinct element matrices ``*_types`` (n_types, 3 n_local, 3 n_local) and each
+    element's type ``which``, summed through the topology's cached :class:`ReducedPattern` [N/m], [kg] (or the
+    derivatives of both when the types are derivatives of element matrices)."""
+    pattern = reduced_pattern(mesh, free)
+    mass = lumped_mass(mesh, mass_types, which, free) if mesh.brick.lumped else pattern.mass(mass_types, which)
+    return pattern.stiffness(stiffness_types, which), mass
+
+
 def assemble_system(mesh: BrickMesh, plate: Plate, voltage: float) -> PlateSystem:
     """K, M and F of the quarter plate with its symmetry constraints (the fast, pattern-cached path).
 
@@ -283,13 +292,11 @@ def assemble_system(mesh: BrickMesh, plate: Plate, voltage: float) -> PlateSyste
     explicit zeros between different components).
     """
     free = free_dofs(mesh)
-    pattern = reduced_pattern(mesh, free)
-    stiffness, mass, which = element_types(mesh, plate)
-    lumped = mesh.brick.lumped
+    stiffness, mass = reduced_matrices(mesh, free, *element_types(mesh, plate))
     return PlateSystem(
-        stiffness=pattern.stiffness(stiffness, which),
-        mass=lumped_mass(mesh, mass, which, free) if lumped else pattern.mass(mass, which),
+        stiffness=stiffness,
+        mass=mass,
         load=assemble_piezo_load(mesh, plate, voltage)[free],
         free_dofs=free,
-        diagonal_entries=pattern.diagonal_entries if lumped else None,
+        diagonal_entries=reduced_pattern(mesh, free).diagonal_entries if mesh.brick.lumped else None,
     )

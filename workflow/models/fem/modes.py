@@ -149,7 +149,7 @@ def block_krylov_modes(mass, shift: float, solve_elastic: Callable, n_modes: int
     projected = np.zeros((0, 0))  # Q^T M T Q
     block = start
     for _ in range(MAX_BLOCKS):
-        block, mass_block = _mass_orthonormal(block, basis, mass_basis, mass)
+        block, mass_block = mass_orthonormal(block, basis, mass_basis, mass, DEPENDENT)
         if block.shape[1] == 0:
             return None
         image = solve_elastic(mass_block)
@@ -168,20 +168,22 @@ def block_krylov_modes(mass, shift: float, solve_elastic: Callable, n_modes: int
     return None
 
 
-def _mass_orthonormal(block: np.ndarray, basis: list, mass_basis: list, mass) -> tuple:
-    """(Q, M Q): the part of ``block`` mass-orthogonal to the blocks of ``basis`` (``mass_basis``: their products with
-    M), mass-orthonormalised, dependent directions dropped (twice: orthonormal to rounding)."""
+def mass_orthonormal(block: np.ndarray, basis: list, mass_basis: list, mass, rtol: float) -> tuple:
+    """(V, M V): ``block`` orthonormalised in the M inner product against the blocks of ``basis`` (``mass_basis``:
+    their products with M; projected out twice) and within itself; directions whose M-norm falls below ``rtol``
+    times the largest column's are dropped as dependent."""
+    scale = np.sqrt(np.max(np.einsum("ik,ik->k", block, mass @ block), initial=0.0))
     for _ in range(2):
         for held, mass_held in zip(basis, mass_basis):
             block = block - held @ (mass_held.T @ block)
-        mass_block = mass @ block
-        gram = block.T @ mass_block
-        values, vectors = la.eigh((gram + gram.T) / 2)
-        kept = values > values.max(initial=0.0) * DEPENDENT
-        scaling = vectors[:, kept] / np.sqrt(values[kept])
-        block, mass_block = block @ scaling, mass_block @ scaling
-    return block, mass_block
+    mass_block = mass @ block
+    values, vectors = la.eigh(block.T @ mass_block)
+    kept = values > (rtol * scale) ** 2
+    scaling = vectors[:, kept] / np.sqrt(values[kept])
+    return block @ scaling, mass_block @ scaling
 
 
-DEPENDENT = 1e-20
-"""Eigenvalue of a block's Gram matrix, relative to its largest, below which a direction is dropped as dependent [-]."""
+DEPENDENT = 1e-10
+"""M-norm of a Krylov direction, relative to the block it comes from, below which it is dropped as dependent [-]
+(far below :data:`RESIDUAL_TOLERANCE`, the size of the directions still needed)."""
+

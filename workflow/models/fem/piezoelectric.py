@@ -37,6 +37,7 @@ from workflow.models.fem.probes import antinode_probe_points, probe_matrix
 from workflow.models.fem.prolongation import start_block
 from workflow.models.fem.result import QUARTERS, FemResult, fem_result
 from workflow.models.fem.solvers import factorise
+from workflow.models.fem.structures import shared_block_matrix
 from workflow.models.fem.settings import DEFAULT_SETTINGS, FemSettings
 from workflow.models.materials import PiezoMaterial
 from workflow.models.plate import Plate
@@ -212,12 +213,11 @@ def coupled_modes(system: PiezoSystem, frequency: float, n_modes: int, start: np
     n_u = mechanical.stiffness.shape[0]
     # a symmetric scaling of the potentials brings both blocks to one magnitude (exact: only u is read)
     scale = np.sqrt(np.abs(mechanical.stiffness.diagonal()).mean() / np.abs(system.permittivity.diagonal()).mean())
-    saddle = sp.bmat(
+    saddle = shared_block_matrix(
         [
-            [mechanical.stiffness - shift * mechanical.mass, scale * system.coupling],
+            [mechanical.shifted(shift), scale * system.coupling],
             [scale * system.coupling.T, -(scale**2) * system.permittivity],
-        ],
-        format="csc",
+        ]
     )
     factor = factorise(saddle)
     n_potentials = saddle.shape[0] - n_u

@@ -19,6 +19,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
 from workflow.errors import TactileError
+from workflow.models.fem.structures import memory, same_memory, shared
 
 SOLVER_VARIABLE = "TACTILE_SPARSE_SOLVER"
 """Environment variable that forces a solver: ``superlu`` or ``pardiso``."""
@@ -85,35 +86,16 @@ def _upper_selection(matrix: sp.csc_matrix) -> _UpperStructure:
     recognised by the array that owns the memory)."""
     indptr, indices = matrix.indptr, matrix.indices
     for held_indptr, held_indices, structure in _upper_structures:
-        if _same_memory(held_indptr, indptr) and _same_memory(held_indices, indices):
+        if same_memory(held_indptr, indptr) and same_memory(held_indices, indices):
             return structure
     rows = np.repeat(np.arange(matrix.shape[0], dtype=indices.dtype), np.diff(indptr))
     keep = np.flatnonzero(indices >= rows)
     upper_indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[keep], minlength=matrix.shape[0]))])
     structure = _UpperStructure(keep, indices[keep], upper_indptr)
-    if not indices.flags.writeable and not indptr.flags.writeable:
-        _upper_structures.insert(0, (_memory(indptr), _memory(indices), structure))
+    if shared(matrix):
+        _upper_structures.insert(0, (memory(indptr), memory(indices), structure))
         del _upper_structures[UPPER_STRUCTURES:]
     return structure
-
-
-def _owner(array: np.ndarray) -> np.ndarray:
-    """The array that owns the memory of ``array`` (itself, or the base of its views)."""
-    while isinstance(array.base, np.ndarray):
-        array = array.base
-    return array
-
-
-def _memory(array: np.ndarray) -> tuple:
-    """(weak reference to the owner, first byte, length, dtype) of a read-only array."""
-    return weakref.ref(_owner(array)), array.__array_interface__["data"][0], array.size, array.dtype
-
-
-def _same_memory(held: tuple, array: np.ndarray) -> bool:
-    """Whether ``array`` is the read-only array described by ``held`` (:func:`_memory`), its owner still alive."""
-    owner, start, size, dtype = held
-    return (owner() is _owner(array) and start == array.__array_interface__["data"][0] and size == array.size
-            and dtype == array.dtype and not array.flags.writeable)
 
 
 def upper_triangle(matrix) -> sp.csr_matrix:
@@ -180,7 +162,7 @@ class _Analysis:
         self.ia, self.ja = structure.indptr.astype(np.int32) + 1, structure.indices.astype(np.int32) + 1
         self.handle = np.zeros(64, dtype=np.int64)
         self.iparm = np.zeros(64, dtype=np.int32)  # iparm(1) = 0: PARDISO fills in its defaults
-        self.lock = threading.Lock()
+        self.lock = threading.RLock()  # re-entrant: a finalizer (release) may run inside a call, when memory is allocated
         self.holder = None  # the factor whose numbers are factorised
         self.threads = _mkl_threads()[0]()
         self._call(11, data)
@@ -238,7 +220,7 @@ class _Pardiso:
         structure = _upper_selection(matrix)
         self.data = np.ascontiguousarray(matrix.data[structure.keep], dtype=float)
         analysis = structure.analysis or _Analysis(structure, self.data)
-        if not matrix.indices.flags.writeable:
+        if shared(matrix):
             structure.analysis = analysis
         self._analysis = analysis
         analysis.factorise(self)
