@@ -147,6 +147,17 @@ def _pardiso(handle, phase: int, matrix: tuple, iparm, rhs, solution) -> None:
         raise TactileError(f"PARDISO phase {phase} failed with error {error.value}; set {SOLVER_VARIABLE}=superlu")
 
 
+def _with_threads(threads: int, handle, phase: int, matrix: tuple, iparm, rhs, solution=None) -> None:
+    """:func:`_pardiso` with ``threads`` MKL threads, those of the handle's analysis: a phase run with other threads
+    than the analysis's (e.g. a solve under a one-thread limit) makes the next factorisation crash."""
+    set_local = _mkl_threads()[1]
+    previous = set_local(threads)
+    try:
+        _pardiso(handle, phase, matrix, iparm, rhs, rhs.copy() if solution is None else solution)
+    finally:
+        set_local(previous)
+
+
 class _Analysis:
     """PARDISO's analysis (fill-reducing ordering and symbolic factorisation) of one upper-triangle structure, and the
     one numeric factorisation it holds at a time.
@@ -167,20 +178,13 @@ class _Analysis:
         self.threads = _mkl_threads()[0]()
         self._call(11, data)
         self.iparm[7] = 0  # iparm(8): no iterative refinement in the solves (the default does 2 steps)
-        weakref.finalize(self, _pardiso, self.handle, -1, (self.size, data[:0], self.ia, self.ja), self.iparm,
-                         np.zeros(0), np.zeros(0)).atexit = False  # at exit the process's memory goes anyway
+        matrix = (self.size, data[:0], self.ia, self.ja)
+        finalizer = weakref.finalize(self, _with_threads, self.threads, self.handle, -1, matrix, self.iparm, np.zeros(0))
+        finalizer.atexit = False  # at exit the process's memory goes anyway
 
     def _call(self, phase: int, data: np.ndarray, rhs=None, solution=None) -> None:
-        """One PARDISO phase on this handle, with the MKL threads of its analysis: a phase run with other threads
-        than the analysis's (e.g. a solve under a one-thread limit) makes the next factorisation crash."""
         rhs = np.zeros(self.size) if rhs is None else rhs
-        set_local = _mkl_threads()[1]
-        previous = set_local(self.threads)
-        try:
-            _pardiso(self.handle, phase, (self.size, data, self.ia, self.ja), self.iparm, rhs,
-                     rhs.copy() if solution is None else solution)
-        finally:
-            set_local(previous)
+        _with_threads(self.threads, self.handle, phase, (self.size, data, self.ia, self.ja), self.iparm, rhs, solution)
 
     def factorise(self, factor: "_Pardiso") -> None:
         """Factorise the numbers of ``factor`` (they replace those held)."""
