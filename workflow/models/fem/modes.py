@@ -130,7 +130,7 @@ def block_krylov_modes(mass, shift: float, solve_elastic: Callable, n_modes: int
     The space span{X, T X, T^2 X, ...} of T = (K - sigma M)^-1 M (the rigid translation projected out) is built
     one block at a time with a mass-orthonormal basis Q; as T Q is kept, the Ritz values mu of T (eigenvalues
     sigma + 1 / mu) and their residuals come without further solves.  One block solve costs about two single
-    ones, and from the lower level's modes three to five blocks reach the tolerance where ARPACK needs ~30
+    ones, and from the lower level's modes five to seven blocks reach the tolerance where ARPACK needs 20-30
     single solves (docs/fem.md, "Speed").
 
     Parameters
