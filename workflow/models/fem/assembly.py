@@ -261,7 +261,7 @@ def _type_summation(pattern: ReducedPattern, which: bytes) -> sp.csr_matrix:
     entries one by one.
     """
     which = np.frombuffer(which, dtype=np.int64)
-    n_elements, n_local, _ = pattern.element_slots.shape
+    n_local = pattern.element_slots.shape[1]
     pairs = n_local * n_local
     columns = (which[:, None] * pairs + np.arange(pairs)).ravel()
     ones = np.ones(len(columns))

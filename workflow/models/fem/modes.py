@@ -86,17 +86,19 @@ def shift_invert_modes(system: PlateSystem, shift: float, solve_shifted: Callabl
     rigid = rigid_translation(system)
     rigid_mass = system.mass @ rigid
 
+    def elastic(vectors):  # without the rigid translation: a vector or the columns of a block
+        return vectors - np.multiply.outer(rigid, rigid_mass @ vectors)
+
     def solve_elastic(rhs):
-        solution = solve_shifted(rhs)
-        return solution - np.multiply.outer(rigid, rigid_mass @ solution)
+        return elastic(solve_shifted(rhs))
 
     mass = system.mass.tocsc()
     mass_rows = sp.csr_matrix((mass.data, mass.indices, mass.indptr), shape=mass.shape)  # M = M^T: row-wise products are faster
     with threadpool_limits(limits=1, user_api="blas"):
-        # ARPACK's small dense steps only lose from threads; PARDISO's solves (MKL) with two threads are
-        # not bitwise reproducible, and repeated evaluations of one plate must be equal
+        # the small dense steps of both methods only lose from threads on a shared machine (PARDISO's calls keep the
+        # MKL threads of their analysis: workflow.models.fem.solvers)
         if start is not None and start.ndim == 2:
-            found = block_krylov_modes(mass_rows, shift, solve_elastic, n_modes, start - np.outer(rigid, rigid_mass @ start))
+            found = block_krylov_modes(mass_rows, shift, solve_elastic, n_modes, elastic(start))
             if found is not None:
                 return _mass_normalised(system, *found, shift, solve_shifted)
             start = start @ np.linspace(1.0, 2.0, start.shape[1])  # one vector in which no mode cancels

@@ -19,7 +19,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
 from workflow.errors import TactileError
-from workflow.models.fem.structures import memory, same_memory, shared
+from workflow.models.fem.structures import StructureCache, canonical, describe, shared
 
 SOLVER_VARIABLE = "TACTILE_SPARSE_SOLVER"
 """Environment variable that forces a solver: ``superlu`` or ``pardiso``."""
@@ -66,7 +66,7 @@ def _mkl_threads():
 UPPER_STRUCTURES = 4
 """Upper-triangle structures kept with their PARDISO analyses, one per sparsity structure (the assembly shares its
 structures between evaluations of one mesh topology) [-]."""
-_upper_structures: list = []
+_upper_structures = StructureCache(UPPER_STRUCTURES)
 
 
 @dataclass(eq=False)
@@ -84,25 +84,22 @@ def _upper_selection(matrix: sp.csc_matrix) -> _UpperStructure:
     """The upper triangle of a canonical CSC structure, remembered for structures that are shared and read-only
     (those of :mod:`~workflow.models.fem.assembly`'s patterns; a matrix built on them holds views of their arrays,
     recognised by the array that owns the memory)."""
-    indptr, indices = matrix.indptr, matrix.indices
-    for held_indptr, held_indices, structure in _upper_structures:
-        if same_memory(held_indptr, indptr) and same_memory(held_indices, indices):
-            return structure
-    rows = np.repeat(np.arange(matrix.shape[0], dtype=indices.dtype), np.diff(indptr))
-    keep = np.flatnonzero(indices >= rows)
-    upper_indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[keep], minlength=matrix.shape[0]))])
-    structure = _UpperStructure(keep, indices[keep], upper_indptr)
-    if shared(matrix):
-        _upper_structures.insert(0, (memory(indptr), memory(indices), structure))
-        del _upper_structures[UPPER_STRUCTURES:]
+    key = (describe(matrix),) if shared(matrix) else None
+    structure = _upper_structures.get(key) if key else None
+    if structure is None:
+        indptr, indices = matrix.indptr, matrix.indices
+        rows = np.repeat(np.arange(matrix.shape[0], dtype=indices.dtype), np.diff(indptr))
+        keep = np.flatnonzero(indices >= rows)
+        upper_indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[keep], minlength=matrix.shape[0]))])
+        structure = _UpperStructure(keep, indices[keep], upper_indptr)
+        if key:
+            _upper_structures.put(key, structure)
     return structure
 
 
 def upper_triangle(matrix) -> sp.csr_matrix:
     """Upper triangle of a symmetric sparse matrix as CSR with sorted indices (its CSC structure read as CSR)."""
-    matrix = sp.csc_matrix(matrix)
-    if not matrix.has_canonical_format:
-        matrix.sum_duplicates()
+    matrix = canonical(matrix)
     structure = _upper_selection(matrix)
     return sp.csr_matrix((matrix.data[structure.keep], structure.indices, structure.indptr), shape=matrix.shape)
 
@@ -218,18 +215,14 @@ class _Pardiso:
     """
 
     def __init__(self, matrix):
-        matrix = sp.csc_matrix(matrix)
-        if not matrix.has_canonical_format:
-            matrix.sum_duplicates()
-        structure = _upper_selection(matrix)
+        matrix = canonical(matrix)
+        structure = _upper_selection(matrix)  # remembered with its analysis only for shared structures
         self.data = np.ascontiguousarray(matrix.data[structure.keep], dtype=float)
-        analysis = structure.analysis or _Analysis(structure, self.data)
-        if shared(matrix):
-            structure.analysis = analysis
-        self._analysis = analysis
-        analysis.factorise(self)
-        reference = analysis.holder
-        finalizer = weakref.finalize(self, analysis.release, reference)
+        if structure.analysis is None:
+            structure.analysis = _Analysis(structure, self.data)
+        self._analysis = structure.analysis
+        self._analysis.factorise(self)
+        finalizer = weakref.finalize(self, self._analysis.release, self._analysis.holder)
         finalizer.atexit = False
 
     def solve(self, rhs):

@@ -7,7 +7,6 @@ a block matrix) is made once per structure and found again by the memory of its 
 
 import hashlib
 import weakref
-from collections import OrderedDict
 
 import numpy as np
 import scipy.sparse as sp
@@ -20,37 +19,69 @@ def owner(array: np.ndarray) -> np.ndarray:
     return array
 
 
-def memory(array: np.ndarray) -> tuple:
-    """(weak reference to the owner, first byte, length, dtype) of a read-only array."""
-    return weakref.ref(owner(array)), array.__array_interface__["data"][0], array.size, array.dtype
-
-
-def same_memory(held: tuple, array: np.ndarray) -> bool:
-    """Whether ``array`` is the read-only array described by ``held`` (:func:`memory`), its owner still alive."""
-    held_owner, start, size, dtype = held
-    return (held_owner() is owner(array) and start == array.__array_interface__["data"][0] and size == array.size
-            and dtype == array.dtype and not array.flags.writeable)
-
-
 def shared(matrix) -> bool:
     """Whether a compressed sparse matrix's structure is read-only (shared between evaluations)."""
     return not matrix.indices.flags.writeable and not matrix.indptr.flags.writeable
 
 
-BLOCK_LAYOUTS = 4
-"""Block-matrix layouts kept, one per structure of the blocks [-]."""
-_block_layouts: OrderedDict = OrderedDict()
+def _memory(array: np.ndarray) -> tuple:
+    """(weak reference to the owner, first byte, length, dtype) of an array."""
+    return weakref.ref(owner(array)), array.__array_interface__["data"][0], array.size, array.dtype
 
 
-def _structure_key(matrix: sp.csc_matrix):
-    """What identifies a block's structure: the memory of shared arrays (found again without reading them), else a
-    digest of the arrays' contents."""
+def describe(matrix) -> tuple:
+    """What identifies a compressed sparse matrix's structure: the memory of its arrays when they are read-only
+    (shared: found again without reading them), else a digest of their contents."""
     if shared(matrix):
-        return ("shared", matrix.shape, id(owner(matrix.indptr)), matrix.indptr.__array_interface__["data"][0],
-                id(owner(matrix.indices)), matrix.indices.__array_interface__["data"][0], matrix.nnz)
+        return ("shared", matrix.shape, _memory(matrix.indptr), _memory(matrix.indices))
     digest = hashlib.blake2b(matrix.indptr.tobytes(), digest_size=16)
     digest.update(matrix.indices.tobytes())
     return ("content", matrix.shape, digest.hexdigest())
+
+
+def _same(held: tuple, query: tuple) -> bool:
+    """Whether two :func:`describe` results name one structure (shared arrays: the same memory, its owner alive)."""
+    if held[:2] != query[:2]:
+        return False
+    if held[0] == "content":
+        return held[2] == query[2]
+    return all(a[0]() is not None and a[0]() is b[0]() and a[1:] == b[1:] for a, b in zip(held[2:], query[2:]))
+
+
+class StructureCache:
+    """What was derived from sparsity structures, found again by their :func:`describe` (the most recent first)."""
+
+    def __init__(self, size: int):
+        self.size, self.entries = size, []
+
+    def get(self, structures: tuple):
+        """The value kept for these structures (one :func:`describe` each), or None."""
+        for index, (held, value) in enumerate(self.entries):
+            if len(held) == len(structures) and all(map(_same, held, structures)):
+                self.entries.insert(0, self.entries.pop(index))
+                return value
+        return None
+
+    def put(self, structures: tuple, value):
+        """Keep ``value`` for these structures (the oldest beyond :attr:`size` dropped); returns it."""
+        self.entries.insert(0, (structures, value))
+        del self.entries[self.size:]
+        return value
+
+
+BLOCK_LAYOUTS = 4
+"""Block-matrix layouts kept, one per structure of the blocks [-]."""
+_block_layouts = StructureCache(BLOCK_LAYOUTS)
+
+
+def canonical(matrix) -> sp.csc_matrix:
+    """``matrix`` as CSC with sorted indices and no duplicates (a copy where they had to change: the arrays may be
+    shared and read-only)."""
+    matrix = sp.csc_matrix(matrix)
+    if not matrix.has_canonical_format:
+        matrix = matrix.copy()
+        matrix.sum_duplicates()
+    return matrix
 
 
 def shared_block_matrix(blocks: list) -> sp.csc_matrix:
@@ -60,53 +91,31 @@ def shared_block_matrix(blocks: list) -> sp.csc_matrix:
     Parameters
     ----------
     blocks : list of lists of sparse matrices (or None)
-        Each in canonical CSC form (sorted indices, no duplicates) or convertible to it.
     """
-    blocks = [[None if block is None else _canonical(block) for block in row] for row in blocks]
+    blocks = [[None if block is None else canonical(block) for block in row] for row in blocks]
     present = [block for row in blocks for block in row if block is not None]
-    key = tuple(_structure_key(block) for block in present)
-    layout = _block_layouts.get(key)
-    if layout is not None and all(ref() is not None for ref in layout[3]):
-        _block_layouts.move_to_end(key)
-    else:
-        layout = _layout(blocks, present)
-        _block_layouts[key] = layout
-        while len(_block_layouts) > BLOCK_LAYOUTS:
-            _block_layouts.popitem(last=False)
-    indptr, indices, order, _, shape = layout
+    key = tuple(map(describe, present))
+    indptr, indices, order, shape = _block_layouts.get(key) or _block_layouts.put(key, _layout(blocks, present))
     data = np.concatenate([block.data for block in present])[order]
     return sp.csc_matrix((data, indices, indptr), shape=shape)
 
 
-def _canonical(block) -> sp.csc_matrix:
-    block = sp.csc_matrix(block)
-    if not block.has_canonical_format:
-        block = block.copy()
-        block.sum_duplicates()
-    return block
-
-
 def _layout(blocks: list, present: list) -> tuple:
-    """(indptr, indices, order, owners, shape): the block matrix's structure (read-only) and where each of its entries
-    is in the blocks' concatenated data; ``owners`` (weak references) keep a layout of shared blocks from outliving
-    their arrays, whose addresses are its key."""
+    """(indptr, indices, order, shape): the block matrix's structure (read-only) and where each of its entries is in
+    the blocks' concatenated data (found by assembling the blocks with their entries' positions as values)."""
     offsets = np.cumsum([0] + [block.nnz for block in present])
-    coded, position = [], iter(range(len(present)))
-    for row in blocks:
-        coded_row = []
-        for block in row:
-            if block is None:
-                coded_row.append(None)
-                continue
-            index = next(position)
-            positions = np.arange(offsets[index], offsets[index + 1], dtype=float) + 1  # exact below 2^53
-            coded_row.append(sp.csc_matrix((positions, block.indices, block.indptr), shape=block.shape))
-        coded.append(coded_row)
-    whole = sp.bmat(coded, format="csc")
+    ranges = iter(zip(offsets[:-1], offsets[1:]))
+
+    def positions(block):
+        if block is None:
+            return None
+        start, stop = next(ranges)  # the blocks in row order, as in ``present``
+        return sp.csc_matrix((np.arange(start, stop, dtype=float) + 1, block.indices, block.indptr), shape=block.shape)
+
+    whole = sp.bmat([[positions(block) for block in row] for row in blocks], format="csc")
     whole.sum_duplicates()
-    order = whole.data.astype(np.int64) - 1
+    order = whole.data.astype(np.int64) - 1  # exact: positions below 2^53
     indptr, indices = whole.indptr.copy(), whole.indices.copy()
     for array in (indptr, indices, order):
         array.flags.writeable = False
-    owners = tuple(weakref.ref(owner(block.indices)) for block in present if shared(block))
-    return indptr, indices, order, owners, whole.shape
+    return indptr, indices, order, whole.shape
