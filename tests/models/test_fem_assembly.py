@@ -9,6 +9,7 @@ from workflow.models.fem.assembly import (
     assemble_piezo_load,
     assemble_system,
     free_dofs,
+    node_pairs,
     reduce_system,
     reduced_pattern,
 )
@@ -36,6 +37,9 @@ def test_pattern_assembly_equals_the_plain_one(element, glue):
     assert np.array_equal(fast.stiffness.indptr, plain.stiffness.indptr)
     assert np.array_equal(fast.stiffness.indices, plain.stiffness.indices)
     assert fast.stiffness.has_sorted_indices and fast.mass.has_sorted_indices
+    columns = np.repeat(np.arange(fast.stiffness.shape[1]), np.diff(fast.stiffness.indptr))
+    assert np.array_equal(reduced_pattern(mesh, fast.free_dofs).diagonal_entries,
+                          np.flatnonzero(fast.stiffness.indices == columns))
     scale = abs(plain.stiffness).max()
     assert abs(fast.stiffness - plain.stiffness).max() <= 1e-14 * scale
     # the mass keeps only the couplings of equal components (the plain one stores the others as zeros)
@@ -53,3 +57,23 @@ def test_pattern_depends_on_the_topology_only():
     assert abs(fast.stiffness - plain.stiffness).max() <= 1e-14 * abs(plain.stiffness).max()
     finer = quarter_plate_mesh(ORIGINAL_PLATE, SMALL.refined(2))
     assert reduced_pattern(finer, free_dofs(finer)) is not reduced_pattern(mesh, free_dofs(mesh))
+
+
+def _sorted_pairs(connectivity, n_nodes):
+    """The element node pairs by sorting them all (the slower way :func:`node_pairs` replaces)."""
+    pairs, slots = np.unique((connectivity[:, :, None] * n_nodes + connectivity[:, None, :]).ravel(),
+                             return_inverse=True)
+    rows, cols = np.divmod(pairs, n_nodes)
+    return rows, cols, slots.reshape(connectivity.shape + connectivity.shape[1:]), np.searchsorted(pairs, cols * n_nodes + rows)
+
+
+@pytest.mark.parametrize("element", ["spectral-3-3-3", "spectral-4-3-2", "serendipity20"])
+@pytest.mark.parametrize("renumbered", [False, True])
+def test_node_pairs_are_those_of_sorting_every_element_pair(element, renumbered):
+    mesh = quarter_plate_mesh(ORIGINAL_PLATE.with_(glue_thickness=30e-6), FemSettings(**{**SMALL.as_dict(), "element": element}))
+    connectivity = mesh.connectivity
+    if renumbered:  # nodes not numbered along the grid: the slots are sorted afterwards
+        connectivity = np.random.default_rng(3).permutation(mesh.n_nodes)[connectivity]
+    found = node_pairs(connectivity, mesh.brick.local_nodes, mesh.n_nodes)
+    for got, expected in zip(found, _sorted_pairs(connectivity, mesh.n_nodes)):
+        assert np.array_equal(got, expected)

@@ -1,5 +1,6 @@
 """The sparse direct solvers of the FEM: PARDISO (MKL called directly) against SuperLU."""
 
+import os
 import threading
 import numpy as np
 import pytest
@@ -83,3 +84,15 @@ def test_a_factor_released_while_its_analysis_is_busy_does_not_deadlock():
     assert finished.is_set()
     rhs = np.ones(system.mass.shape[0])  # the released numbers are factorised again for the next solve
     assert np.linalg.norm(system.shifted(shift) @ factor.solve(rhs) - rhs) <= 1e-10 * np.linalg.norm(rhs)
+
+
+def test_mkl_is_loaded_from_the_mkl_package_record_without_searching_or_leaving_the_variable(monkeypatch):
+    monkeypatch.delenv(solvers.MKL_VARIABLE, raising=False)
+    runtime = solvers._installed_mkl_runtime()
+    assert runtime is not None and "libmkl_rt" in runtime
+    solvers._pypardiso.cache_clear()
+    try:
+        assert solvers._pypardiso().libmkl._name == runtime
+        assert solvers.MKL_VARIABLE not in os.environ
+    finally:
+        solvers._pypardiso.cache_clear()

@@ -8,7 +8,7 @@ topology (element counts and type, not the dimensions) and is cached per topolog
 """
 
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 import scipy.sparse as sp
@@ -151,31 +151,32 @@ class ReducedPattern:
         Free dofs [-].
     indptr, indices : int arrays
         CSC structure of the stiffness on the free dofs (with rows sorted; by symmetry also its CSR structure).
-    mass_indptr, mass_indices : int arrays
-        The same for the mass (only equal components couple).
     diagonal_entries : (n_free,) int array
         Position of each diagonal entry in the stiffness's data.
     element_slots : (n_elements, n_local, n_local) int array
         Slot of each element node pair.
     stiffness_entries : (nnz,) int array
         Index of each stiffness entry in the (n_slots, 3, 3) block sums.
-    mass_entries : (nnz_mass,) int array
-        Slot of each mass entry.
     """
 
     n_free: int
     indptr: np.ndarray
     indices: np.ndarray
-    mass_indptr: np.ndarray
-    mass_indices: np.ndarray
     diagonal_entries: np.ndarray
     element_slots: np.ndarray
     stiffness_entries: np.ndarray
-    mass_entries: np.ndarray
 
-    @property
+    @cached_property
     def n_slots(self) -> int:
         return int(self.element_slots.max()) + 1
+
+    @cached_property
+    def mass_structure(self) -> tuple:
+        """(indptr, indices, slot of each entry) of the consistent mass on the free dofs: the stiffness's entries
+        that couple equal components (made when first asked: the spectral elements' lumped mass does not need it)."""
+        same = np.flatnonzero(self.stiffness_entries % 9 % 4 == 0)  # i == j: 3 i + j in (0, 4, 8)
+        indptr = np.searchsorted(same, self.indptr).astype(np.int32)
+        return _read_only(indptr, self.indices[same], self.stiffness_entries[same] // 9)
 
     def stiffness(self, types, which) -> sp.csc_matrix:
         """Reduced stiffness [N/m] from the distinct element matrices ``types`` (n_types, 3 n_local, 3 n_local) and each element's type ``which``."""
@@ -189,34 +190,90 @@ class ReducedPattern:
         n_local = self.element_slots.shape[1]
         local = np.reshape(types, (len(types), n_local, 3, n_local, 3))[:, :, 0, :, 0]
         blocks = np.bincount(self.element_slots.ravel(), weights=local[which].ravel(), minlength=self.n_slots)
-        return sp.csc_matrix((blocks[self.mass_entries], self.mass_indices, self.mass_indptr), shape=(self.n_free,) * 2)
+        indptr, indices, entries = self.mass_structure
+        return sp.csc_matrix((blocks[entries], indices, indptr), shape=(self.n_free,) * 2)
 
 
 def reduced_pattern(mesh: BrickMesh, free: np.ndarray) -> ReducedPattern:
     """The :class:`ReducedPattern` of a mesh with free dofs ``free`` (cached per topology)."""
     connectivity = np.ascontiguousarray(mesh.connectivity, dtype=np.int64)
+    local_nodes = np.ascontiguousarray(mesh.brick.local_nodes, dtype=np.int64)
     free = np.ascontiguousarray(free, dtype=np.int64)
-    return _cached_pattern(connectivity.tobytes(), connectivity.shape[1], mesh.n_nodes, free.tobytes())
+    return _cached_pattern(connectivity.tobytes(), local_nodes.tobytes(), mesh.n_nodes, free.tobytes())
+
+
+def node_pairs(connectivity: np.ndarray, local_nodes: np.ndarray, n_nodes: int) -> tuple:
+    """The node pairs (slots) that elements couple, sorted by row node then column node, without sorting the
+    element pairs.
+
+    A pair is named by its row node and the grid offset of its column node, which is the same in every element that
+    holds the pair (the offset of local node j from local node i on the element's node grid), so a table over
+    (node, offset) finds the slots in one pass over the element pairs (sorting them, :func:`numpy.unique`, took
+    five times as long at degree 4).
+
+    Parameters
+    ----------
+    connectivity : (n, n_local) int array
+        Node numbers of each element (numbered along the node grid, as :func:`~workflow.models.fem.mesh.brick_mesh`
+        does; any other numbering only costs a sort of the pairs).
+    local_nodes : (n_local, 3) int array
+        Position of each local node on the element's node grid.
+    n_nodes : int
+
+    Returns
+    -------
+    rows, cols : (n_slots,) int arrays
+        Nodes (A, B) of each slot.
+    slots : (n, n_local, n_local) int array
+        Slot of each element's node pair (i, j): (connectivity[e, i], connectivity[e, j]).
+    transposed : (n_slots,) int array
+        Slot of (B, A) for each slot (A, B).
+    """
+    n_local = len(local_nodes)
+    span = local_nodes.max(axis=0) - local_nodes.min(axis=0)
+    width = 2 * span + 1
+    n_offsets = int(np.prod(width))
+    offsets = local_nodes[None, :, :] - local_nodes[:, None, :] + span  # (i, j): where j lies seen from i
+    offset_index = np.ravel_multi_index(tuple(offsets.reshape(-1, 3).T), width).reshape(n_local, n_local)
+    keys = connectivity[:, :, None] * n_offsets + offset_index
+    used = np.zeros(n_nodes * n_offsets, dtype=bool)
+    used[keys.ravel()] = True
+    present = np.flatnonzero(used)
+    del used
+    table = np.empty(n_nodes * n_offsets, dtype=np.int32)  # only the present keys' entries are written and read
+    table[present] = np.arange(len(present), dtype=np.int32)
+    slots = table[keys]
+    rows, offset = np.divmod(present, n_offsets)
+    cols = np.empty(len(present), dtype=np.int64)
+    cols[slots.ravel()] = np.broadcast_to(connectivity[:, None, :], keys.shape).ravel()
+    transposed = table[cols * n_offsets + (n_offsets - 1 - offset)]  # the mirrored offset
+    if np.any((np.diff(rows) == 0) & (np.diff(cols) < 0)):  # a numbering not along the grid: sort the slots
+        order = np.argsort(rows * n_nodes + cols, kind="stable")
+        rank = np.empty_like(order)
+        rank[order] = np.arange(len(order))
+        rows, cols, slots, transposed = rows[order], cols[order], rank[slots], rank[transposed[order]]
+    return rows, cols, slots, transposed
 
 
 @lru_cache(maxsize=PATTERN_CACHE_SIZE)
-def _cached_pattern(connectivity: bytes, n_local: int, n_nodes: int, free: bytes) -> ReducedPattern:
-    connectivity = np.frombuffer(connectivity, dtype=np.int64).reshape(-1, n_local)
+def _cached_pattern(connectivity: bytes, local_nodes: bytes, n_nodes: int, free: bytes) -> ReducedPattern:
+    local_nodes = np.frombuffer(local_nodes, dtype=np.int64).reshape(-1, 3)
+    connectivity = np.frombuffer(connectivity, dtype=np.int64).reshape(-1, len(local_nodes))
+    n_local = len(local_nodes)
     free = np.frombuffer(free, dtype=np.int64)
-    pairs, slots = np.unique(
-        (connectivity[:, :, None] * n_nodes + connectivity[:, None, :]).ravel(), return_inverse=True
-    )
-    rows, cols = np.divmod(pairs, n_nodes)
-    transposed = np.searchsorted(pairs, cols * n_nodes + rows)  # slot (A, B) of slot (B, A)
+    rows, cols, slots, transposed = node_pairs(connectivity, local_nodes, n_nodes)
     is_free = np.zeros(3 * n_nodes, dtype=bool)
     is_free[free] = True
     is_free = is_free.reshape(n_nodes, 3)
-    number = np.full(3 * n_nodes, -1)
-    number[free] = np.arange(len(free))
+    number = np.full(3 * n_nodes, -1, dtype=np.int32)
+    number[free] = np.arange(len(free), dtype=np.int32)
     # items: the free dofs of each slot's column node A, slot by slot; the column (B, j) lists the items of row B
-    item_slot, item_component = np.nonzero(is_free[cols])
-    item_row = number.reshape(n_nodes, 3)[cols[item_slot], item_component].astype(np.int32)
-    item_block = (9 * transposed[item_slot] + 3 * item_component).astype(np.int32)
+    slot_free = is_free[cols]
+    item = np.flatnonzero(slot_free).astype(np.int32)  # 3 slot + component
+    item_slot = item // 3
+    item_component = item - 3 * item_slot
+    item_row = number[3 * cols.astype(np.int32)[item_slot] + item_component]
+    item_block = 9 * transposed.astype(np.int32)[item_slot] + 3 * item_component
     item_node = rows[item_slot]
     row_width = np.bincount(item_node, minlength=n_nodes)
     item_start = np.concatenate([[0], np.cumsum(row_width)[:-1]])
@@ -226,25 +283,26 @@ def _cached_pattern(connectivity: bytes, n_local: int, n_nodes: int, free: bytes
     item = np.repeat((item_start[column_node] - indptr[:-1]).astype(np.int32), lengths)
     item += np.arange(indptr[-1], dtype=np.int32)
     stiffness_entries = item_block[item] + np.repeat(column_component.astype(np.int32), lengths)
-    diagonal = np.flatnonzero(stiffness_entries % 9 % 4 == 0)  # i == j: 3 i + j in (0, 4, 8)
-    mass_lengths = np.bincount(3 * item_node + item_component, minlength=3 * n_nodes)[free]
-    indices = item_row[item]
-    columns = np.repeat(np.arange(len(free), dtype=np.int32), lengths)
-    pattern = ReducedPattern(
-        n_free=len(free),
-        indptr=indptr.astype(np.int32),
-        indices=indices,
-        mass_indptr=np.concatenate([[0], np.cumsum(mass_lengths)]).astype(np.int32),
-        mass_indices=indices[diagonal],
-        diagonal_entries=np.flatnonzero(indices == columns),
-        element_slots=slots.reshape(connectivity.shape + (n_local,)).astype(np.int32),
-        stiffness_entries=stiffness_entries,
-        mass_entries=stiffness_entries[diagonal] // 9,
-    )
-    for array in vars(pattern).values():  # shared by the matrices it assembles: never to be changed in place
-        if isinstance(array, np.ndarray):
-            array.flags.writeable = False
-    return pattern
+    # the diagonal entry of column (B, j): the item of component j of slot (B, B) among the items of row B
+    first_item = np.concatenate([[0], np.cumsum(slot_free.sum(axis=1))[:-1]])
+    own = np.flatnonzero(rows == cols)
+    own_slot = np.empty(n_nodes, dtype=np.int64)
+    own_slot[rows[own]] = own
+    rank = np.cumsum(is_free, axis=1) - 1  # of each free component among its node's free components
+    diagonal = first_item[own_slot[column_node]] + rank[column_node, column_component] - item_start[column_node]
+    return ReducedPattern(*_read_only(
+        len(free), indptr.astype(np.int32), item_row[item], indptr[:-1] + diagonal,
+        slots.reshape(connectivity.shape + (n_local,)).astype(np.int32), stiffness_entries,
+    ))
+
+
+def _read_only(*values) -> tuple:
+    """``values`` with their arrays made read-only: a pattern's arrays are shared by the matrices it assembles, never
+    to be changed in place."""
+    for value in values:
+        if isinstance(value, np.ndarray):
+            value.flags.writeable = False
+    return values
 
 
 SUMMATIONS = 4
