@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from workflow.execution.parallel import SchedulerError, map_evaluations
+from workflow.execution.parallel import THREAD_VARIABLES, SchedulerError, local_workers, map_evaluations
 
 
 def spectrum(seed):
@@ -38,3 +38,19 @@ def test_bad_scheduler_is_a_clear_error(address, monkeypatch):
     monkeypatch.setattr("workflow.execution.parallel.CONNECT_TIMEOUT", 1.0)
     with pytest.raises(SchedulerError, match="Dask scheduler"):
         map_evaluations(spectrum, [1, 2], scheduler=address, progress=False)
+
+
+def worker_threads(_):
+    """The thread settings a pool worker runs with: its environment's and those of the loaded BLAS/OpenMP libraries."""
+    import os
+
+    from threadpoolctl import threadpool_info
+
+    return [os.environ.get(name) for name in THREAD_VARIABLES], max(info["num_threads"] for info in threadpool_info())
+
+
+def test_pool_workers_share_the_cores_instead_of_each_taking_them_all():
+    share = max(1, local_workers() // 2)
+    for variables, loaded in map_evaluations(worker_threads, [0, 1], workers=2, progress=False):
+        assert variables == [str(share)] * len(THREAD_VARIABLES)  # libraries loaded later take it from there
+        assert loaded == share

@@ -102,13 +102,32 @@ def _process_pool(function, items, workers, bar):
         return _in_process(function, items, bar)
     methods = multiprocessing.get_all_start_methods()
     context = multiprocessing.get_context("fork" if "fork" in methods else None)
-    with ProcessPoolExecutor(max_workers=min(workers, len(items)), mp_context=context) as pool:
+    workers = min(workers, len(items))
+    with ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_share_cores,
+                             initargs=(max(1, local_workers() // workers),)) as pool:
         futures = {pool.submit(function, item): index for index, item in enumerate(items)}
         results = [None] * len(items)
         for future in as_completed(futures):
             results[futures[future]] = future.result()
             bar.update()
     return results
+
+
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+"""Environment variables through which the BLAS and OpenMP libraries take their thread count when they load."""
+_worker_limits = []
+"""The thread limits of this worker process (kept so that they hold for its life)."""
+
+
+def _share_cores(threads: int) -> None:
+    """Limit a pool worker's BLAS and OpenMP (MKL, PARDISO) threads to its share of the cores: two workers of two
+    threads each on two cores make the FEM's factorisations wait on each other (eight calibration evaluations
+    took 40-41 s so, 30-34 s with one thread per worker; docs/scaling.md)."""
+    from threadpoolctl import threadpool_limits
+
+    for name in THREAD_VARIABLES:  # for the libraries this worker loads later (MKL is loaded when first used)
+        os.environ[name] = str(threads)
+    _worker_limits.append(threadpool_limits(limits=threads))  # for those already loaded
 
 
 def _dask(function, items, scheduler, bar):
