@@ -271,6 +271,70 @@ def test_robust_candidate_meets_the_reliability_on_a_known_model():
     assert candidate.homogeneity == pytest.approx(0.0, abs=1e-12) and not candidate.lambda_at_edge
 
 
+class _CosineSurface:
+    """A stand-in for the top-face modes: a cosine along x whose wavelength follows the plate's."""
+
+    def __init__(self, plate):
+        self.wavelength = float(plate.wavelength)
+
+    def deflection(self, x, y, frequency, q):
+        return np.cos(2 * np.pi * x / self.wavelength) * (1 + 0.1 * y / 0.02) + 0j
+
+
+def test_prior_surrogates_evaluate_all_plates_in_one_batch_per_kind_each_surrogate_as_if_alone():
+    from workflow.calibration.calibration import prior_surrogates
+    from workflow.calibration.measurements import ScanShape
+
+    settings = replace(default_settings(), surrogate_points=18)
+    scan = ScanShape((0.0, 0.004, 0.008), (0.0, 0.0, 0.01), (1.0, 0.5, -0.3), 0.03, None, "scan")
+    calls = []
+
+    def evaluate(plates):
+        calls.append(("fem", len(plates)))
+        return [_BeamResult(p) for p in plates]
+
+    def evaluate_surfaces(plates):
+        calls.append(("surfaces", len(plates)))
+        return [_BeamResult(p) for p in plates], [_CosineSurface(p) for p in plates]
+
+    plates, scans = (P1, P2, P1.with_(width=40 * MM)), (None, scan, None)
+    surrogates = prior_surrogates(plates, settings, evaluate, evaluate_surfaces, scans)
+    assert calls == [("fem", 36), ("surfaces", 18)]
+    for plate, found, shape in zip(plates, surrogates, scans):
+        points = None if shape is None else (np.array(shape.x), np.array(shape.y))
+        alone = build_plate_surrogate(plate, settings.names, settings.bounds, lambda ps: [_BeamResult(p) for p in ps],
+                                      18, settings.surrogate_degree, settings.surrogate_seed,
+                                      lambda ps: ([_BeamResult(p) for p in ps], [_CosineSurface(p) for p in ps]), points)
+        assert found == alone and (found.shape is None) == (shape is None)
+
+
+def test_robust_design_evaluates_every_stock_in_two_batches_with_the_candidates_of_one_stock_each():
+    """All stocks' surrogate designs go to the FEM in one batch and their median checks in a second (a pool's
+    workers stay busy across the stocks); each candidate is the one its stock gives alone."""
+    from workflow.optimise.robust import RobustSettings, robust_candidate, robust_design
+
+    settings = default_settings()
+    rng = np.random.default_rng(0)
+    samples = np.column_stack([rng.normal(0.95, 0.02, 500), rng.normal(0.97, 0.02, 500),
+                               rng.uniform(20e-6, 40e-6, 500), rng.normal(-10e-6, 5e-6, 500)])
+    surrogate = build_plate_surrogate(P1, settings.names, settings.bounds, lambda ps: [_BeamResult(p) for p in ps], 20, 2, 1)
+    calibration = Calibration(settings, samples, (MeasuredPlate("P1", P1, 23.2e3),), (surrogate,), None, {})
+    batches = []
+
+    def evaluate(plates):
+        batches.append(len(plates))
+        return [_BeamResult(p) for p in plates]
+
+    stock = (0.5e-3, 0.75e-3, 1e-3)
+    design = robust_design(calibration, P1, stock, RobustSettings(separation=0.01), evaluate, 54.0)
+    per_stock = design.candidates[0].evaluations - 1
+    assert batches == [3 * per_stock, 3]
+    for h, candidate in zip(stock, design.candidates):
+        alone = robust_candidate(calibration, P1.with_(resonator_thickness=h), RobustSettings(separation=0.01),
+                                 lambda ps: [_BeamResult(p) for p in ps], 54.0)
+        assert candidate == alone
+
+
 def test_run_step_predicts_the_recommended_designs_with_the_calibration(tmp_path, coarse_cli, coarse_model):
     """``tactile run --calibration``: the step's predictions and the report section that states them."""
     from types import SimpleNamespace

@@ -13,7 +13,14 @@ import numpy as np
 from workflow.calibration.logs import BuiltPlateLog
 from workflow.calibration.measurements import ScanShape
 from workflow.calibration.parameters import DISCREPANCIES, CalibrationSettings, Parameter, checked_settings
-from workflow.calibration.plate_surrogate import Evaluate, EvaluateSurfaces, PlateSurrogate, build_plate_surrogate
+from workflow.calibration.plate_surrogate import (
+    Evaluate,
+    EvaluateSurfaces,
+    PlateSurrogate,
+    build_plate_surrogate,
+    fit_plate_surrogate,
+    surrogate_design,
+)
 from workflow.calibration.posterior import (
     calibration_data,
     identifiability,
@@ -332,13 +339,30 @@ def nominal_theta(names: Sequence[str], plate: Plate) -> np.ndarray:
 def prior_surrogates(plates: Sequence[Plate], settings: CalibrationSettings, evaluate: Evaluate,
                      evaluate_surfaces: EvaluateSurfaces | None = None, scans: Sequence = ()) -> tuple:
     """A surrogate of each plate over the prior's box (the settings' design size, degree and seed), with the
-    mode pattern at its scan's points where ``scans`` (one ScanShape or None per plate) has one."""
+    mode pattern at its scan's points where ``scans`` (one ScanShape or None per plate) has one.
+
+    The designs of the plates without a scan go to ``evaluate`` in one batch, those with one to
+    ``evaluate_surfaces`` in another, so that the workers of a pool stay busy across the plates.
+    """
     scans = tuple(scans) or (None,) * len(plates)
+    designs = [surrogate_design(plate, settings.names, settings.bounds, settings.surrogate_points,
+                                settings.surrogate_seed) for plate in plates]
+    evaluated = [None] * len(plates)
+    for with_scan in (False, True):
+        chosen = [k for k, scan in enumerate(scans) if (scan is not None) == with_scan]
+        if not chosen:
+            continue
+        batch = [design for k in chosen for design in designs[k][1]]
+        results, surfaces = evaluate_surfaces(batch) if with_scan else (evaluate(batch), [None] * len(batch))
+        start = 0
+        for k in chosen:
+            stop = start + len(designs[k][1])
+            evaluated[k] = (results[start:stop], surfaces[start:stop] if with_scan else None)
+            start = stop
     return tuple(
-        build_plate_surrogate(plate, settings.names, settings.bounds, evaluate, settings.surrogate_points,
-                              settings.surrogate_degree, settings.surrogate_seed, evaluate_surfaces,
-                              None if scan is None else (np.array(scan.x), np.array(scan.y)))
-        for plate, scan in zip(plates, scans)
+        fit_plate_surrogate(settings.names, settings.bounds, settings.surrogate_degree, points, *evaluated[k],
+                            None if scans[k] is None else (np.array(scans[k].x), np.array(scans[k].y)))
+        for k, (points, _) in enumerate(designs)
     )
 
 

@@ -176,6 +176,34 @@ def design_patterns(results: list, surfaces: list, scan_points: tuple) -> np.nda
     return patterns * np.where(patterns @ patterns[0] < 0, -1.0, 1.0)[:, None]
 
 
+def surrogate_design(plate: Plate, names: Sequence[str], bounds: np.ndarray, n_points: int, seed: int) -> tuple:
+    """(points, plates): the Latin hypercube of ``n_points`` in ``bounds`` (n, 2) [SI] and the nominal ``plate``
+    deviated to each point (:func:`~workflow.calibration.parameters.deviated_plate`)."""
+    points = latin_hypercube(n_points, bounds, seed)
+    return points, [deviated_plate(plate, names, theta) for theta in points]
+
+
+def fit_plate_surrogate(names: Sequence[str], bounds: np.ndarray, degree: int, points: np.ndarray, results: list,
+                        surfaces: list | None = None, scan_points: tuple | None = None) -> PlateSurrogate:
+    """The response surfaces of degree ``degree`` through the FemResults of the design ``points`` (and, with the
+    SurfaceModes ``surfaces`` and ``scan_points`` ((x, y) arrays [m]), a :class:`ShapeSurrogate`)."""
+    log_f, log_w, log_g, errors = design_results(results)
+    shape = None
+    if scan_points is not None:
+        patterns = design_patterns(results, surfaces, scan_points)
+        shape = ShapeSurrogate(tuple(float(v) for v in scan_points[0]), tuple(float(v) for v in scan_points[1]),
+                               tuple(fit_response_surface(points, column, bounds, degree) for column in patterns.T))
+    return PlateSurrogate(
+        names=tuple(names),
+        log_frequency=fit_response_surface(points, log_f, bounds, degree),
+        log_deflection=fit_response_surface(points, log_w, bounds, degree),
+        fem_error=float(np.sqrt(np.mean(errors**2))),
+        evaluations=len(points),
+        log_point_deflection=fit_response_surface(points, log_g, bounds, degree),
+        shape=shape,
+    )
+
+
 def build_plate_surrogate(
     plate: Plate, names: Sequence[str], bounds: np.ndarray, evaluate: Evaluate, n_points: int, degree: int, seed: int,
     evaluate_surfaces: EvaluateSurfaces | None = None, scan_points: tuple | None = None,
@@ -198,24 +226,6 @@ def build_plate_surrogate(
         Plates -> (FemResults, SurfaceModes); with ``scan_points`` ((x, y) arrays [m]) the design is evaluated with
         it instead of ``evaluate`` and a :class:`ShapeSurrogate` is built too.
     """
-    points = latin_hypercube(n_points, bounds, seed)
-    plates = [deviated_plate(plate, names, theta) for theta in points]
-    if scan_points is None:
-        results, surfaces = evaluate(plates), None
-    else:
-        results, surfaces = evaluate_surfaces(plates)
-    log_f, log_w, log_g, errors = design_results(results)
-    shape = None
-    if scan_points is not None:
-        patterns = design_patterns(results, surfaces, scan_points)
-        shape = ShapeSurrogate(tuple(float(v) for v in scan_points[0]), tuple(float(v) for v in scan_points[1]),
-                               tuple(fit_response_surface(points, column, bounds, degree) for column in patterns.T))
-    return PlateSurrogate(
-        names=tuple(names),
-        log_frequency=fit_response_surface(points, log_f, bounds, degree),
-        log_deflection=fit_response_surface(points, log_w, bounds, degree),
-        fem_error=float(np.sqrt(np.mean(errors**2))),
-        evaluations=len(points),
-        log_point_deflection=fit_response_surface(points, log_g, bounds, degree),
-        shape=shape,
-    )
+    points, plates = surrogate_design(plate, names, bounds, n_points, seed)
+    results, surfaces = (evaluate(plates), None) if scan_points is None else evaluate_surfaces(plates)
+    return fit_plate_surrogate(names, bounds, degree, points, results, surfaces, scan_points)

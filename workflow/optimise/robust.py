@@ -231,8 +231,8 @@ class RobustSurrogate:
                 self.log_deflection(inside) + rng.normal(0, self.log_deflection.loo_rms, len(draws)) + discrepancy[:, 1])
 
 
-def robust_surrogate(calibration: Calibration, plate: Plate, settings: RobustSettings, evaluate: Evaluate) -> RobustSurrogate:
-    """The linear surrogate of a nominal plate for its robust design (the module's step 1)."""
+def robust_design_points(calibration: Calibration, plate: Plate, settings: RobustSettings) -> tuple:
+    """(bounds, points, plates) of the FEM design of a nominal plate's robust surrogate (the module's step 1)."""
     names = robust_inputs(calibration)
     tol = settings.tolerances
     guess = beam_wavelength(plate, settings.min_frequency / calibration_ratio(calibration))
@@ -244,11 +244,21 @@ def robust_surrogate(calibration: Calibration, plate: Plate, settings: RobustSet
     half_hp = max(3 * tol.ceramic_thickness, 1e-6)
     bounds = np.vstack([np.log(np.array(LAMBDA_BOX) * guess), np.column_stack([low, high]), [-half_hp, half_hp]])
     points = latin_hypercube(prediction_points(len(bounds) - 1), bounds, settings.seed)
-    results = evaluate([_robust_plate(plate, names, point) for point in points])
+    return bounds, points, [_robust_plate(plate, names, point) for point in points]
+
+
+def fit_robust_surrogate(bounds: np.ndarray, points: np.ndarray, results: Sequence) -> RobustSurrogate:
+    """The linear surrogate from the FemResults of the design ``points`` in ``bounds``."""
     errors = np.array([0.0 if r.error is None else r.error.frequency for r in results])
     log_f = fit_response_surface(points, np.log([r.frequency for r in results]), bounds, 1)
     log_w = fit_response_surface(points, np.log([r.deflection for r in results]), bounds, 1)
     return RobustSurrogate(bounds, log_f, log_w, float(np.hypot(log_f.loo_rms, np.sqrt(np.mean(errors**2)))), len(points))
+
+
+def robust_surrogate(calibration: Calibration, plate: Plate, settings: RobustSettings, evaluate: Evaluate) -> RobustSurrogate:
+    """The linear surrogate of a nominal plate for its robust design (the module's step 1)."""
+    bounds, points, plates = robust_design_points(calibration, plate, settings)
+    return fit_robust_surrogate(bounds, points, evaluate(plates))
 
 
 def conservative_level(reliability: float, draws: int) -> float:
@@ -258,10 +268,19 @@ def conservative_level(reliability: float, draws: int) -> float:
     return max(level - SOLVE_MARGIN_SE * np.sqrt(level * (1 - level) / draws), level / 2)
 
 
-def robust_candidate(calibration: Calibration, plate: Plate, settings: RobustSettings, evaluate: Evaluate,
-                     q: float) -> RobustCandidate:
-    """The robust design of one nominal plate (its h_i and h_p fixed, lambda solved); see the module."""
-    surrogate = robust_surrogate(calibration, plate, settings, evaluate)
+@dataclass(frozen=True)
+class _Solved:
+    """A nominal plate's lambda solved on its surrogate (the module's step 2) and fresh draws at it."""
+
+    surrogate: RobustSurrogate
+    design: Plate
+    frequencies: np.ndarray
+    deflections: np.ndarray
+    at_edge: bool
+    median: Plate
+
+
+def _solve(calibration: Calibration, plate: Plate, settings: RobustSettings, surrogate: RobustSurrogate) -> _Solved:
     solve = scattered_draws(calibration, plate, settings.tolerances, SOLVE_DRAWS, settings.seed)
     target = np.log(settings.min_frequency)
     level = conservative_level(settings.reliability, SOLVE_DRAWS)
@@ -275,17 +294,21 @@ def robust_candidate(calibration: Calibration, plate: Plate, settings: RobustSet
     log_lambda = low if too_low else high if too_high else brentq(shortfall, low, high, xtol=1e-8)
     check = scattered_draws(calibration, plate, settings.tolerances, CHECK_DRAWS, settings.seed + 1)
     log_f, log_w = surrogate.sample(log_lambda, check, settings.seed + 1)
-    frequencies, deflections = np.exp(log_f), np.exp(log_w)
-    probability = float(np.mean(frequencies >= settings.min_frequency))
     design = plate.with_(wavelength=float(np.exp(log_lambda)))
     median = deviated_plate(design, robust_inputs(calibration), np.median(posterior_columns(calibration, plate), axis=0))
-    (result,) = evaluate([median])
+    return _Solved(surrogate, design, np.exp(log_f), np.exp(log_w), bool(too_low or too_high), median)
+
+
+def _candidate(solved: _Solved, result, settings: RobustSettings, q: float) -> RobustCandidate:
+    """The candidate of a solved plate, from the FEM result at its posterior median (the module's step 3)."""
+    frequencies = solved.frequencies
+    probability = float(np.mean(frequencies >= settings.min_frequency))
     nearest, separated = mode_separation(result, settings)
     probes = np.abs(result.probe_model.response(result.frequency, q))
     return RobustCandidate(
-        plate=design,
+        plate=solved.design,
         frequency=tuple(float(x) for x in np.percentile(frequencies, [5, 50, 95])),
-        deflection=tuple(float(x) for x in np.percentile(deflections, [5, 50, 95])),
+        deflection=tuple(float(x) for x in np.percentile(solved.deflections, [5, 50, 95])),
         probability=probability,
         probability_error=float(np.sqrt(probability * (1 - probability) / CHECK_DRAWS)),
         draws=CHECK_DRAWS,
@@ -293,12 +316,32 @@ def robust_candidate(calibration: Calibration, plate: Plate, settings: RobustSet
         nearest_transverse=nearest,
         separated=separated,
         homogeneity=float(np.std(probes) / np.mean(probes)),
-        surrogate_error=surrogate.log_frequency.loo_rms,
-        evaluations=surrogate.evaluations + 1,
-        lambda_at_edge=bool(too_low or too_high),
+        surrogate_error=solved.surrogate.log_frequency.loo_rms,
+        evaluations=solved.surrogate.evaluations + 1,
+        lambda_at_edge=solved.at_edge,
     )
 
 
+def robust_candidates(calibration: Calibration, plates: Sequence[Plate], settings: RobustSettings, evaluate: Evaluate,
+                      q: float) -> tuple:
+    """The robust design of each nominal plate (its h_i and h_p fixed, lambda solved); see the module.
+
+    The FEM evaluations of every plate's surrogate go in one batch, and those at the solved designs' posterior
+    medians in a second, so that the workers of a pool stay busy across the plates.
+    """
+    designs = [robust_design_points(calibration, plate, settings) for plate in plates]
+    results = iter(evaluate([design for _, _, batch in designs for design in batch]))
+    surrogates = [fit_robust_surrogate(bounds, points, [next(results) for _ in points]) for bounds, points, _ in designs]
+    solved = [_solve(calibration, plate, settings, surrogate) for plate, surrogate in zip(plates, surrogates)]
+    medians = evaluate([s.median for s in solved])
+    return tuple(_candidate(s, result, settings, q) for s, result in zip(solved, medians))
+
+
+def robust_candidate(calibration: Calibration, plate: Plate, settings: RobustSettings, evaluate: Evaluate,
+                     q: float) -> RobustCandidate:
+    """The robust design of one nominal plate (its h_i and h_p fixed, lambda solved); see the module."""
+    (candidate,) = robust_candidates(calibration, [plate], settings, evaluate, q)
+    return candidate
 
 
 def mode_separation(result, settings: RobustSettings) -> tuple[dict | None, bool]:
@@ -323,7 +366,7 @@ def robust_design(calibration: Calibration, plate: Plate, stock: Sequence[float]
     InfeasibleError
         When no candidate has its modes separated and its lambda inside the design range.
     """
-    candidates = tuple(robust_candidate(calibration, plate.with_(resonator_thickness=h), settings, evaluate, q) for h in stock)
+    candidates = robust_candidates(calibration, [plate.with_(resonator_thickness=h) for h in stock], settings, evaluate, q)
     low, high = materials.WAVELENGTH_RANGE
     feasible = [k for k, c in enumerate(candidates)
                 if c.separated and not c.lambda_at_edge and low <= float(c.plate.wavelength) <= high]
