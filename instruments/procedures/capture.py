@@ -111,6 +111,17 @@ class CaptureWindow:
         return kb + kb % 2
 
 
+def capture_settings(window: CaptureWindow) -> dict:
+    """The lock-in's settings during a capture (what :func:`prepare_capture` sets), for a log's metadata: they replace
+    those of the sweep readout (:meth:`~instruments.procedures.readout.Readout.describe`), which a capture does not
+    use."""
+    return {"lockin_reference": "INT at the drive frequency", "lockin_time_constant_s": window.time_constant,
+            "lockin_filter_db_oct": 6 * CAPTURE_FILTER_POLES, "lockin_input_range_v": INPUT_RANGES[0],
+            "lockin_sensitivity_v": SENSITIVITIES[0], "lockin_capture_interval_s": window.interval,
+            "lockin_settle_s": "none: a capture starts at the trigger",
+            "ranging": "decoder range per burst (stepped up and the burst fired again on an overload); lock-in fixed"}
+
+
 def prepare_capture(station: Station, window: CaptureWindow, frequency: float) -> int:
     """Set the lock-in up for ``window`` at the drive ``frequency`` [Hz]: internal reference there, the window's time
     constant and a 24 dB/oct filter, the 1 V input range; returns the ``CAPTURERATE`` exponent giving its interval.

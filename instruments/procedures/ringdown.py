@@ -18,7 +18,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from instruments.drivers.lockin import capture_interval
-from instruments.procedures.capture import CaptureWindow, EnvelopeRecord, capture_envelope, prepare_capture
+from instruments.procedures.capture import (
+    CaptureWindow,
+    EnvelopeRecord,
+    capture_envelope,
+    capture_settings,
+    prepare_capture,
+)
 from instruments.procedures.logwriter import LogWriter, point_key, row_key
 from instruments.procedures.sweeps import PlanError, ProcedureResult, Station, check_frequencies, check_sizes, note_readout
 from workflow import logformat
@@ -110,6 +116,7 @@ def ringdown(station: Station, path, plan: RingdownPlan, metadata: dict | None =
     header = {
         "procedure": "ringdown",
         **ids,
+        **capture_settings(plan.window()),  # a ring-down reads the lock-in's capture, not the sweeps' readout
         "amplifier_gain": station.amplifier.gain,
         "ceramic_voltage_limit_v": station.voltage_limit,
         **{f"plan_{key}": value for key, value in vars(plan).items()},

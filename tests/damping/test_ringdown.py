@@ -87,6 +87,18 @@ def test_ringdown_record_over_range_steps_up_and_logs_temperature(tmp_path):
     assert np.all(np.isfinite(decays.temperature)) and result.summary["bursts"][0]["temperature_c"] > 20
 
 
+def test_ringdown_log_states_the_lock_in_settings_of_its_capture_not_those_of_the_sweeps(tmp_path):
+    from instruments.drivers.lockin import capture_time_constant
+    from instruments.procedures.logwriter import read_log
+
+    simulate_ringdown(tmp_path / "r.csv", voltages=(5.0,), samples=20)
+    metadata = read_log(tmp_path / "r.csv", logformat.RINGDOWN_COLUMNS).metadata
+    assert metadata["lockin_reference"].startswith("INT") and metadata["lockin_filter_db_oct"] == "24"
+    interval = float(metadata["lockin_capture_interval_s"])
+    assert float(metadata["lockin_time_constant_s"]) == pytest.approx(capture_time_constant(interval))
+    assert "per reading" not in metadata["ranging"] and "per reading" not in metadata["lockin_sensitivity_v"]
+
+
 def test_ringdown_resumes_after_a_disconnect_and_records_a_burst_cut_short_again(tmp_path):
     path = tmp_path / "r.csv"
     plan = RingdownPlan(32126.0, (4.0, 8.0, 12.0), samples=20)
