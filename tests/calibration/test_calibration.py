@@ -250,18 +250,23 @@ class _BeamResult:
         self.probe_model = SimpleNamespace(response=lambda f, q: np.full(44, self.deflection))
 
 
+def _beam_calibration(n_samples: int) -> Calibration:
+    """A calibration on P1 with the beam model as 'FEM' and a made-up posterior of ``n_samples`` samples."""
+    settings = default_settings()
+    rng = np.random.default_rng(0)
+    samples = np.column_stack([rng.normal(0.95, 0.02, n_samples), rng.normal(0.97, 0.02, n_samples),
+                               rng.uniform(20e-6, 40e-6, n_samples), rng.normal(-10e-6, 5e-6, n_samples)])
+    surrogate = build_plate_surrogate(P1, settings.names, settings.bounds, lambda ps: [_BeamResult(p) for p in ps], 20, 2, 1)
+    return Calibration(settings, samples, (MeasuredPlate("P1", P1, 23.2e3),), (surrogate,), None, {})
+
+
 def test_robust_candidate_meets_the_reliability_on_a_known_model():
     """With the beam model as 'FEM' (fast, exact surrogate inputs), the solved lambda puts the 5 % quantile of f_r
     on 25 kHz, the fresh-draw probability is 0.95 within its Monte Carlo error, and a transverse mode 2 % away
     is flagged."""
     from workflow.optimise.robust import RobustSettings, robust_candidate
 
-    settings = default_settings()
-    rng = np.random.default_rng(0)
-    samples = np.column_stack([rng.normal(0.95, 0.02, 3000), rng.normal(0.97, 0.02, 3000),
-                               rng.uniform(20e-6, 40e-6, 3000), rng.normal(-10e-6, 5e-6, 3000)])
-    surrogate = build_plate_surrogate(P1, settings.names, settings.bounds, lambda ps: [_BeamResult(p) for p in ps], 20, 2, 1)
-    calibration = Calibration(settings, samples, (MeasuredPlate("P1", P1, 23.2e3),), (surrogate,), None, {})
+    calibration = _beam_calibration(3000)
     candidate = robust_candidate(calibration, P1, RobustSettings(), lambda ps: [_BeamResult(p) for p in ps], 54.0)
     assert candidate.frequency[0] == pytest.approx(25e3, rel=2e-3)
     assert candidate.probability >= 0.95 - candidate.probability_error, "the solve is conservative by its own MC error"
@@ -313,12 +318,7 @@ def test_robust_design_evaluates_every_stock_in_two_batches_with_the_candidates_
     workers stay busy across the stocks); each candidate is the one its stock gives alone."""
     from workflow.optimise.robust import RobustSettings, robust_candidate, robust_design
 
-    settings = default_settings()
-    rng = np.random.default_rng(0)
-    samples = np.column_stack([rng.normal(0.95, 0.02, 500), rng.normal(0.97, 0.02, 500),
-                               rng.uniform(20e-6, 40e-6, 500), rng.normal(-10e-6, 5e-6, 500)])
-    surrogate = build_plate_surrogate(P1, settings.names, settings.bounds, lambda ps: [_BeamResult(p) for p in ps], 20, 2, 1)
-    calibration = Calibration(settings, samples, (MeasuredPlate("P1", P1, 23.2e3),), (surrogate,), None, {})
+    calibration = _beam_calibration(500)
     batches = []
 
     def evaluate(plates):
