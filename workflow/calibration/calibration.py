@@ -347,23 +347,23 @@ def prior_surrogates(plates: Sequence[Plate], settings: CalibrationSettings, eva
     scans = tuple(scans) or (None,) * len(plates)
     designs = [surrogate_design(plate, settings.names, settings.bounds, settings.surrogate_points,
                                 settings.surrogate_seed) for plate in plates]
-    evaluated = [None] * len(plates)
-    for with_scan in (False, True):
-        chosen = [k for k, scan in enumerate(scans) if (scan is not None) == with_scan]
-        if not chosen:
-            continue
-        batch = [design for k in chosen for design in designs[k][1]]
-        results, surfaces = evaluate_surfaces(batch) if with_scan else (evaluate(batch), [None] * len(batch))
-        start = 0
-        for k in chosen:
-            stop = start + len(designs[k][1])
-            evaluated[k] = (results[start:stop], surfaces[start:stop] if with_scan else None)
-            start = stop
-    return tuple(
-        fit_plate_surrogate(settings.names, settings.bounds, settings.surrogate_degree, points, *evaluated[k],
-                            None if scans[k] is None else (np.array(scans[k].x), np.array(scans[k].y)))
-        for k, (points, _) in enumerate(designs)
-    )
+    with_scan = [scan is not None for scan in scans]
+
+    def batch(scanned: bool) -> list:
+        return [p for (_, design), flag in zip(designs, with_scan) if flag == scanned for p in design]
+
+    plain = iter(evaluate(batch(False)) if not all(with_scan) else ())
+    surfaced = iter(zip(*evaluate_surfaces(batch(True))) if any(with_scan) else ())
+    surrogates = []
+    for (points, _), scan in zip(designs, scans):
+        if scan is None:
+            results, surfaces, scan_points = [next(plain) for _ in points], None, None
+        else:
+            results, surfaces = zip(*[next(surfaced) for _ in points])
+            scan_points = (np.array(scan.x), np.array(scan.y))
+        surrogates.append(fit_plate_surrogate(settings.names, settings.bounds, settings.surrogate_degree, points,
+                                              list(results), surfaces and list(surfaces), scan_points))
+    return tuple(surrogates)
 
 
 def posterior_from(plates: Sequence[MeasuredPlate], surrogates: Sequence[PlateSurrogate], settings: CalibrationSettings,
