@@ -255,12 +255,6 @@ def fit_robust_surrogate(bounds: np.ndarray, points: np.ndarray, results: Sequen
     return RobustSurrogate(bounds, log_f, log_w, float(np.hypot(log_f.loo_rms, np.sqrt(np.mean(errors**2)))), len(points))
 
 
-def robust_surrogate(calibration: Calibration, plate: Plate, settings: RobustSettings, evaluate: Evaluate) -> RobustSurrogate:
-    """The linear surrogate of a nominal plate for its robust design (the module's step 1)."""
-    bounds, points, plates = robust_design_points(calibration, plate, settings)
-    return fit_robust_surrogate(bounds, points, evaluate(plates))
-
-
 def conservative_level(reliability: float, draws: int) -> float:
     """Quantile level [-] the lambda solve targets: 1 - reliability less :data:`SOLVE_MARGIN_SE` binomial standard
     errors of a quantile estimated from ``draws`` samples (never below half the requested level)."""
