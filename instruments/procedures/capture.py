@@ -39,6 +39,10 @@ CAPTURE_POLLS = 20
 """Most ``CAPTURESTAT?`` polls while a capture finishes [-]."""
 VALUES_PER_SAMPLE = 2
 """R and theta."""
+CAPTURE_INPUT_RANGE = INPUT_RANGES[0]
+"""The lock-in's input range during a capture [V peak] (the decoder range keeps the signal below it)."""
+CAPTURE_SENSITIVITY = SENSITIVITIES[0]
+"""The lock-in's sensitivity during a capture, held fixed [V rms full scale]."""
 
 
 @dataclass(frozen=True)
@@ -116,8 +120,8 @@ def capture_settings(window: CaptureWindow) -> dict:
     those of the sweep readout (:meth:`~instruments.procedures.readout.Readout.describe`), which a capture does not
     use."""
     return {"lockin_reference": "INT at the drive frequency", "lockin_time_constant_s": window.time_constant,
-            "lockin_filter_db_oct": 6 * CAPTURE_FILTER_POLES, "lockin_input_range_v": INPUT_RANGES[0],
-            "lockin_sensitivity_v": SENSITIVITIES[0], "lockin_capture_interval_s": window.interval,
+            "lockin_filter_db_oct": 6 * CAPTURE_FILTER_POLES, "lockin_input_range_v": CAPTURE_INPUT_RANGE,
+            "lockin_sensitivity_v": CAPTURE_SENSITIVITY, "lockin_capture_interval_s": window.interval,
             "lockin_settle_s": "none: a capture starts at the trigger",
             "ranging": "decoder range per burst (stepped up and the burst fired again on an overload); lock-in fixed"}
 
@@ -137,8 +141,8 @@ def prepare_capture(station: Station, window: CaptureWindow, frequency: float) -
     lockin.frequency = frequency
     lockin.time_constant = window.time_constant
     lockin.filter_poles = CAPTURE_FILTER_POLES
-    lockin.input_range = INPUT_RANGES[0]
-    lockin.sensitivity = SENSITIVITIES[0]
+    lockin.input_range = CAPTURE_INPUT_RANGE
+    lockin.sensitivity = CAPTURE_SENSITIVITY
     lockin.check_status(f"configuring a capture at {frequency:.9g} Hz")
     exponent = round(math.log2(lockin.capture_max_rate * window.interval))
     if not 0 <= exponent <= CAPTURE_MAX_RATE_EXPONENT:

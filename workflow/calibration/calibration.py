@@ -6,6 +6,7 @@ accuracy and the cache).  :class:`Calibration` converts to and from plain data (
 """
 
 from dataclasses import asdict, dataclass, replace
+from functools import partial
 from typing import Sequence
 
 import numpy as np
@@ -18,6 +19,7 @@ from workflow.calibration.plate_surrogate import (
     EvaluateSurfaces,
     PlateSurrogate,
     build_plate_surrogate,
+    evaluate_together,
     fit_plate_surrogate,
     surrogate_design,
 )
@@ -347,22 +349,19 @@ def prior_surrogates(plates: Sequence[Plate], settings: CalibrationSettings, eva
     scans = tuple(scans) or (None,) * len(plates)
     designs = [surrogate_design(plate, settings.names, settings.bounds, settings.surrogate_points,
                                 settings.surrogate_seed) for plate in plates]
-    with_scan = [scan is not None for scan in scans]
-
-    def batch(scanned: bool) -> list:
-        return [p for (_, design), flag in zip(designs, with_scan) if flag == scanned for p in design]
-
-    plain = iter(evaluate(batch(False)) if not all(with_scan) else ())
-    surfaced = iter(zip(*evaluate_surfaces(batch(True))) if any(with_scan) else ())
+    plain = [k for k, scan in enumerate(scans) if scan is None]
+    scanned = [k for k, scan in enumerate(scans) if scan is not None]
+    evaluated = dict(zip(plain, evaluate_together(evaluate, [designs[k][1] for k in plain])))
+    with_surfaces = evaluate_together(lambda batch: list(zip(*evaluate_surfaces(batch))), [designs[k][1] for k in scanned])
+    evaluated.update(zip(scanned, with_surfaces))
     surrogates = []
-    for (points, _), scan in zip(designs, scans):
+    for k, ((points, _), scan) in enumerate(zip(designs, scans)):
+        fit = partial(fit_plate_surrogate, settings.names, settings.bounds, settings.surrogate_degree, points)
         if scan is None:
-            results, surfaces, scan_points = [next(plain) for _ in points], None, None
+            surrogates.append(fit(evaluated[k]))
         else:
-            results, surfaces = zip(*[next(surfaced) for _ in points])
-            scan_points = (np.array(scan.x), np.array(scan.y))
-        surrogates.append(fit_plate_surrogate(settings.names, settings.bounds, settings.surrogate_degree, points,
-                                              list(results), surfaces and list(surfaces), scan_points))
+            results, surfaces = map(list, zip(*evaluated[k]))
+            surrogates.append(fit(results, surfaces, (np.array(scan.x), np.array(scan.y))))
     return tuple(surrogates)
 
 

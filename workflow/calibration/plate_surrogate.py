@@ -176,6 +176,14 @@ def design_patterns(results: list, surfaces: list, scan_points: tuple) -> np.nda
     return patterns * np.where(patterns @ patterns[0] < 0, -1.0, 1.0)[:, None]
 
 
+def evaluate_together(evaluate: Callable[[list], list], groups: Sequence[list]) -> list:
+    """``[evaluate(group) for group in groups]`` from one call on all their plates (one batch keeps a pool's workers
+    busy across the groups); no call when there is no plate."""
+    plates = [plate for group in groups for plate in group]
+    results = iter(evaluate(plates) if plates else ())
+    return [[next(results) for _ in group] for group in groups]
+
+
 def surrogate_design(plate: Plate, names: Sequence[str], bounds: np.ndarray, n_points: int, seed: int) -> tuple:
     """(points, plates): the Latin hypercube of ``n_points`` in ``bounds`` (n, 2) [SI] and the nominal ``plate``
     deviated to each point (:func:`~workflow.calibration.parameters.deviated_plate`)."""

@@ -25,7 +25,7 @@ from scipy.optimize import brentq
 
 from workflow.calibration.calibration import POSTERIOR_RANGE, Calibration, nominal_theta, prediction_points
 from workflow.calibration.parameters import deviated_plate
-from workflow.calibration.plate_surrogate import Evaluate
+from workflow.calibration.plate_surrogate import Evaluate, evaluate_together
 from workflow.calibration.surrogate import ResponseSurface, fit_response_surface, latin_hypercube
 from workflow.errors import InfeasibleError
 from workflow.models import analytical, materials
@@ -324,8 +324,8 @@ def robust_candidates(calibration: Calibration, plates: Sequence[Plate], setting
     medians in a second, so that the workers of a pool stay busy across the plates.
     """
     designs = [robust_design_points(calibration, plate, settings) for plate in plates]
-    results = iter(evaluate([design for _, _, batch in designs for design in batch]))
-    surrogates = [fit_robust_surrogate(bounds, points, [next(results) for _ in points]) for bounds, points, _ in designs]
+    results = evaluate_together(evaluate, [batch for _, _, batch in designs])
+    surrogates = [fit_robust_surrogate(bounds, points, found) for (bounds, points, _), found in zip(designs, results)]
     solved = [_solve(calibration, plate, settings, surrogate) for plate, surrogate in zip(plates, surrogates)]
     medians = evaluate([s.median for s in solved])
     return tuple(_candidate(s, result, settings, q) for s, result in zip(solved, medians))

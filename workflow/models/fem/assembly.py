@@ -14,6 +14,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from workflow.models.fem.mesh import CERAMIC, GLUE, GLUE_UNDER, RESONATOR, BrickMesh, symmetry_dofs
+from workflow.models.fem.structures import read_only
 from workflow.models.materials import VaryingGlue
 from workflow.models.plate import Plate
 
@@ -47,7 +48,15 @@ class PlateSystem:
             return (self.stiffness - shift * self.mass).tocsc()
         data = self.stiffness.data.copy()
         data[self.diagonal_entries] -= shift * self.mass.diagonal()
-        return sp.csc_matrix((data, self.stiffness.indices, self.stiffness.indptr), shape=self.stiffness.shape)
+        return on_pattern(data, self.stiffness.indices, self.stiffness.indptr, self.stiffness.shape)
+
+
+def on_pattern(data: np.ndarray, indices: np.ndarray, indptr: np.ndarray, shape: tuple) -> sp.csc_matrix:
+    """A CSC matrix on a pattern's structure, marked canonical (its rows sorted, no duplicates: scipy need not check
+    the 20-30 million entries of a degree-4 matrix again before each factorisation)."""
+    matrix = sp.csc_matrix((data, indices, indptr), shape=shape)
+    matrix.has_canonical_format = True
+    return matrix
 
 
 def _materials(plate: Plate):
@@ -157,6 +166,8 @@ class ReducedPattern:
         Slot of each element node pair.
     stiffness_entries : (nnz,) int array
         Index of each stiffness entry in the (n_slots, 3, 3) block sums.
+    n_slots : int
+        Node pairs [-].
     """
 
     n_free: int
@@ -165,10 +176,7 @@ class ReducedPattern:
     diagonal_entries: np.ndarray
     element_slots: np.ndarray
     stiffness_entries: np.ndarray
-
-    @cached_property
-    def n_slots(self) -> int:
-        return int(self.element_slots.max()) + 1
+    n_slots: int
 
     @cached_property
     def mass_structure(self) -> tuple:
@@ -176,14 +184,14 @@ class ReducedPattern:
         that couple equal components (made when first asked: the spectral elements' lumped mass does not need it)."""
         same = np.flatnonzero(self.stiffness_entries % 9 % 4 == 0)  # i == j: 3 i + j in (0, 4, 8)
         indptr = np.searchsorted(same, self.indptr).astype(np.int32)
-        return _read_only(indptr, self.indices[same], self.stiffness_entries[same] // 9)
+        return read_only(indptr, self.indices[same], self.stiffness_entries[same] // 9)
 
     def stiffness(self, types, which) -> sp.csc_matrix:
         """Reduced stiffness [N/m] from the distinct element matrices ``types`` (n_types, 3 n_local, 3 n_local) and each element's type ``which``."""
         n_local = self.element_slots.shape[1]
         local = np.reshape(types, (len(types), n_local, 3, n_local, 3)).transpose(0, 1, 3, 2, 4)
         blocks = _type_summation(self, np.ascontiguousarray(which, dtype=np.int64).tobytes()) @ local.reshape(-1, 9)
-        return sp.csc_matrix((blocks.ravel()[self.stiffness_entries], self.indices, self.indptr), shape=(self.n_free,) * 2)
+        return on_pattern(blocks.ravel()[self.stiffness_entries], self.indices, self.indptr, (self.n_free,) * 2)
 
     def mass(self, types, which) -> sp.csc_matrix:
         """Reduced mass [kg] from the distinct component-diagonal element matrices (as :meth:`stiffness`)."""
@@ -191,7 +199,7 @@ class ReducedPattern:
         local = np.reshape(types, (len(types), n_local, 3, n_local, 3))[:, :, 0, :, 0]
         blocks = np.bincount(self.element_slots.ravel(), weights=local[which].ravel(), minlength=self.n_slots)
         indptr, indices, entries = self.mass_structure
-        return sp.csc_matrix((blocks[entries], indices, indptr), shape=(self.n_free,) * 2)
+        return on_pattern(blocks[entries], indices, indptr, (self.n_free,) * 2)
 
 
 def reduced_pattern(mesh: BrickMesh, free: np.ndarray) -> ReducedPattern:
@@ -269,9 +277,9 @@ def _cached_pattern(connectivity: bytes, local_nodes: bytes, n_nodes: int, free:
     number[free] = np.arange(len(free), dtype=np.int32)
     # items: the free dofs of each slot's column node A, slot by slot; the column (B, j) lists the items of row B
     slot_free = is_free[cols]
-    item = np.flatnonzero(slot_free).astype(np.int32)  # 3 slot + component
-    item_slot = item // 3
-    item_component = item - 3 * item_slot
+    flat = np.flatnonzero(slot_free).astype(np.int32)  # 3 slot + component of each item
+    item_slot = flat // 3
+    item_component = flat - 3 * item_slot
     item_row = number[3 * cols.astype(np.int32)[item_slot] + item_component]
     item_block = 9 * transposed.astype(np.int32)[item_slot] + 3 * item_component
     item_node = rows[item_slot]
@@ -290,19 +298,10 @@ def _cached_pattern(connectivity: bytes, local_nodes: bytes, n_nodes: int, free:
     own_slot[rows[own]] = own
     rank = np.cumsum(is_free, axis=1) - 1  # of each free component among its node's free components
     diagonal = first_item[own_slot[column_node]] + rank[column_node, column_component] - item_start[column_node]
-    return ReducedPattern(*_read_only(
+    return ReducedPattern(*read_only(
         len(free), indptr.astype(np.int32), item_row[item], indptr[:-1] + diagonal,
-        slots.reshape(connectivity.shape + (n_local,)).astype(np.int32), stiffness_entries,
+        slots.reshape(connectivity.shape + (n_local,)).astype(np.int32), stiffness_entries, len(rows),
     ))
-
-
-def _read_only(*values) -> tuple:
-    """``values`` with their arrays made read-only: a pattern's arrays are shared by the matrices it assembles, never
-    to be changed in place."""
-    for value in values:
-        if isinstance(value, np.ndarray):
-            value.flags.writeable = False
-    return values
 
 
 SUMMATIONS = 4

@@ -78,7 +78,6 @@ def _pypardiso():
         del os.environ[MKL_VARIABLE]
 
 
-@lru_cache(maxsize=1)
 def _mkl_pardiso():
     """MKL's ``pardiso`` with its argument types."""
     return _pypardiso()._mkl_pardiso

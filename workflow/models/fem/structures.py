@@ -19,6 +19,14 @@ def owner(array: np.ndarray) -> np.ndarray:
     return array
 
 
+def read_only(*values) -> tuple:
+    """``values`` with their arrays made read-only (shared structures: never to be changed in place)."""
+    for value in values:
+        if isinstance(value, np.ndarray):
+            value.flags.writeable = False
+    return values
+
+
 def shared(matrix) -> bool:
     """Whether a compressed sparse matrix's structure is read-only (shared between evaluations)."""
     return not matrix.indices.flags.writeable and not matrix.indptr.flags.writeable
@@ -77,7 +85,7 @@ _block_layouts = StructureCache(BLOCK_LAYOUTS)
 def canonical(matrix) -> sp.csc_matrix:
     """``matrix`` as CSC with sorted indices and no duplicates (a copy where they had to change: the arrays may be
     shared and read-only)."""
-    matrix = sp.csc_matrix(matrix)
+    matrix = matrix.tocsc() if sp.issparse(matrix) else sp.csc_matrix(matrix)  # a CSC matrix itself, its flags kept
     if not matrix.has_canonical_format:
         matrix = matrix.copy()
         matrix.sum_duplicates()
@@ -115,7 +123,4 @@ def _layout(blocks: list, present: list) -> tuple:
     whole = sp.bmat([[positions(block) for block in row] for row in blocks], format="csc")
     whole.sum_duplicates()
     order = whole.data.astype(np.int64) - 1  # exact: positions below 2^53
-    indptr, indices = whole.indptr.copy(), whole.indices.copy()
-    for array in (indptr, indices, order):
-        array.flags.writeable = False
-    return indptr, indices, order, whole.shape
+    return (*read_only(whole.indptr.copy(), whole.indices.copy(), order), whole.shape)
