@@ -2,10 +2,14 @@
 simulated built plates and fast sampler settings (the fixtures built on them are in conftest.py)."""
 
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 
+from workflow.calibration.calibration import Calibration, MeasuredPlate
 from workflow.calibration.parameters import default_settings
+from workflow.calibration.plate_surrogate import build_plate_surrogate
+from workflow.models import analytical
 from workflow.models.fem import FemSettings
 from workflow.models.plate import Plate
 
@@ -25,3 +29,25 @@ SHORT_CONFIG = "[sampler]\nsteps = 600\n[surrogate]\npoints = 18\n"
 """SHORT as a ``tactile calibrate --config`` file."""
 FEM_RECORD = {"q": 54.0, "voltage_v": 15.0, "accuracy": 0.01, "piezo": "eigenstrain"}
 """The FEM conditions a calibration records (what ``tactile calibrate`` binds)."""
+
+
+class BeamResult:
+    """A stand-in for an FEM result from the beam model: one longitudinal mode, uniform probes."""
+
+    def __init__(self, plate):
+        self.frequency = float(analytical.resonance_frequency(plate))
+        self.deflection = float(analytical.dynamic_deflection(plate, 15.0, 54.0))
+        self.error, self.best_index, self.q, self.voltage = None, 0, 54.0, 15.0
+        self.modes = (SimpleNamespace(frequency=self.frequency, transverse_indicator=0.0),
+                      SimpleNamespace(frequency=1.02 * self.frequency, transverse_indicator=0.9))
+        self.probe_model = SimpleNamespace(response=lambda f, q: np.full(44, self.deflection))
+
+
+def beam_calibration(n_samples: int) -> Calibration:
+    """A calibration on P1 with the beam model as 'FEM' and a made-up posterior of ``n_samples`` samples."""
+    settings = default_settings()
+    rng = np.random.default_rng(0)
+    samples = np.column_stack([rng.normal(0.95, 0.02, n_samples), rng.normal(0.97, 0.02, n_samples),
+                               rng.uniform(20e-6, 40e-6, n_samples), rng.normal(-10e-6, 5e-6, n_samples)])
+    surrogate = build_plate_surrogate(P1, settings.names, settings.bounds, lambda ps: [BeamResult(p) for p in ps], 20, 2, 1)
+    return Calibration(settings, samples, (MeasuredPlate("P1", P1, 23.2e3),), (surrogate,), None, {})

@@ -15,7 +15,7 @@ import pytest
 
 import instruments
 import workflow
-from workflow.pipeline.loop import PAPER_LOGS
+from workflow.calibration.published import PUBLISHED_PLATES
 
 SOURCE_TREE = Path(__file__).resolve().parents[1]
 """The checkout the tests live in (its package folders are compared with the installed ones)."""
@@ -43,7 +43,7 @@ def test_every_data_file_of_the_source_tree_is_in_the_installed_package(package)
 
 def test_the_run_time_files_are_read_through_the_installed_package():
     published = resources.files("workflow.calibration.published")
-    for name in PAPER_LOGS:
+    for name in PUBLISHED_PLATES.values():
         assert (published / name).read_text(encoding="utf-8").startswith("# Published built plate")
     for package, name in (("workflow.pipeline", "defaults.toml"), ("workflow.models", "materials.toml"),
                           ("workflow.calibration", "calibration.toml")):

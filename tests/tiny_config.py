@@ -1,5 +1,5 @@
 """The tiny configuration of the tests' ``tactile run``: every step, on coarse meshes and short chains (the loop
-off: it is tested in test_loop.py)."""
+and the robust recommendation off: they are tested in test_loop.py and test_robust_recommendation.py)."""
 
 TINY = """
 [design]
@@ -29,5 +29,7 @@ max_steps = 1500
 posterior_draws = 8
 [loop]
 enabled = false
+[recommendation]
+robust = false
 """
 """A run of about a minute that passes through every step."""

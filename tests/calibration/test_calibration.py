@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from calibration_setup import FAST, FEM_RECORD, P1, P2, SHORT, SHORT_CONFIG, TRUTH
+from calibration_setup import FAST, FEM_RECORD, P1, P2, SHORT, SHORT_CONFIG, TRUTH, BeamResult, beam_calibration
 
 from workflow.calibration.calibration import Calibration, MeasuredPlate, calibrate, nominal_theta, predict
 from workflow.calibration.case_study import cross_predictions
@@ -234,40 +234,14 @@ def test_maps_with_a_calibration_scale_and_state_it(tmp_path, capsys, coarse_cli
     assert correction["optimum_f_r_khz_p05"] <= record["optimum"]["f_r_khz"] <= correction["optimum_f_r_khz_p95"]
 
 
-class _BeamResult:
-    """A stand-in for an FEM result from the beam model: one longitudinal mode, uniform probes."""
-
-    def __init__(self, plate):
-        from types import SimpleNamespace
-
-        from workflow.models import analytical
-
-        self.frequency = float(analytical.resonance_frequency(plate))
-        self.deflection = float(analytical.dynamic_deflection(plate, 15.0, 54.0))
-        self.error, self.best_index, self.q, self.voltage = None, 0, 54.0, 15.0
-        self.modes = (SimpleNamespace(frequency=self.frequency, transverse_indicator=0.0),
-                      SimpleNamespace(frequency=1.02 * self.frequency, transverse_indicator=0.9))
-        self.probe_model = SimpleNamespace(response=lambda f, q: np.full(44, self.deflection))
-
-
-def _beam_calibration(n_samples: int) -> Calibration:
-    """A calibration on P1 with the beam model as 'FEM' and a made-up posterior of ``n_samples`` samples."""
-    settings = default_settings()
-    rng = np.random.default_rng(0)
-    samples = np.column_stack([rng.normal(0.95, 0.02, n_samples), rng.normal(0.97, 0.02, n_samples),
-                               rng.uniform(20e-6, 40e-6, n_samples), rng.normal(-10e-6, 5e-6, n_samples)])
-    surrogate = build_plate_surrogate(P1, settings.names, settings.bounds, lambda ps: [_BeamResult(p) for p in ps], 20, 2, 1)
-    return Calibration(settings, samples, (MeasuredPlate("P1", P1, 23.2e3),), (surrogate,), None, {})
-
-
 def test_robust_candidate_meets_the_reliability_on_a_known_model():
     """With the beam model as 'FEM' (fast, exact surrogate inputs), the solved lambda puts the 5 % quantile of f_r
     on 25 kHz, the fresh-draw probability is 0.95 within its Monte Carlo error, and a transverse mode 2 % away
     is flagged."""
     from workflow.optimise.robust import RobustSettings, robust_candidate
 
-    calibration = _beam_calibration(3000)
-    candidate = robust_candidate(calibration, P1, RobustSettings(), lambda ps: [_BeamResult(p) for p in ps], 54.0)
+    calibration = beam_calibration(3000)
+    candidate = robust_candidate(calibration, P1, RobustSettings(), lambda ps: [BeamResult(p) for p in ps], 54.0)
     assert candidate.frequency[0] == pytest.approx(25e3, rel=2e-3)
     assert candidate.probability >= 0.95 - candidate.probability_error, "the solve is conservative by its own MC error"
     assert candidate.probability < 0.95 + 6 * candidate.probability_error, "but not wastefully so"
@@ -296,20 +270,20 @@ def test_prior_surrogates_evaluate_all_plates_in_one_batch_per_kind_each_surroga
 
     def evaluate(plates):
         calls.append(("fem", len(plates)))
-        return [_BeamResult(p) for p in plates]
+        return [BeamResult(p) for p in plates]
 
     def evaluate_surfaces(plates):
         calls.append(("surfaces", len(plates)))
-        return [_BeamResult(p) for p in plates], [_CosineSurface(p) for p in plates]
+        return [BeamResult(p) for p in plates], [_CosineSurface(p) for p in plates]
 
     plates, scans = (P1, P2, P1.with_(width=40 * MM)), (None, scan, None)
     surrogates = prior_surrogates(plates, settings, evaluate, evaluate_surfaces, scans)
     assert calls == [("fem", 36), ("surfaces", 18)]
     for plate, found, shape in zip(plates, surrogates, scans):
         points = None if shape is None else (np.array(shape.x), np.array(shape.y))
-        alone = build_plate_surrogate(plate, settings.names, settings.bounds, lambda ps: [_BeamResult(p) for p in ps],
+        alone = build_plate_surrogate(plate, settings.names, settings.bounds, lambda ps: [BeamResult(p) for p in ps],
                                       18, settings.surrogate_degree, settings.surrogate_seed,
-                                      lambda ps: ([_BeamResult(p) for p in ps], [_CosineSurface(p) for p in ps]), points)
+                                      lambda ps: ([BeamResult(p) for p in ps], [_CosineSurface(p) for p in ps]), points)
         assert found == alone and (found.shape is None) == (shape is None)
 
 
@@ -318,12 +292,12 @@ def test_robust_design_evaluates_every_stock_in_two_batches_with_the_candidates_
     workers stay busy across the stocks); each candidate is the one its stock gives alone."""
     from workflow.optimise.robust import RobustSettings, robust_candidate, robust_design
 
-    calibration = _beam_calibration(500)
+    calibration = beam_calibration(500)
     batches = []
 
     def evaluate(plates):
         batches.append(len(plates))
-        return [_BeamResult(p) for p in plates]
+        return [BeamResult(p) for p in plates]
 
     stock = (0.5e-3, 0.75e-3, 1e-3)
     design = robust_design(calibration, P1, stock, RobustSettings(separation=0.01), evaluate, 54.0)
@@ -331,7 +305,7 @@ def test_robust_design_evaluates_every_stock_in_two_batches_with_the_candidates_
     assert batches == [3 * per_stock, 3]
     for h, candidate in zip(stock, design.candidates):
         alone = robust_candidate(calibration, P1.with_(resonator_thickness=h), RobustSettings(separation=0.01),
-                                 lambda ps: [_BeamResult(p) for p in ps], 54.0)
+                                 lambda ps: [BeamResult(p) for p in ps], 54.0)
         assert candidate == alone
 
 

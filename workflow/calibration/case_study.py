@@ -7,7 +7,7 @@ from workflow.calibration.posterior import predictive_quantiles
 
 
 def cross_predictions(first: MeasuredPlate, second: MeasuredPlate, settings: CalibrationSettings, evaluate: Evaluate,
-                      fem: dict) -> list[dict]:
+                      fem: dict, surrogates: tuple | None = None) -> list[dict]:
     """Calibrate on each plate alone and predict the other's resonance, with 90 % intervals.
 
     Parameters
@@ -19,6 +19,8 @@ def cross_predictions(first: MeasuredPlate, second: MeasuredPlate, settings: Cal
         Plates -> FemResults.
     fem : dict
         The FEM conditions ``evaluate`` binds.
+    surrogates : tuple of PlateSurrogate, optional
+        The two plates' prior surrogates when already built with these settings and FEM (no evaluation then).
 
     Returns
     -------
@@ -28,7 +30,7 @@ def cross_predictions(first: MeasuredPlate, second: MeasuredPlate, settings: Cal
         ``error`` (median over measured - 1) [-], ``source_fit_hz`` (the calibrated plate's own
         posterior median) [Hz], ``parameters`` (posterior summary), ``evaluations`` (FEM, both surrogates).
     """
-    surrogates = prior_surrogates([first.plate, second.plate], settings, evaluate)
+    surrogates = surrogates or prior_surrogates([first.plate, second.plate], settings, evaluate)
     directions = []
     for (source, source_surrogate), (target, target_surrogate) in (
         ((first, surrogates[0]), (second, surrogates[1])),

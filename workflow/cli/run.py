@@ -16,6 +16,7 @@ from workflow.execution.cache import EvaluationCache
 from workflow.pipeline.config import load_config, to_toml
 from workflow.pipeline.outputs import output_folder
 from workflow.pipeline.report import write_report
+from workflow.pipeline.robust_recommendation import own_plates
 from workflow.pipeline.runner import RunContext, run_steps
 from workflow.pipeline.steps import RUN_OUTPUTS, STEPS
 
@@ -32,6 +33,11 @@ def register(subparsers) -> None:
     parser.add_argument("--out", type=Path, default=Path("reports"), help="output folder (default: reports/)")
     add_force_option(parser)
     parser.add_argument("--logs", type=Path, nargs="+", help="interferometer logs to fit instead of a simulated campaign")
+    parser.add_argument("--built-plates", type=Path, nargs="+", metavar="LOG",
+                        help="built-plate logs of your plates (resonance search, and a deflection scan where there is "
+                        "one) to calibrate the FEM on, besides the published P1 and P2; the recommended design per h_p "
+                        "is then robust under that calibration (default: the configuration's [recommendation] "
+                        "built_plates, none)")
     parser.add_argument("--scheduler", help="tcp://host:port of a Dask scheduler (default: local cores)")
     parser.add_argument("--print-config", action="store_true", help="print the effective configuration and exit")
     add_fem_options(parser, overrides=True)
@@ -43,10 +49,13 @@ def register(subparsers) -> None:
 
 def run(args):
     config = override_config(load_config(args.config), args)
+    if args.built_plates:
+        config["recommendation"]["built_plates"] = [str(path) for path in args.built_plates]
     if args.print_config:
         print(to_toml(config), end="")
         return None
     load_calibration_option(args)  # a bad file fails before any step
+    own_plates(config)  # a bad built-plate log fails before any step
     with output_folder(args.out, RUN_OUTPUTS, force=args.force) as out:
         context = RunContext(
             config=config,

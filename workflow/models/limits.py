@@ -86,6 +86,9 @@ LIMITS = {
     "loop.reliability": (0.5, 0.999),
     "loop.stock_hi_mm": mm_range(materials.RESONATOR_THICKNESS_RANGE),
     "loop.search_start_khz": (1.0, 39.0),
+    "recommendation.reliability": (0.5, 0.999),
+    "recommendation.stock_hi_mm": mm_range(materials.RESONATOR_THICKNESS_RANGE),
+    "recommendation.stocks_per_design": (1, 9),
 }
 for _key, _quantity in (
     ("design.q", "q"), ("design.glue_um", "glue_um"), ("simulator.low_velocity_q", "q"), ("simulator.working_q", "q"),

@@ -14,7 +14,9 @@ For each stock resonator thickness h_i (docs/calibration.md, "Robust design"):
 3. the achieved probability from fresh draws (its Monte Carlo standard error given), and one FEM
    evaluation at the posterior median for the mode separation and the homogeneity of |w|.
 
-The candidate with the largest median deflection whose modes are separated is the optimum.
+The candidate with the largest median deflection whose modes are separated is the optimum.  A given design (e.g.
+the nominal optimum) is checked the same way with its own lambda instead of a solved one
+(:func:`robust_candidates` with ``solve`` False): its probability under the same posterior and scatter.
 """
 
 from dataclasses import dataclass
@@ -231,11 +233,12 @@ class RobustSurrogate:
                 self.log_deflection(inside) + rng.normal(0, self.log_deflection.loo_rms, len(draws)) + discrepancy[:, 1])
 
 
-def robust_design_points(calibration: Calibration, plate: Plate, settings: RobustSettings) -> tuple:
-    """(bounds, points, plates) of the FEM design of a nominal plate's robust surrogate (the module's step 1)."""
+def robust_design_points(calibration: Calibration, plate: Plate, settings: RobustSettings, solve: bool = True) -> tuple:
+    """(bounds, points, plates) of the FEM design of a nominal plate's robust surrogate (the module's step 1): lambda
+    around the beam model's estimate of the robust lambda when ``solve``, around the plate's own otherwise."""
     names = robust_inputs(calibration)
     tol = settings.tolerances
-    guess = beam_wavelength(plate, settings.min_frequency / calibration_ratio(calibration))
+    guess = beam_wavelength(plate, settings.min_frequency / calibration_ratio(calibration)) if solve else float(plate.wavelength)
     low, high = np.percentile(posterior_columns(calibration, plate), POSTERIOR_RANGE, axis=0)
     scatter = {"glue_um": tol.glue_thickness, "resonator_offset_um": tol.resonator_thickness}
     spread = np.array([3 * scatter.get(name, 0.0) for name in names])
@@ -274,21 +277,26 @@ class _Solved:
     median: Plate
 
 
-def _solve(calibration: Calibration, plate: Plate, settings: RobustSettings, surrogate: RobustSurrogate) -> _Solved:
-    solve = scattered_draws(calibration, plate, settings.tolerances, SOLVE_DRAWS, settings.seed)
-    target = np.log(settings.min_frequency)
-    level = conservative_level(settings.reliability, SOLVE_DRAWS)
+def _solve(calibration: Calibration, plate: Plate, settings: RobustSettings, surrogate: RobustSurrogate,
+           solve: bool = True) -> _Solved:
+    """lambda solved on the surrogate (``solve``) or the plate's own, and the fresh draws at it."""
+    too_low = too_high = False
+    log_lambda = float(np.log(plate.wavelength))
+    if solve:
+        draws = scattered_draws(calibration, plate, settings.tolerances, SOLVE_DRAWS, settings.seed)
+        target = np.log(settings.min_frequency)
+        level = conservative_level(settings.reliability, SOLVE_DRAWS)
 
-    def shortfall(log_lambda):
-        log_f, _ = surrogate.sample(log_lambda, solve, settings.seed)
-        return float(np.percentile(log_f, 100 * level)) - target
+        def shortfall(log_lambda):
+            log_f, _ = surrogate.sample(log_lambda, draws, settings.seed)
+            return float(np.percentile(log_f, 100 * level)) - target
 
-    low, high = surrogate.bounds[0]
-    too_low, too_high = shortfall(low) < 0, shortfall(high) > 0
-    log_lambda = low if too_low else high if too_high else brentq(shortfall, low, high, xtol=1e-8)
+        low, high = surrogate.bounds[0]
+        too_low, too_high = shortfall(low) < 0, shortfall(high) > 0
+        log_lambda = low if too_low else high if too_high else brentq(shortfall, low, high, xtol=1e-8)
     check = scattered_draws(calibration, plate, settings.tolerances, CHECK_DRAWS, settings.seed + 1)
     log_f, log_w = surrogate.sample(log_lambda, check, settings.seed + 1)
-    design = plate.with_(wavelength=float(np.exp(log_lambda)))
+    design = plate.with_(wavelength=float(np.exp(log_lambda))) if solve else plate
     median = deviated_plate(design, robust_inputs(calibration), np.median(posterior_columns(calibration, plate), axis=0))
     return _Solved(surrogate, design, np.exp(log_f), np.exp(log_w), bool(too_low or too_high), median)
 
@@ -317,16 +325,18 @@ def _candidate(solved: _Solved, result, settings: RobustSettings, q: float) -> R
 
 
 def robust_candidates(calibration: Calibration, plates: Sequence[Plate], settings: RobustSettings, evaluate: Evaluate,
-                      q: float) -> tuple:
-    """The robust design of each nominal plate (its h_i and h_p fixed, lambda solved); see the module.
+                      q: float, solve: Sequence[bool] | None = None) -> tuple:
+    """The robust design of each nominal plate (its h_i and h_p fixed, lambda solved; see the module), or, where
+    ``solve`` says False, the check of the plate as given (its own lambda).
 
     The FEM evaluations of every plate's surrogate go in one batch, and those at the solved designs' posterior
     medians in a second, so that the workers of a pool stay busy across the plates.
     """
-    designs = [robust_design_points(calibration, plate, settings) for plate in plates]
+    solve = [True] * len(plates) if solve is None else list(solve)
+    designs = [robust_design_points(calibration, plate, settings, s) for plate, s in zip(plates, solve)]
     results = evaluate_together(evaluate, [batch for _, _, batch in designs])
     surrogates = [fit_robust_surrogate(bounds, points, found) for (bounds, points, _), found in zip(designs, results)]
-    solved = [_solve(calibration, plate, settings, surrogate) for plate, surrogate in zip(plates, surrogates)]
+    solved = [_solve(calibration, plate, settings, surrogate, s) for plate, surrogate, s in zip(plates, surrogates, solve)]
     medians = evaluate([s.median for s in solved])
     return tuple(_candidate(s, result, settings, q) for s, result in zip(solved, medians))
 
@@ -361,6 +371,18 @@ def robust_design(calibration: Calibration, plate: Plate, stock: Sequence[float]
         When no candidate has its modes separated and its lambda inside the design range.
     """
     candidates = robust_candidates(calibration, [plate.with_(resonator_thickness=h) for h in stock], settings, evaluate, q)
+    return select_robust(candidates)
+
+
+def select_robust(candidates: Sequence[RobustCandidate]) -> RobustDesign:
+    """The candidate with the largest median deflection among those with separated modes and lambda inside its
+    range (not at its surrogate's box edge).
+
+    Raises
+    ------
+    InfeasibleError
+        When there is none, with each candidate's reason.
+    """
     low, high = materials.WAVELENGTH_RANGE
     feasible = [k for k, c in enumerate(candidates)
                 if c.separated and not c.lambda_at_edge and low <= float(c.plate.wavelength) <= high]
@@ -371,4 +393,4 @@ def robust_design(calibration: Calibration, plate: Plate, stock: Sequence[float]
                         f"{' (box edge)' if c.lambda_at_edge else ''}, separated {c.separated}" for c in candidates)
         )
     best = max(feasible, key=lambda k: candidates[k].deflection[1])
-    return RobustDesign(candidates, best)
+    return RobustDesign(tuple(candidates), best)

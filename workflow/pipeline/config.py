@@ -33,10 +33,11 @@ CHOICES = {
 }
 """Accepted values of the items of list keys."""
 
-LIST_ITEMS = {"campaign.logs": ""}
+LIST_ITEMS = {"campaign.logs": "", "recommendation.built_plates": ""}
 """An item of each list key whose default is empty, for its type (the logs' paths are strings)."""
 
-NOT_EMPTY = ("damping.laws", "design.ceramic_thicknesses_mm", "campaign.voltages_v", "loop.stock_hi_mm")
+NOT_EMPTY = ("damping.laws", "design.ceramic_thicknesses_mm", "campaign.voltages_v", "loop.stock_hi_mm",
+             "recommendation.stock_hi_mm")
 """List keys that need at least one item."""
 
 ORDERED = (
@@ -54,7 +55,7 @@ def default_config() -> dict:
     embedded = tomllib.loads(resources.files(__package__).joinpath("defaults.toml").read_text(encoding="utf-8"))
     embedded["fem"] = {**fem_defaults(), **embedded["fem"]}
     return {"design": design_defaults(), **embedded, "campaign": campaign_defaults(), "simulator": simulator_defaults(),
-            "loop": loop_defaults()}
+            "loop": loop_defaults(), "recommendation": recommendation_defaults()}
 
 
 def fem_defaults() -> dict:
@@ -131,6 +132,22 @@ def loop_defaults() -> dict:
         "stock_hi_mm": list(LOOP_STOCK_MM),
         "search_start_khz": 15.0,
         "case_study": True,
+    }
+
+
+def recommendation_defaults() -> dict:
+    """The [recommendation] section (docs/calibration.md, "The recommended design in tactile run"): the robust design
+    per h_p under the calibration on the measured built plates."""
+    from workflow.optimise.robust import RobustSettings
+    from workflow.pipeline.robust_recommendation import STOCK_HI_MM, STOCKS_PER_DESIGN
+
+    return {
+        "robust": True,
+        "published_plates": True,
+        "built_plates": [],
+        "reliability": RobustSettings().reliability,
+        "stock_hi_mm": list(STOCK_HI_MM),
+        "stocks_per_design": STOCKS_PER_DESIGN,
     }
 
 

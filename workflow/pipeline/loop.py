@@ -7,9 +7,7 @@ run through the real procedures and write built-plate logs into ``loop/`` of the
 calibration reads only those logs, never the deviations.
 """
 
-from contextlib import ExitStack
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 
 from workflow.errors import TactileError
@@ -21,8 +19,6 @@ LOOP_FOLDER = "loop"
 """Sub-folder of the run's output with the loop's logs and calibration."""
 LOOP_OUTPUTS = ("*.csv", "calibration.json", "*.png")
 """Glob patterns of the files the loop writes into its sub-folder."""
-PAPER_LOGS = ("paper_P1.csv", "paper_P2.csv")
-"""The published plates' logs (the case study), shipped in :mod:`workflow.calibration.published`."""
 PAIRS_CAPTION = "Posterior of the calibration on plate #1"
 """Caption of the loop's calibration pairs figure."""
 SCAN_VOLTAGE = 5.0
@@ -196,17 +192,17 @@ def second_plate(context: RunContext) -> BuiltMeasurement | None:
 
 
 def case_study(context: RunContext):
-    """Cross-prediction between the published plates P1 and P2 (their data logs), or None when disabled."""
-    from workflow.calibration.calibration import measured_plate
+    """Cross-prediction between the published plates P1 and P2 (their data logs), or None when disabled; their
+    surrogates from the calibration on the built plates when it has them (no FEM evaluation then)."""
     from workflow.calibration.case_study import cross_predictions
-    from workflow.calibration.logs import read_built_plate
     from workflow.calibration.parameters import load_settings
+    from workflow.calibration.published import PUBLISHED_PLATES, published_plates
 
     if not (context.config["loop"]["enabled"] and context.config["loop"]["case_study"]):
         return None
-    with ExitStack() as stack:
-        published = resources.files("workflow.calibration.published")
-        paths = [stack.enter_context(resources.as_file(published / name)) for name in PAPER_LOGS]
-        first, second = (measured_plate(read_built_plate(path)) for path in paths)
+    settings = load_settings()
+    built = context.results.get("built_calibration")
+    surrogates = None if built is None else built.surrogates_of(tuple(PUBLISHED_PLATES))
+    first, second = published_plates() if surrogates is None else built.plates_of(tuple(PUBLISHED_PLATES))
     model, fem = calibration_model(context)
-    return cross_predictions(first, second, load_settings(), model.evaluate_plates, fem)
+    return cross_predictions(first, second, settings, model.evaluate_plates, fem, surrogates)

@@ -8,6 +8,7 @@ from workflow.models.analytical import BEAM_CALIBRATION
 from workflow.optimise.maps import TRANSVERSE_THRESHOLD
 from workflow.pipeline.loop_report import case_study_section, loop_section
 from workflow.pipeline.markdown import relative_link, step_figures, table
+from workflow.pipeline.robust_report import robust_section
 from workflow.pipeline.runner import RunContext
 from workflow.units import KHZ, MM, UM
 
@@ -40,7 +41,17 @@ def _title(context: RunContext) -> str:
 
 
 def _recommended_design(context: RunContext, recommendation) -> str:
-    section = recommendation_section(recommendation)
+    """The robust designs under the built plates' calibration when they ran ("What to build"), then the nominal
+    optima with Q(v)."""
+    robust = context.results.get("robust_recommendation")
+    if robust is None:
+        return _nominal_designs(context, recommendation, "Recommended design")
+    return robust_section(context, robust) + "\n\n" + _nominal_designs(
+        context, recommendation, "Nominal optima with Q(v) (for comparison: not calibrated to built plates)")
+
+
+def _nominal_designs(context: RunContext, recommendation, heading: str) -> str:
+    section = recommendation_section(recommendation, heading)
     fit = context.results.get("damping_fit")
     if not section or fit is None:
         return section
@@ -95,8 +106,9 @@ def _basis(recommendation, measured_velocity, simulated: bool) -> str:
     return " ".join(text)
 
 
-def recommendation_section(recommendation) -> str:
-    """The report's "Recommended design" section from a :class:`~workflow.pipeline.recommendation.Recommendation`."""
+def recommendation_section(recommendation, heading: str = "Recommended design") -> str:
+    """The report's "Recommended design" section (or its ``heading``) from a
+    :class:`~workflow.pipeline.recommendation.Recommendation`."""
     designs = recommendation.designs
     rows = [(f"{hp / MM:g}", _SOURCES[d.model], d) for hp, d in designs.items()]
     original = recommendation.original
@@ -140,7 +152,7 @@ def recommendation_section(recommendation) -> str:
     if fem:
         text.append(_mesh_accuracy(fem, recommendation))
     text.append(_beam_and_fem(designs))
-    return "## Recommended design\n\n" + "\n\n".join(t for t in text if t)
+    return f"## {heading}\n\n" + "\n\n".join(t for t in text if t)
 
 
 INTERVAL_MEANING = (

@@ -15,6 +15,8 @@ import numpy as np
 from workflow.errors import InputFileError, TactileError
 from workflow.optimise.problem import optimise_analytical
 from workflow.pipeline import loop
+from workflow.pipeline import robust_recommendation as robust
+from workflow.pipeline.calibration_files import CALIBRATION_OUTPUTS
 from workflow.pipeline.damping_files import FIT_OUTPUTS, stated_noise, write_fit
 from workflow.pipeline.domain import bench_settings, build_plate, design_problems, fem_model, fem_settings
 from workflow.pipeline.runner import RunContext, Step
@@ -416,7 +418,8 @@ def width_sweep_figures(context: RunContext, sweep) -> None:
 
 
 RUN_OUTPUTS = ("report.md", "simulated_campaign.csv", "simulated_ringdown.csv", "*.png", *(f"damping/{pattern}" for pattern in FIT_OUTPUTS),
-               *(f"{loop.LOOP_FOLDER}/{pattern}" for pattern in loop.LOOP_OUTPUTS))
+               *(f"{loop.LOOP_FOLDER}/{pattern}" for pattern in loop.LOOP_OUTPUTS),
+               *(f"{robust.CALIBRATION_FOLDER}/{name}" for name in CALIBRATION_OUTPUTS))
 """Glob patterns of the files ``tactile run`` writes into its output folder (:mod:`workflow.pipeline.outputs`)."""
 
 STEPS: List[Step] = [
@@ -428,6 +431,10 @@ STEPS: List[Step] = [
     Step("FEM responses of the original plate", "fem_responses", fem_responses, fem_responses_figures),
     Step("FEM optimum per h_p (space mapping)", "fem_optima", fem_optima, fem_optima_figures),
     Step("recommended design per h_p", "recommended_design", recommended_design, recommended_design_figures,
+         cacheable=False),
+    Step("calibration on the measured built plates (published P1, P2 and --built-plates)", "built_calibration",
+         robust.built_calibration, robust.built_calibration_files, cacheable=False),
+    Step("robust design per h_p under that calibration", "robust_recommendation", robust.robust_recommendation,
          cacheable=False),
     Step("texture rendering and electrical load per design", "texture_rendering", texture_rendering,
          texture_rendering_figures, cacheable=False),

@@ -1,0 +1,167 @@
+"""The recommended design that holds when built (issue 29, point 5): the calibration on the built plates, the robust
+design per h_p beside the nominal optimum, the report's first table, and the run's options for it.
+
+The FEM is stood in for by the beam model (:class:`calibration_setup.BeamResult`: one longitudinal mode and a
+transverse one 2 % above it), so that the machinery is checked in seconds; the run's own figures are in
+docs/calibration.md."""
+
+import re
+import shutil
+import types
+from importlib import resources
+
+import pytest
+from calibration_setup import P1, SHORT, BeamResult, beam_calibration
+from user_facing import run_cli
+
+from workflow.calibration import parameters
+from workflow.execution.cache import EvaluationCache
+from workflow.optimise.robust import RobustSettings, beam_wavelength, robust_candidates
+from workflow.pipeline import loop
+from workflow.pipeline import robust_recommendation as robust
+from workflow.pipeline.config import default_config, merge
+from workflow.errors import InputFileError
+from workflow.pipeline.robust_report import robust_section
+from workflow.pipeline.runner import RunContext
+from workflow.units import KHZ, MM
+
+def on_the_limit(plate):
+    """The plate with the wavelength that puts its beam model on 25 kHz."""
+    return plate.with_(wavelength=beam_wavelength(plate, 25 * KHZ))
+
+
+NOMINAL = on_the_limit(P1)
+"""A nominal optimum on the 25 kHz limit (the beam model as its FEM)."""
+SEPARATED = RobustSettings(separation=0.01)
+"""The stand-in's transverse mode sits 2 % above the working one: separated at 1 %, not at the default 3 %."""
+
+
+def beam_evaluate(batches: list):
+    def evaluate(plates):
+        batches.append(len(plates))
+        return [BeamResult(p) for p in plates]
+    return evaluate
+
+
+def test_the_stocks_tried_are_those_nearest_the_nominal_thickness():
+    stock = [t * MM for t in robust.STOCK_HI_MM]
+    assert robust.nearest_stocks(0.916 * MM, stock, 2) == [0.8 * MM, 1.0 * MM]
+    assert robust.nearest_stocks(0.5 * MM, stock, 2) == [0.5 * MM, 0.6 * MM]
+    assert robust.nearest_stocks(1.9 * MM, stock, 3) == [1.2 * MM, 1.5 * MM, 2.0 * MM]
+
+
+def test_robust_choices_batch_every_hp_and_check_the_nominal_at_its_own_wavelength():
+    """Under a calibration that lowers f_r (factors 0.95 and 0.97), the nominal optimum on the limit would mostly
+    miss it; the robust design at the same stock shortens λ until P(f_r >= 25 kHz) reaches the reliability."""
+    calibration = beam_calibration(800)
+    batches = []
+    nominals = {1 * MM: NOMINAL, 2 * MM: on_the_limit(P1.with_(ceramic_thickness=2 * MM))}
+    stock = [t * MM for t in robust.STOCK_HI_MM]
+    choices = robust.robust_choices(calibration, nominals, stock, 2, SEPARATED, beam_evaluate(batches), 54.0)
+    per_candidate = choices[1 * MM].nominal.evaluations - 1
+    assert batches == [2 * 3 * per_candidate, 2 * 3], "one batch of surrogates, one of median checks, for every h_p"
+    for hp, choice in choices.items():
+        assert [float(c.plate.resonator_thickness) for c in choice.candidates] == [0.75 * MM, 0.8 * MM]
+        assert choice.nominal.plate == nominals[hp] and not choice.nominal.lambda_at_edge
+        assert choice.nominal.probability < 0.5 and choice.nominal.frequency[1] < 25 * KHZ
+        assert choice.best is not None and choice.reason is None
+        assert choice.best.probability >= SEPARATED.reliability - choice.best.probability_error
+        assert choice.best.frequency[0] == pytest.approx(25 * KHZ, rel=2e-3)
+        same_stock = choice.candidates[0]
+        assert float(same_stock.plate.wavelength) < float(nominals[hp].wavelength)
+    alone = robust_candidates(calibration, [NOMINAL], SEPARATED, beam_evaluate([]), 54.0, [False])[0]
+    assert alone == choices[1 * MM].nominal, "each check as if alone"
+
+
+def test_an_hp_without_a_robust_design_says_why_and_keeps_its_nominal_check():
+    calibration = beam_calibration(300)
+    choices = robust.robust_choices(calibration, {1 * MM: NOMINAL}, [0.75 * MM, 1 * MM], 2, RobustSettings(),
+                                    beam_evaluate([]), 54.0)
+    choice = choices[1 * MM]
+    assert choice.best is None and "no stock thickness gives a robust design" in choice.reason
+    assert choice.nominal.plate == NOMINAL and len(choice.candidates) == 2
+
+
+@pytest.fixture
+def beam_run(tmp_path, monkeypatch):
+    """A run context whose calibration model is the beam stand-in and whose sampler is short; a copy of the published
+    P1 log is the user's own built plate."""
+    own = tmp_path / "my_plate.csv"
+    with resources.as_file(resources.files("workflow.calibration.published") / "paper_P1.csv") as path:
+        shutil.copy(path, own)
+    batches = []
+    model = types.SimpleNamespace(evaluate_plates=beam_evaluate(batches), results_with_surfaces=None)
+    monkeypatch.setattr(loop, "calibration_model", lambda context: (model, {}))
+    monkeypatch.setattr(parameters, "load_settings", lambda *args: SHORT)
+    config = default_config()
+    config["recommendation"].update(built_plates=[str(own)], stock_hi_mm=[0.75, 1.0])
+    run = RunContext(config=config, out=tmp_path / "run", cache=EvaluationCache(tmp_path / "cache"))
+    run.results["recommended_design"] = types.SimpleNamespace(designs={1 * MM: types.SimpleNamespace(plate=NOMINAL)})
+    return run, batches
+
+
+def test_the_run_calibrates_on_the_published_and_the_users_plates_and_the_case_study_reuses_them(beam_run):
+    run, batches = beam_run
+    built = robust.built_calibration(run)
+    assert built.names == ("P1", "P2", "my_plate.csv") and len(built.calibration.plates) == 3
+    assert batches == [3 * SHORT.surrogate_points], "the three plates' surrogates in one batch"
+    run.results["built_calibration"] = built
+    run.step = "built_calibration"
+    robust.built_calibration_files(run, built)
+    assert (run.out / "calibration" / "calibration.json").is_file()
+    assert run.figures_of("built_calibration")[0].name == "calibration/calibration_pairs.png"
+    directions = loop.case_study(run)
+    assert batches == [3 * SHORT.surrogate_points], "the case study evaluates nothing more"
+    assert [d["calibrated_on"] for d in directions] == ["P1", "P2"]
+
+
+def test_robust_step_without_a_separated_stock_and_without_built_plates(beam_run):
+    run, _ = beam_run
+    run.config["recommendation"].update(built_plates=[], published_plates=False)
+    assert robust.built_calibration(run) is None, "no built plate: no calibration"
+    run.results["built_calibration"] = robust.BuiltCalibration(beam_calibration(300), ("P1",))
+    recommendation = robust.robust_recommendation(run)
+    (choice,) = recommendation.choices.values()
+    assert choice.best is None, "the stand-in's transverse mode is 2 % away: not separated at the default 3 %"
+    assert [float(c.plate.resonator_thickness) for c in choice.candidates] == [0.75 * MM, 1.0 * MM]
+    text = robust_section(run, recommendation)
+    assert text.startswith("## What to build") and "**No h_p has a robust design**" in text
+    assert "| 1 | robust: **none** |" in text and "No robust design: h_p = 1 mm: no stock thickness" in text
+    assert "| 1 | nominal FEM optimum | " in text
+
+
+def test_the_first_table_recommends_the_robust_row_and_shows_the_nominal_one_below_it(beam_run):
+    run, _ = beam_run
+    choices = robust.robust_choices(beam_calibration(800), {1 * MM: NOMINAL}, [0.75 * MM, 1 * MM], 2, SEPARATED,
+                                    beam_evaluate([]), 54.0)
+    recommendation = robust.RobustRecommendation(choices, ("P1", "P2"), 0.95, 25 * KHZ, 54.0)
+    text = robust_section(run, recommendation)
+    rows = [line for line in text.splitlines() if line.startswith("| 1 |")]
+    best = choices[1 * MM].best
+    assert rows[0].startswith(f"| 1 | robust (stock h_i of 2 tried) | {float(best.plate.wavelength) / MM:.3f} | "
+                              f"{float(best.plate.resonator_thickness) / MM:g} |")
+    assert f"| {best.probability:.3f} ± {best.probability_error:.3f} |" in rows[0] and "**build this**" in rows[0]
+    assert rows[1].startswith(f"| 1 | nominal FEM optimum | {float(NOMINAL.wavelength) / MM:.3f} | 0.75 |")
+    assert "**likely to miss**: P 0." in rows[1]
+    assert "on the measured built plates (P1, P2)" in text and "Build: h_p = 1 mm from the robust rows." in text
+    assert "What these bands contain" in text and "constant Q = 54" in text
+    assert f"{recommendation.evaluations} FEM evaluations" in text
+    assert recommendation.evaluations == 3 * choices[1 * MM].nominal.evaluations
+
+
+def test_recommendation_settings_are_checked_like_the_others():
+    config = default_config()
+    assert config["recommendation"]["robust"] and config["recommendation"]["published_plates"]
+    for text, message in (({"reliability": 1.5}, "'recommendation.reliability' = 1.5 is outside"),
+                          ({"stock_hi_mm": []}, "'recommendation.stock_hi_mm' is empty"),
+                          ({"built_plates": [3]}, "'recommendation.built_plates[0]' must be a string")):
+        with pytest.raises(InputFileError, match=re.escape(message)):
+            merge(config, {"recommendation": text})
+
+
+def test_a_bad_built_plate_log_fails_the_run_before_any_step(tmp_path, capsys):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("frequency_hz,velocity\n1,2\n", encoding="utf-8")
+    status, _, err = run_cli(capsys, "run", "--built-plates", bad, "--out", tmp_path / "out")
+    assert status != 0 and len(err.strip().splitlines()) == 1 and "bad.csv" in err, err
+    assert not (tmp_path / "out" / "report.md").exists()

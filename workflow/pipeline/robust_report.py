@@ -1,0 +1,97 @@
+"""The report's first table: the robust design per h_p beside the nominal optimum, under the calibration on the
+built plates (:mod:`workflow.pipeline.robust_recommendation`)."""
+
+from workflow.optimise.robust import RobustCandidate, RobustSettings, Tolerances
+from workflow.pipeline.markdown import step_figures, table
+from workflow.pipeline.robust_recommendation import RobustRecommendation
+from workflow.pipeline.runner import RunContext
+from workflow.units import KHZ, MM, UM
+
+
+def _band(values, unit: float, digits: int) -> str:
+    low, median, high = (v / unit for v in values)
+    return f"{median:.{digits}f} [{low:.{digits}f}, {high:.{digits}f}]"
+
+
+def _nearest(candidate: RobustCandidate) -> str:
+    nearest = candidate.nearest_transverse
+    if nearest is None:
+        return "none computed"
+    return f"{nearest['f'] / KHZ:.3f} kHz ({100 * nearest['relative_distance']:.1f} % away)"
+
+
+def _row(label: str, design: str, candidate: RobustCandidate, verdict: str) -> tuple:
+    plate = candidate.plate
+    return (
+        label,
+        design,
+        f"{float(plate.wavelength) / MM:.3f}",
+        f"{float(plate.resonator_thickness) / MM:g}",
+        f"{float(plate.length) / MM:.1f}",
+        _band(candidate.frequency, KHZ, 3),
+        f"{candidate.probability:.3f} ± {candidate.probability_error:.3f}",
+        _band(candidate.deflection, UM, 2),
+        _nearest(candidate),
+        verdict,
+    )
+
+
+def _robust_verdict(candidate: RobustCandidate, reliability: float) -> str:
+    return "**build this**" if candidate.probability >= reliability else f"P below {reliability:g} (Monte Carlo)"
+
+
+def _nominal_verdict(candidate: RobustCandidate, reliability: float) -> str:
+    if candidate.probability >= reliability:
+        return "robust as it is"
+    return f"**likely to miss**: P {candidate.probability:.2f} < {reliability:g}"
+
+
+def robust_section(context: RunContext, robust: RobustRecommendation) -> str:
+    """"What to build": per h_p the robust row, then the nominal optimum's, with their predicted f_r and w bands and
+    P(f_r >= f_min); a line per h_p without a robust design; what the bands contain."""
+    limit = robust.min_frequency / KHZ
+    voltage = context.config["design"]["voltage_v"]
+    rows, missing = [], []
+    for hp, choice in robust.choices.items():
+        label = f"{hp / MM:g}"
+        if choice.best is not None:
+            rows.append(_row(label, f"robust (stock h_i of {len(choice.candidates)} tried)", choice.best,
+                             _robust_verdict(choice.best, robust.reliability)))
+        else:
+            rows.append((label, "robust: **none**", "–", "–", "–", "–", "–", "–", "–", "see below"))
+            missing.append(f"h_p = {label} mm: {choice.reason}")
+        rows.append(_row(label, "nominal FEM optimum", choice.nominal, _nominal_verdict(choice.nominal, robust.reliability)))
+    plates = ", ".join(robust.calibrated_on)
+    built = [hp for hp, c in robust.choices.items() if c.best is not None]
+    text = [
+        "## What to build\n\n"
+        f"The FEM calibrated on the measured built plates ({plates}) predicts how a plate of each design would "
+        f"resonate as built; the **robust** design per h_p is the stock resonator thickness and wavelength with "
+        f"P(f_r ≥ {limit:g} kHz) ≥ {robust.reliability:g} under that calibration and the manufacturing tolerances, "
+        "and the largest deflection among the stocks tried (docs/calibration.md, \"The recommended design in "
+        "tactile run\"). The nominal FEM optimum (the next section) is checked the same way, for comparison."
+        + (f" Build: {', '.join(f'h_p = {hp / MM:g} mm' for hp in built)} from the robust rows." if built else
+           " **No h_p has a robust design**: see below."),
+        table(["h_p [mm]", "design", "λ [mm]", "h_i [mm]", "L [mm]", "f_r as built [kHz], median [5 %, 95 %]",
+               f"P(f_r ≥ {limit:g} kHz)", f"w at {voltage:g} V, Q = {robust.q:g} [µm]",
+               "nearest transverse-mixing mode", "verdict"], rows),
+    ]
+    if missing:
+        text.append("No robust design: " + "; ".join(missing) + ".")
+    tolerances = Tolerances()
+    text.append(
+        "What these bands contain: the calibration's posterior (its parameters and its model-discrepancy term, "
+        f"from the built plates' measurements), manufacturing scatter (standard deviations h_i "
+        f"{tolerances.resonator_thickness / UM:g} µm, h_p {tolerances.ceramic_thickness / UM:g} µm, λ "
+        f"{tolerances.wavelength / UM:g} µm, bond {tolerances.glue_thickness / UM:g} µm), and the surrogate's and the "
+        "FEM's errors; P is from fresh Monte Carlo draws (± its standard error). What they do not contain: Q(v) (the "
+        f"deflections are at the constant Q = {robust.q:g}; the next section gives them with the fitted Q(v)), and "
+        "ways a new plate may differ from the calibration plates beyond what the discrepancy term learned from them "
+        "(another ceramic, another bonding process). The nearest transverse-mixing mode is the FEM's at the "
+        f"posterior-median plate; a robust design needs it more than {100 * RobustSettings().separation:g} % away. "
+        f"{robust.evaluations} FEM evaluations."
+    )
+    figures = step_figures(context, "built_calibration")
+    if figures:
+        text.append(figures)
+    return "\n\n".join(text)
