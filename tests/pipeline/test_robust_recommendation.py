@@ -139,9 +139,9 @@ def test_the_first_table_recommends_the_robust_row_and_shows_the_nominal_one_bel
     rows = [line for line in text.splitlines() if line.startswith("| 1 |")]
     best = choices[1 * MM].best
     assert rows[0].startswith(f"| 1 | robust (stock h_i of 2 tried) | {float(best.plate.wavelength) / MM:.3f} | "
-                              f"{float(best.plate.resonator_thickness) / MM:g} |")
-    assert f"| {best.probability:.3f} ± {best.probability_error:.3f} |" in rows[0] and "**build this**" in rows[0]
-    assert rows[1].startswith(f"| 1 | nominal FEM optimum | {float(NOMINAL.wavelength) / MM:.3f} | 0.75 |")
+                              f"{float(best.plate.resonator_thickness) / MM:.3f} |")
+    assert f"| {best.probability:.3f} ± {best.probability_error:.1g} |" in rows[0] and "**build this**" in rows[0]
+    assert rows[1].startswith(f"| 1 | nominal FEM optimum | {float(NOMINAL.wavelength) / MM:.3f} | 0.750 |")
     assert "**likely to miss**: P 0." in rows[1]
     assert "on the measured built plates (P1, P2)" in text and "Build: h_p = 1 mm from the robust rows." in text
     assert "What these bands contain" in text and "constant Q = 54" in text

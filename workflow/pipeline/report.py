@@ -46,8 +46,11 @@ def _recommended_design(context: RunContext, recommendation) -> str:
     robust = context.results.get("robust_recommendation")
     if robust is None:
         return _nominal_designs(context, recommendation, "Recommended design")
-    return robust_section(context, robust) + "\n\n" + _nominal_designs(
-        context, recommendation, "Nominal optima with Q(v) (for comparison: not calibrated to built plates)")
+    return robust_section(context, robust) + "\n\n" + _nominal_designs(context, recommendation, NOMINAL_HEADING)
+
+
+NOMINAL_HEADING = "Nominal optima with Q(v)"
+"""The recommended-design section's heading when "What to build" comes first (the nominal optima, for comparison)."""
 
 
 def _nominal_designs(context: RunContext, recommendation, heading: str) -> str:

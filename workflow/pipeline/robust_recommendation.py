@@ -25,7 +25,7 @@ from workflow.units import KHZ, MM
 
 CALIBRATION_FOLDER = "calibration"
 """Sub-folder of the run's output with the calibration on the built plates (``calibration.json``, its pairs figure)."""
-STOCK_HI_MM = (0.5, 0.6, 0.7, 0.75, 0.8, 1.0, 1.2, 1.5, 2.0)
+STOCK_HI_MM = (0.5, 0.6, 0.7, 0.75, 0.8, 1.0, 1.2, 1.5, 2.0, 2.5, 3.0)
 """Resonator stock thicknesses the robust design chooses from [mm] (common CuBe strip gauges)."""
 STOCKS_PER_DESIGN = 2
 """Stocks tried per h_p: those nearest (in ratio) to the nominal optimum's h_i [-]; each costs a surrogate of

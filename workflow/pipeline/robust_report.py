@@ -26,24 +26,29 @@ def _row(label: str, design: str, candidate: RobustCandidate, verdict: str) -> t
         label,
         design,
         f"{float(plate.wavelength) / MM:.3f}",
-        f"{float(plate.resonator_thickness) / MM:g}",
+        f"{float(plate.resonator_thickness) / MM:.3f}",
         f"{float(plate.length) / MM:.1f}",
         _band(candidate.frequency, KHZ, 3),
-        f"{candidate.probability:.3f} ± {candidate.probability_error:.3f}",
+        f"{candidate.probability:.3f} ± {candidate.probability_error:.1g}",
         _band(candidate.deflection, UM, 2),
         _nearest(candidate),
         verdict,
     )
 
 
+def _meets(candidate: RobustCandidate, reliability: float) -> bool:
+    """P reaches the reliability within two Monte Carlo standard errors."""
+    return candidate.probability >= reliability - 2 * candidate.probability_error
+
+
 def _robust_verdict(candidate: RobustCandidate, reliability: float) -> str:
-    return "**build this**" if candidate.probability >= reliability else f"P below {reliability:g} (Monte Carlo)"
+    return "**build this**" if _meets(candidate, reliability) else f"P below {reliability:g}: widen the stocks tried"
 
 
 def _nominal_verdict(candidate: RobustCandidate, reliability: float) -> str:
-    if candidate.probability >= reliability:
+    if _meets(candidate, reliability):
         return "robust as it is"
-    return f"**likely to miss**: P {candidate.probability:.2f} < {reliability:g}"
+    return f"**likely to miss**: P {candidate.probability:.3f} < {reliability:g}"
 
 
 def robust_section(context: RunContext, robust: RobustRecommendation) -> str:
