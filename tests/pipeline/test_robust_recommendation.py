@@ -47,7 +47,8 @@ def test_the_stocks_tried_are_those_nearest_the_nominal_thickness():
     stock = [t * MM for t in robust.STOCK_HI_MM]
     assert robust.nearest_stocks(0.916 * MM, stock, 2) == [0.8 * MM, 1.0 * MM]
     assert robust.nearest_stocks(0.5 * MM, stock, 2) == [0.5 * MM, 0.6 * MM]
-    assert robust.nearest_stocks(1.9 * MM, stock, 3) == [1.2 * MM, 1.5 * MM, 2.0 * MM]
+    assert robust.nearest_stocks(1.9 * MM, stock, 3) == [1.5 * MM, 2.0 * MM, 2.5 * MM]
+    assert robust.nearest_stocks(2.29 * MM, stock, 2) == [2.0 * MM, 2.5 * MM]
 
 
 def test_robust_choices_batch_every_hp_and_check_the_nominal_at_its_own_wavelength():
