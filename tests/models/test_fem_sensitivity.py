@@ -28,7 +28,7 @@ from workflow.models.fem.sensitivity import (
     system_tangent,
 )
 from workflow.models.plate import ORIGINAL_PLATE
-from workflow.optimise.damped import fem_damped_deflection
+from workflow.optimise.damped import damped_deflection
 from workflow.optimise.fem_model import FemModel, FemTask, describe_fem_task
 from workflow.optimise.problem import DesignProblem
 from workflow.units import MM
@@ -72,9 +72,9 @@ def test_gradient_of_a_self_consistent_deflection_with_q_of_v():
     """Any function of a result differentiates along the tangents: here the deflection with Q(v)."""
     law = quadratic_law_through(q_low=80.0, q_work=54.0, v_work=0.2)
     result = evaluate_fem_with_tangents(ORIGINAL_PLATE, 54.0, 15.0, COARSE)
-    computed = result_gradient(lambda moved: fem_damped_deflection(moved, law), result)
+    computed = result_gradient(lambda moved: damped_deflection(moved, law), result)
     for k, name in enumerate(DESIGN_PARAMETERS):
-        expected = _central_difference(lambda other: fem_damped_deflection(other, law), ORIGINAL_PLATE, name)
+        expected = _central_difference(lambda other: damped_deflection(other, law), ORIGINAL_PLATE, name)
         assert computed[k] == pytest.approx(expected, rel=1e-3)
 
 

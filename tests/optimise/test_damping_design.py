@@ -6,6 +6,7 @@ import pytest
 from workflow.damping.laws import ConstantQ, QuadraticLoss, quadratic_law_through
 from workflow.damping.posterior import DampingPosterior
 from workflow.models import analytical, materials
+from workflow.models.analytical import beam_response
 from workflow.models.plate import ORIGINAL_PLATE, Plate
 from workflow.optimise.damped import (
     DampedFemModel,
@@ -13,8 +14,6 @@ from workflow.optimise.damped import (
     damped_deflection,
     damped_maps,
     design_with_damping,
-    fem_damped_deflection,
-    fem_required_voltage,
     required_voltage,
 )
 from workflow.optimise.problem import DesignProblem, maximise_deflection, optimise_analytical
@@ -28,7 +27,7 @@ GRID = Plate(
 
 
 def test_constant_q_gives_the_beam_model():
-    w = damped_deflection(GRID, 15.0, ConstantQ(materials.PLATE_Q))
+    w = damped_deflection(beam_response(GRID, 15.0), ConstantQ(materials.PLATE_Q))
     assert np.allclose(w, analytical.dynamic_deflection(GRID, 15.0, materials.PLATE_Q), rtol=1e-10)
 
 
@@ -36,23 +35,42 @@ def test_original_plate_keeps_its_deflection_when_q_of_v_passes_through_54_there
     w_constant = analytical.dynamic_deflection(ORIGINAL_PLATE, 15.0, 54.0)
     v_work = 2 * np.pi * analytical.resonance_frequency(ORIGINAL_PLATE) * w_constant
     law = quadratic_law_through(150.0, 54.0, float(v_work))
-    assert damped_deflection(ORIGINAL_PLATE, 15.0, law) == pytest.approx(w_constant, rel=1e-9)
+    assert damped_deflection(beam_response(ORIGINAL_PLATE, 15.0), law) == pytest.approx(w_constant, rel=1e-9)
 
 
 def test_required_voltage_inverts_the_deflection():
-    voltage = required_voltage(GRID, LAW)
-    assert np.allclose(damped_deflection(GRID, voltage, LAW), materials.TARGET_DEFLECTION, rtol=1e-8)
+    voltage = required_voltage(beam_response(GRID, 15.0), LAW)
+    assert np.allclose(damped_deflection(beam_response(GRID, voltage), LAW), materials.TARGET_DEFLECTION, rtol=1e-8)
+
+
+def test_one_q_of_v_path_for_every_model_gives_the_beam_models_closed_forms():
+    """The beam model through the model-independent functions: the single-mode harmonic solve of the beam's own
+    amplitude, the closed-form V* = w* / (Q(v*) k) whatever voltage the response was taken at, and a response
+    scaled to another voltage equal to the response at that voltage (every model is linear in V)."""
+    from workflow.damping.harmonic import self_consistent_amplitude
+    from workflow.models.response import ScaledResponse
+
+    frequency = analytical.resonance_frequency(GRID)
+    per_volt = analytical.deflection_per_volt_per_q(GRID)
+    single_mode = self_consistent_amplitude(per_volt * 15.0, frequency, frequency, LAW.quality_factor)
+    assert np.allclose(damped_deflection(beam_response(GRID, 15.0), LAW), single_mode, rtol=1e-11)
+    closed = materials.TARGET_DEFLECTION / (LAW.quality_factor(2 * np.pi * frequency * materials.TARGET_DEFLECTION) * per_volt)
+    for voltage in (1.0, 15.0, 200.0):
+        assert np.allclose(required_voltage(beam_response(GRID, voltage), LAW), closed, rtol=1e-13)
+    scaled = ScaledResponse(beam_response(GRID, 15.0), 2.0)
+    assert scaled.voltage == 30.0 and scaled.error is None
+    assert np.allclose(damped_deflection(scaled, LAW), damped_deflection(beam_response(GRID, 30.0), LAW), rtol=1e-13)
 
 
 def test_more_voltage_more_deflection_more_loss_less_deflection():
     voltages = np.linspace(1.0, 40.0, 30)
-    w = damped_deflection(ORIGINAL_PLATE, voltages, LAW)
+    w = damped_deflection(beam_response(ORIGINAL_PLATE, voltages), LAW)
     assert np.all(np.diff(w) > 0)
     alphas = np.linspace(0.0, 1.0, 11)
-    w_alpha = damped_deflection(ORIGINAL_PLATE, 15.0, QuadraticLoss(150.0, alphas))
+    w_alpha = damped_deflection(beam_response(ORIGINAL_PLATE, 15.0), QuadraticLoss(150.0, alphas))
     assert np.all(np.diff(w_alpha) < 0)
     # a voltage-dependent Q saturates the response: doubling V less than doubles w
-    assert damped_deflection(ORIGINAL_PLATE, 30.0, LAW) < 2 * damped_deflection(ORIGINAL_PLATE, 15.0, LAW)
+    assert damped_deflection(beam_response(ORIGINAL_PLATE, 30.0), LAW) < 2 * damped_deflection(beam_response(ORIGINAL_PLATE, 15.0), LAW)
 
 
 def test_damped_beam_model_drives_the_optimiser():
@@ -64,7 +82,7 @@ def test_damped_beam_model_drives_the_optimiser():
     assert damped.frequency >= problem.min_frequency * (1 - 1e-6)
     # the optimum geometry barely moves (the paper, docs/damping.md)
     assert float(damped.plate.wavelength) == pytest.approx(float(reference.plate.wavelength), rel=0.02)
-    assert damped.deflection == pytest.approx(float(damped_deflection(damped.plate, problem.voltage, LAW)), rel=1e-9)
+    assert damped.deflection == pytest.approx(float(damped_deflection(beam_response(damped.plate, problem.voltage), LAW)), rel=1e-9)
 
 
 class _LinearFemResult:
@@ -81,8 +99,8 @@ def test_fem_path_matches_the_beam_solution_for_a_proportional_response():
     per_q = float(analytical.deflection_per_volt_per_q(ORIGINAL_PLATE)) * 15.0
     frequency = float(analytical.resonance_frequency(ORIGINAL_PLATE))
     result = _LinearFemResult(per_q, frequency, 15.0)
-    assert fem_damped_deflection(result, LAW) == pytest.approx(float(damped_deflection(ORIGINAL_PLATE, 15.0, LAW)), rel=1e-9)
-    assert fem_required_voltage(result, LAW) == pytest.approx(float(required_voltage(ORIGINAL_PLATE, LAW)), rel=1e-9)
+    assert damped_deflection(result, LAW) == pytest.approx(float(damped_deflection(beam_response(ORIGINAL_PLATE, 15.0), LAW)), rel=1e-9)
+    assert required_voltage(result, LAW) == pytest.approx(float(required_voltage(beam_response(ORIGINAL_PLATE, 15.0), LAW)), rel=1e-9)
 
 
 def _posterior(n=40, seed=0):
@@ -106,8 +124,8 @@ def test_maps_are_consistent_with_the_pointwise_functions():
     maps = damped_maps(_posterior(), problem, grid=11, draws=20)
     law = _posterior().median_law()
     plate = problem.plate(maps.wavelength[3], maps.resonator_thickness[5])
-    assert maps.deflection[3, 5] == pytest.approx(float(damped_deflection(plate, problem.voltage, law)), rel=1e-9)
-    assert maps.required_voltage[3, 5] == pytest.approx(float(required_voltage(plate, law)), rel=1e-9)
+    assert maps.deflection[3, 5] == pytest.approx(float(damped_deflection(beam_response(plate, problem.voltage), law)), rel=1e-9)
+    assert maps.required_voltage[3, 5] == pytest.approx(float(required_voltage(beam_response(plate, problem.voltage), law)), rel=1e-9)
     p05, p50, p95 = maps.required_voltage_interval
     assert np.all(p05 <= p50) and np.all(p50 <= p95)
 

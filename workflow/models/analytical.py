@@ -5,6 +5,8 @@ may be numpy arrays that broadcast together.  z is measured from the free face o
 the ceramic (ceramic in [0, h_p], resonator in [h_p, h_p + h_i]).
 """
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from workflow.models.plate import Plate
@@ -125,6 +127,37 @@ def dynamic_deflection(plate: Plate, voltage, q, calibration: float = BEAM_CALIB
         Effective-amplification calibration [-]; 1 gives the literal formula.
     """
     return deflection_per_volt_per_q(plate, calibration) * np.asarray(q) * np.asarray(voltage)
+
+
+@dataclass(frozen=True)
+class BeamResponse:
+    """The beam model's working mode as a :class:`~workflow.models.response.PlateResponse` (fields may be arrays: a
+    batch of geometries).
+
+    Attributes
+    ----------
+    frequency : float or numpy.ndarray
+        f_r [Hz].
+    per_q : float or numpy.ndarray
+        Deflection at the voltage per unit of Q [m]: :func:`deflection_per_volt_per_q` times V.
+    voltage : float
+        [V peak].
+    """
+
+    frequency: object
+    per_q: object
+    voltage: float
+    error = None
+    """The beam model has no discretisation error to estimate (its model error is in docs/model.md)."""
+
+    def deflection_at_q(self, q):
+        """w = Q k V [m]."""
+        return self.per_q * np.asarray(q)
+
+
+def beam_response(plate: Plate, voltage) -> BeamResponse:
+    """The beam model's response of ``plate`` driven at ``voltage`` [V peak]."""
+    return BeamResponse(resonance_frequency(plate), deflection_per_volt_per_q(plate) * np.asarray(voltage), voltage)
 
 
 def bending_stiffness(plate: Plate):

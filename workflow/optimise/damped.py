@@ -23,11 +23,12 @@ from typing import Dict, Optional, Sequence
 
 import numpy as np
 
-from workflow.damping.harmonic import self_consistent_amplitude, self_consistent_deflection
+from workflow.damping.harmonic import self_consistent_deflection
 from workflow.damping.laws import POSTERIOR_LAWS, law_parameters
 from workflow.damping.posterior import DampingPosterior
 from workflow.models import analytical, materials
 from workflow.models.plate import ORIGINAL_PLATE, Plate
+from workflow.models.response import PlateResponse, ScaledResponse
 from workflow.optimise.fem_optimum import optimise_fem
 from workflow.optimise.maps import grid_axes
 from workflow.optimise.problem import DesignProblem, Optimum, PlateModel, maximise_deflection
@@ -40,50 +41,30 @@ MAX_MAP_DRAWS = 100
 """Most posterior draws behind a required-voltage map's interval."""
 
 
-def damped_deflection(plate: Plate, voltage, law):
-    """Beam-model antinode deflection at resonance with Q = Q(2 pi f_r w) [m].
+def damped_deflection(response: PlateResponse, law):
+    """Antinode deflection at resonance with Q = Q(2 pi f_r w), solved self-consistently [m], for any plate model.
 
     Parameters
     ----------
-    plate : Plate
-        Fields may be arrays (a batch of geometries).
-    voltage : float or array
-        Drive amplitude across the ceramics [V peak].
+    response : PlateResponse
+        The beam model's (:func:`~workflow.models.analytical.beam_response`, fields may be arrays: a batch of
+        geometries) or an FEM result (its best mode; its ``deflection_at_q`` gives the deflection for other Q without
+        a new solve).
     law : Q(v) law
-        Parameters may be arrays broadcasting against the plate's (e.g. draws on a new axis).
+        Parameters may be arrays broadcasting against the response's (e.g. draws on a new axis).
     """
-    frequency = analytical.resonance_frequency(plate)
-    per_volt = analytical.deflection_per_volt_per_q(plate)
-    return self_consistent_amplitude(per_volt * np.asarray(voltage), frequency, frequency, law.quality_factor)
+    omega = 2 * np.pi * np.asarray(response.frequency, dtype=float)
+    return self_consistent_deflection(response.deflection_at_q, law.quality_factor, omega)
 
 
-def required_voltage(plate: Plate, law, target: float = materials.TARGET_DEFLECTION):
-    """Beam-model drive amplitude that gives the deflection ``target`` with Q(v) [V peak].
+def required_voltage(response: PlateResponse, law, target: float = materials.TARGET_DEFLECTION):
+    """Drive amplitude that gives the deflection ``target`` with Q(v) [V peak], for any plate model.
 
-    V* = w* / (Q(2 pi f_r w*) k), k = :func:`~workflow.models.analytical.deflection_per_volt_per_q`.
+    Every model here is linear in V: V* = V w* / D(Q(2 pi f_r w*)), D the deflection at the response's voltage V as
+    a function of Q (the beam model: V* = w* / (Q(v*) k)).
     """
-    frequency = analytical.resonance_frequency(plate)
-    return target / (law.quality_factor(2 * np.pi * frequency * target) * analytical.deflection_per_volt_per_q(plate))
-
-
-def fem_damped_deflection(result, law):
-    """FEM deflection of a result's best mode with Q(v), solved self-consistently [m].
-
-    Parameters
-    ----------
-    result : workflow.models.fem.FemResult
-        Its ``deflection_at_q(q)`` gives the best mode's deflection at the result's
-        voltage for other Q without a new solve.
-    law : Q(v) law
-    """
-    omega = 2 * np.pi * result.frequency
-    return self_consistent_deflection(result.deflection_at_q, law.quality_factor, omega)
-
-
-def fem_required_voltage(result, law, target: float = materials.TARGET_DEFLECTION):
-    """FEM drive amplitude for the deflection ``target`` with Q(v) [V peak] (the FEM is linear in V)."""
-    q_target = law.quality_factor(2 * np.pi * result.frequency * target)
-    return result.voltage * target / result.deflection_at_q(q_target)
+    q_target = law.quality_factor(2 * np.pi * np.asarray(response.frequency, dtype=float) * target)
+    return response.voltage * target / response.deflection_at_q(q_target)
 
 
 @dataclass
@@ -121,32 +102,13 @@ class DampedFemModel:
         results = self.results(plate)
         shape = plate.batch_shape
         scale = self.voltage / self.fem_model.voltage
-        deflection = np.array([float(fem_damped_deflection(_ScaledResult(r, scale), self.law)) for r in results])
+        deflection = np.array([float(damped_deflection(ScaledResponse(r, scale), self.law)) for r in results])
         frequency = np.array([r.frequency for r in results])
         indicator = np.array([r.best.transverse_indicator for r in results])
         return deflection.reshape(shape), frequency.reshape(shape), indicator.reshape(shape)
 
     def __call__(self, plate: Plate):
         return self.responses(plate)[:2]
-
-
-@dataclass(frozen=True)
-class _ScaledResult:
-    """A FEM result seen at another voltage (the FEM is linear in V)."""
-
-    result: object
-    scale: float
-
-    @property
-    def frequency(self):
-        return self.result.frequency
-
-    @property
-    def voltage(self):
-        return self.result.voltage * self.scale
-
-    def deflection_at_q(self, q):
-        return self.scale * self.result.deflection_at_q(q)
 
 
 def damped_beam_model(law, voltage: float = materials.DESIGN_VOLTAGE) -> PlateModel:
@@ -162,7 +124,8 @@ def damped_beam_model(law, voltage: float = materials.DESIGN_VOLTAGE) -> PlateMo
     """
 
     def beam(plate: Plate):
-        return damped_deflection(plate, voltage, law), analytical.resonance_frequency(plate)
+        response = analytical.beam_response(plate, voltage)
+        return damped_deflection(response, law), response.frequency
 
     return beam
 
@@ -181,7 +144,7 @@ def optimise_draw(task: DrawTask) -> tuple:
     """(lambda [m], h_i [m], deflection [m], frequency [Hz], required voltage [V]) of one draw's beam optimum."""
     law = POSTERIOR_LAWS[task.law_name](*task.parameters)
     optimum = maximise_deflection(damped_beam_model(law, task.problem.voltage), task.problem)
-    voltage = float(required_voltage(optimum.plate, law, task.target))
+    voltage = float(required_voltage(analytical.beam_response(optimum.plate, task.problem.voltage), law, task.target))
     return (
         float(optimum.plate.wavelength),
         float(optimum.plate.resonator_thickness),
@@ -288,16 +251,17 @@ def design_with_damping(
             problem=problem,
             constant_q=maximise_deflection(analytical_model(materials.PLATE_Q, problem.voltage), problem),
             damped=damped,
-            required_voltage=float(required_voltage(damped.plate, median, target)),
+            required_voltage=float(required_voltage(analytical.beam_response(damped.plate, problem.voltage), median, target)),
             draws=dict(zip(("wavelength", "resonator_thickness", "deflection", "frequency", "required_voltage"), rows.T)),
         )
     voltage = problems[0].voltage if problems else materials.DESIGN_VOLTAGE
+    original = analytical.beam_response(ORIGINAL_PLATE, voltage)
     return DampedDesign(
         posterior=posterior,
         median_law=median,
         optima=optima,
-        original_deflection=damped_deflection(ORIGINAL_PLATE, voltage, drawn),
-        original_required_voltage=required_voltage(ORIGINAL_PLATE, drawn, target),
+        original_deflection=damped_deflection(original, drawn),
+        original_required_voltage=required_voltage(original, drawn, target),
         target=target,
     )
 
@@ -355,22 +319,22 @@ def damped_maps(
 
     wavelength = np.linspace(*problem.wavelength_range, grid)
     thickness = np.linspace(RESONATOR_THICKNESS_RANGE[0], problem.max_resonator_thickness, grid)
-    plate = problem.plate(wavelength[:, None], thickness[None, :])
+    response = analytical.beam_response(problem.plate(wavelength[:, None], thickness[None, :]), problem.voltage)
     median = posterior.median_law()
     interval = None
     if draws:
         drawn = posterior.draws(draws, seed)
         on_axis = POSTERIOR_LAWS[posterior.law_name](**{k: np.reshape(v, (-1, 1, 1)) for k, v in law_parameters(drawn).items()})
-        interval = np.quantile(required_voltage(plate, on_axis, target), QUANTILES, axis=0)
+        interval = np.quantile(required_voltage(response, on_axis, target), QUANTILES, axis=0)
     return _damped_maps(
         problem,
         optimum,
         "beam model, " + _law_label(posterior.law_name, median),
         wavelength=wavelength,
         resonator_thickness=thickness,
-        deflection=damped_deflection(plate, problem.voltage, median),
-        frequency=np.broadcast_to(analytical.resonance_frequency(plate), (grid, grid)),
-        required_voltage=required_voltage(plate, median, target),
+        deflection=damped_deflection(response, median),
+        frequency=np.broadcast_to(response.frequency, (grid, grid)),
+        required_voltage=required_voltage(response, median, target),
         required_voltage_interval=interval,
     )
 
@@ -483,11 +447,11 @@ def fem_damped_maps(posterior: DampingPosterior, problem: DesignProblem, fem_mod
         "FEM, " + _law_label(posterior.law_name, law),
         wavelength=wavelength,
         resonator_thickness=thickness,
-        deflection=grid([fem_damped_deflection(r, law) for r in results]),
+        deflection=grid([damped_deflection(r, law) for r in results]),
         frequency=grid([r.frequency for r in results]),
-        required_voltage=grid([fem_required_voltage(r, law) for r in results]),
+        required_voltage=grid([required_voltage(r, law) for r in results]),
         required_voltage_interval=np.moveaxis(
-            grid([np.quantile(fem_required_voltage(r, drawn), QUANTILES) for r in results]), -1, 0
+            grid([np.quantile(required_voltage(r, drawn), QUANTILES) for r in results]), -1, 0
         ),
     )
 

@@ -17,8 +17,6 @@ from workflow.models.plate import Plate
 from workflow.optimise.damped import (
     QUANTILES,
     damped_deflection,
-    fem_damped_deflection,
-    fem_required_voltage,
     required_voltage,
 )
 from workflow.optimise.maps import TRANSVERSE_THRESHOLD
@@ -190,8 +188,8 @@ def fem_recommendation(result, plate: Plate, problem: DesignProblem, draws, targ
         problem=problem,
         target=target,
         frequency=result.frequency,
-        deflection=quantiles(fem_damped_deflection(result, draws)),
-        required_voltage=quantiles(fem_required_voltage(result, draws, target)),
+        deflection=quantiles(damped_deflection(result, draws)),
+        required_voltage=quantiles(required_voltage(result, draws, target)),
         working_indicator=result.best.transverse_indicator,
         nearest_transverse=nearest_transverse_mode(result.modes, result.best),
         computed_modes=len(result.modes),
@@ -220,12 +218,13 @@ def _electrical(result) -> dict:
 
 def beam_recommendation(plate: Plate, problem: DesignProblem, draws, target: float) -> RecommendedDesign:
     """The beam-model design at ``plate`` with Q(v) (``draws``: posterior draws as one law)."""
+    response = analytical.beam_response(plate, problem.voltage)
     return RecommendedDesign(
         plate=plate,
         model="beam",
         problem=problem,
         target=target,
-        frequency=float(analytical.resonance_frequency(plate)),
-        deflection=quantiles(damped_deflection(plate, problem.voltage, draws)),
-        required_voltage=quantiles(required_voltage(plate, draws, target)),
+        frequency=float(response.frequency),
+        deflection=quantiles(damped_deflection(response, draws)),
+        required_voltage=quantiles(required_voltage(response, draws, target)),
     )

@@ -7,14 +7,12 @@ damping keys added when a posterior Q(v) is used (``--damping``).
 import numpy as np
 
 from workflow.damping.laws import law_parameters
-from workflow.models.analytical import resonance_frequency
-from workflow.models.materials import TARGET_DEFLECTION
+from workflow.models.analytical import beam_response
+from workflow.models.materials import DESIGN_VOLTAGE, TARGET_DEFLECTION
 from workflow.models.plate import Plate
 from workflow.optimise.damped import (
     QUANTILES,
     damped_deflection,
-    fem_damped_deflection,
-    fem_required_voltage,
     required_voltage,
 )
 from workflow.optimise.problem import Optimum
@@ -76,27 +74,28 @@ def damping_record(posterior, plate: Plate, voltage: float, draws: int = POSTERI
     """JSON keys for a beam-model evaluation with Q(v): the posterior-median law's deflection,
     the Q it settles at, 90 % intervals over posterior draws and the voltage for the target."""
     law, drawn = posterior.median_law(), posterior.draws(draws)
-    deflection = float(damped_deflection(plate, voltage, law))
-    w05, _, w95 = np.quantile(damped_deflection(plate, voltage, drawn), QUANTILES)
+    response = beam_response(plate, voltage)
+    deflection = float(damped_deflection(response, law))
+    w05, _, w95 = np.quantile(damped_deflection(response, drawn), QUANTILES)
     return {
         "w_dyn_um_p05": w05 / UM,
         "w_dyn_um_p95": w95 / UM,
-        **damping_keys(posterior, deflection, float(resonance_frequency(plate)), required_voltage(plate, drawn)),
+        **damping_keys(posterior, deflection, float(response.frequency), required_voltage(response, drawn)),
     }
 
 
 def fem_damping_record(posterior, result, draws: int = POSTERIOR_DRAWS) -> dict:
     """JSON keys for a FEM evaluation with Q(v): the best mode's self-consistent deflection with
     the posterior-median law, the Q it settles at, and the voltage for the target deflection."""
-    deflection = float(fem_damped_deflection(result, posterior.median_law()))
-    voltages = fem_required_voltage(result, posterior.draws(draws))
+    deflection = float(damped_deflection(result, posterior.median_law()))
+    voltages = required_voltage(result, posterior.draws(draws))
     return damping_keys(posterior, deflection, result.frequency, voltages)
 
 
 def damped_optimum_record(posterior, optimum: Optimum, draws: int = POSTERIOR_DRAWS) -> dict:
     """Damping keys of a beam optimum found with Q(v): the Q it settles at and the voltage for
     the target deflection there (median law and 90 % interval over posterior draws)."""
-    voltages = required_voltage(optimum.plate, posterior.draws(draws))
+    voltages = required_voltage(beam_response(optimum.plate, DESIGN_VOLTAGE), posterior.draws(draws))  # any V: linear
     keys = damping_keys(posterior, optimum.deflection, optimum.frequency, voltages)
     del keys["w_dyn_um"]
     return keys

@@ -87,7 +87,7 @@ def reproduce(
         from workflow.optimise.damped import damped_deflection
 
         law = results["damping_fit"].answer.median_law()
-        deflection = float(damped_deflection(ORIGINAL_PLATE, voltage, law))
+        deflection = float(damped_deflection(analytical.beam_response(ORIGINAL_PLATE, voltage), law))
         velocity = 2 * np.pi * float(analytical.resonance_frequency(ORIGINAL_PLATE)) * deflection
         source = "the simulated campaign (generated with Q = 54 at this point)" if simulated_campaign else "the given logs"
         ours["working_q"] = (
