@@ -16,23 +16,15 @@ from workflow.cli.options import (
     calibration_fem_model,
     calibration_line,
     damping_line,
-    fem_accuracy,
+    design_model,
     load_calibration_option,
     load_damping,
     plate_from_args,
     positive_float,
 )
 from workflow.errors import TactileError
-from workflow.models import analytical
 from workflow.pipeline.calibration_files import calibrated_record
-from workflow.pipeline.records import (
-    damping_record,
-    fem_accuracy_record,
-    fem_coupled_record,
-    fem_damping_record,
-    geometry_record,
-)
-from workflow.units import KHZ, UM
+from workflow.pipeline.records import geometry_record
 
 
 def register(subparsers) -> None:
@@ -60,7 +52,8 @@ def register(subparsers) -> None:
 def run(args) -> dict:
     plate = plate_from_args(args)
     calibration = load_calibration_option(args)
-    if calibration is not None and args.model != "fem":
+    model = design_model(args)
+    if calibration is not None and not model.calibrated:
         raise TactileError("--calibration corrects the FEM: give --model fem")
     if args.voltage > DEFAULT_CERAMIC_VOLTAGE_LIMIT:
         print(
@@ -68,39 +61,14 @@ def run(args) -> dict:
             f"{DEFAULT_CERAMIC_VOLTAGE_LIMIT:g} V peak across the ceramics: the bench would refuse this drive",
             file=sys.stderr,
         )
-    result = {
-        "model": args.model,
-        **geometry_record(plate),
-        "q": args.q,
-        "voltage_v": args.voltage,
-    }
-    if args.model == "analytical":
-        result["w_dyn_um"] = float(analytical.dynamic_deflection(plate, args.voltage, args.q)) / UM
-        result["f_r_khz"] = float(analytical.resonance_frequency(plate)) / KHZ
-        posterior = load_damping(args)
-        if posterior is not None:
-            result.update(damping_record(posterior, plate, args.voltage))
-    else:
-        from workflow.models.fem import evaluate_fem
-
-        fem = evaluate_fem(plate, q=args.q, voltage=args.voltage, settings=fem_accuracy(args))
-        result["w_dyn_um"] = fem.deflection / UM
-        result["f_r_khz"] = fem.frequency / KHZ
-        result.update(fem_accuracy_record(fem.error))
-        result.update(fem_coupled_record(fem))
-        result["modes"] = [
-            {"f_khz": m.frequency / KHZ, "w_um": m.deflection / UM, "transverse": m.transverse_indicator}
-            for m in fem.modes
-        ]
-        posterior = load_damping(args)
-        if posterior is not None:
-            result.update(fem_damping_record(posterior, fem))
-        if calibration is not None:
-            result["nominal_f_r_khz"], result["nominal_w_dyn_um"] = result["f_r_khz"], result["w_dyn_um"]
-            model = calibration_fem_model(calibration, args.q, args.voltage)
-            result.update(calibrated_record(calibration, plate, model.evaluate_plates, args.calibration))
+    evaluation = model.evaluate(plate, load_damping(args))
+    result = {"model": args.model, **geometry_record(plate), "q": args.q, "voltage_v": args.voltage, **evaluation.record}
+    if calibration is not None:
+        result["nominal_f_r_khz"], result["nominal_w_dyn_um"] = result["f_r_khz"], result["w_dyn_um"]
+        fem = calibration_fem_model(calibration, args.q, args.voltage)
+        result.update(calibrated_record(calibration, plate, fem.evaluate_plates, args.calibration))
     if not args.json:
-        _print_human(result, args.model, None if args.model == "analytical" else fem.best_index)
+        _print_human(result, args.model, evaluation.working_mode)
     return result
 
 

@@ -21,25 +21,22 @@ from workflow.cli.options import (
     bounded,
     build_plate,
     calibration_fem_model,
-    command_fem_model,
+    design_model,
     design_problem,
-    fem_accuracy,
     limit_text,
     load_calibration_option,
     load_damping,
 )
+from workflow.pipeline.design_models import DESIGN_MODELS
 from workflow.errors import TactileError
 from workflow.models.fem.accuracy import SURVEY_ACCURACY
-from workflow.optimise.damped import damped_fem_optimum, damped_maps, damped_optimum, fem_damped_maps, map_draws
-from workflow.optimise.fem_optimum import optimise_fem
+from workflow.optimise.damped import map_draws
 from workflow.optimise.maps import design_map, width_sweep
-from workflow.optimise.problem import analytical_model, optimise_analytical
 from workflow.models.limits import LIMITS
 from workflow.pipeline.outputs import output_folder, save_figure
-from workflow.pipeline.records import damped_optimum_record, fem_damping_record
 from workflow.units import KHZ, MM, UM
 
-DEFAULT_GRID = {"analytical": 81, "fem": 12}
+
 """Grid points per axis when --grid is not given."""
 
 OUTPUTS = ("*.png",)
@@ -67,8 +64,8 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--grid",
         type=bounded(int, *LIMITS["maps.grid"]),
-        help=f"points per axis, {limit_text('maps.grid')} (default: {DEFAULT_GRID['analytical']} analytical, "
-        f"{DEFAULT_GRID['fem']} FEM)",
+        help=f"points per axis, {limit_text('maps.grid')} (default: "
+        + ", ".join(f"{kind.default_grid} {kind.label}" for kind in DESIGN_MODELS.values()) + ")",
     )
     parser.add_argument("--scheduler", metavar="ADDRESS", help="tcp://host:port of a Dask scheduler (default: local cores)")
     parser.add_argument(
@@ -84,17 +81,18 @@ def register(subparsers) -> None:
 
 
 def run(args) -> dict:
-    points = DEFAULT_GRID[args.model] if args.grid is None else args.grid
-    if args.width_sweep and args.model != "fem":
+    model = design_model(args, args.scheduler)
+    points = model.default_grid if args.grid is None else args.grid
+    if args.width_sweep and not model.resolves_width:
         raise TactileError("maps: --width-sweep needs --model fem (the beam model does not depend on b)")
     problem = design_problem(args, args.hp_mm * MM)
     posterior = load_damping(args)
     calibration = load_calibration_option(args)
-    if calibration is not None and (args.model != "fem" or posterior is not None):
+    if calibration is not None and (not model.calibrated or posterior is not None):
         raise TactileError("maps: --calibration corrects the FEM with a constant Q: give --model fem and no --damping")
     args.loaded_calibration = calibration
     with output_folder(args.out, OUTPUTS, force=args.force):
-        record = _maps(args, problem, posterior, points)
+        record = _maps(args, model, problem, posterior, points)
     if not args.json:
         o = record["optimum"]
         damping = "" if posterior is None else f" with {posterior.law_name} Q(v)"
@@ -107,12 +105,8 @@ def run(args) -> dict:
     return record
 
 
-def _maps(args, problem, posterior, points: int) -> dict:
+def _maps(args, model, problem, posterior, points: int) -> dict:
     """The maps' record, their figures written into --out."""
-    if args.model == "analytical":
-        model = analytical_model(args.q, args.voltage)
-    else:
-        model = command_fem_model(args.q, args.voltage, fem_accuracy(args), args.scheduler)
     if posterior is None:
         record = _constant_q_record(args, problem, model, points)
     else:
@@ -123,7 +117,7 @@ def _maps(args, problem, posterior, points: int) -> dict:
         from workflow.pipeline.steps import sweep_widths
 
         plate = build_plate(args)
-        sweep = width_sweep(model, plate, sweep_widths(default_config()["fem"], plate.width))
+        sweep = width_sweep(model.plate_model, plate, sweep_widths(default_config()["fem"], plate.width))
         figure = width_sweep_figure(sweep, design_width=args.b_mm * MM)
         record["figures"].append(save_figure(figure, args.out / "width_sweep_fem.png"))
         record["width_sweep"] = {
@@ -161,11 +155,8 @@ def _constant_q_record(args, problem, model, points: int) -> dict:
     """Map and optimum with the constant --q."""
     from workflow.pipeline.figures.maps import map_figure
 
-    if args.model == "analytical":
-        optimum = optimise_analytical(problem, args.q)
-    else:
-        optimum = optimise_fem(problem, model, "space-mapping").optimum
-    result = design_map(model, problem, points, args.model, optimum)
+    optimum = model.optimum(problem)
+    result = design_map(model.plate_model, problem, points, model.name, optimum)
     correction = {}
     if getattr(args, "loaded_calibration", None) is not None:
         result, optimum, correction = calibrated_map(args, result, optimum)
@@ -204,14 +195,7 @@ def _damped_record(args, problem, model, points: int, posterior) -> dict:
     from workflow.pipeline.figures.damping import design_map_figure
 
     draws = map_draws(points)
-    if args.model == "analytical":
-        optimum = damped_optimum(posterior.median_law(), problem)
-        keys = damped_optimum_record(posterior, optimum)
-        maps = damped_maps(posterior, problem, points, draws=draws, optimum=optimum)
-    else:
-        found, result = damped_fem_optimum(posterior.median_law(), problem, model, "space-mapping")
-        optimum, keys = found.optimum, fem_damping_record(posterior, result)
-        maps = fem_damped_maps(posterior, problem, model, points, draws, optimum)
+    optimum, keys, maps = model.damped(posterior, problem, points, draws)
     stem = f"map_{args.model}_qv_hp{args.hp_mm:g}mm"
     figures = [
         save_figure(design_map_figure(maps, quantity, design_voltage=args.voltage), args.out / f"{stem}_{quantity}.png") for quantity in ("deflection", "voltage")

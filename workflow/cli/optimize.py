@@ -5,7 +5,6 @@ from workflow.cli.options import (
     add_calibration_option,
     bounded,
     calibration_fem_model,
-    command_fem_model,
     load_calibration_option,
     add_ceramic_option,
     add_damping_option,
@@ -17,15 +16,13 @@ from workflow.cli.options import (
     add_width_option,
     ceramic_thicknesses,
     damping_line,
+    design_model,
     design_problem,
-    fem_accuracy,
     load_damping,
 )
+from workflow.pipeline.design_models import DESIGN_MODELS
 from workflow.errors import TactileError
-from workflow.optimise.damped import damped_fem_optimum, damped_optimum
-from workflow.optimise.fem_optimum import METHODS, optimise_fem
-from workflow.optimise.problem import optimise_analytical
-from workflow.pipeline.records import damped_optimum_record, fem_accuracy_record, fem_damping_record, optimum_record
+from workflow.optimise.fem_optimum import METHODS
 
 DEFAULT_METHOD = "space-mapping"
 """--method when not given: a handful of FEM evaluations instead of the direct run's dozens."""
@@ -91,44 +88,13 @@ def stock_list(text: str) -> tuple:
     return values
 
 
-def _fem_model(args):
-    """The cached, parallel FEM at --q, --voltage and --accuracy."""
-    return command_fem_model(args.q, args.voltage, fem_accuracy(args))
-
-
 def run(args) -> dict:
     calibration = load_calibration_option(args)
     if calibration is not None:
         return _robust(args, calibration)
-    records = []
     posterior = load_damping(args)
-    for ceramic_thickness in ceramic_thicknesses(args):
-        problem = design_problem(args, ceramic_thickness)
-        if args.model == "analytical" and posterior is not None:
-            optimum = damped_optimum(posterior.median_law(), problem)
-            extra = damped_optimum_record(posterior, optimum)
-            records.append(optimum_record(optimum, coarse_evaluations=optimum.evaluations, **extra))
-        elif args.model == "analytical":
-            optimum = optimise_analytical(problem, q=args.q)
-            records.append(optimum_record(optimum, coarse_evaluations=optimum.evaluations))
-        else:
-            extra = {}
-            if posterior is None:
-                found = optimise_fem(problem, _fem_model(args), args.method)
-            else:
-                found, result = damped_fem_optimum(posterior.median_law(), problem, _fem_model(args), args.method)
-                extra = fem_damping_record(posterior, result)
-            counts = dict(
-                method=found.method, fine_evaluations=found.fine_evaluations, coarse_evaluations=found.coarse_evaluations
-            )
-            accuracy = {}
-            if found.error is not None:
-                accuracy = {
-                    **fem_accuracy_record(found.error),
-                    "verified": found.verified,
-                    "verification_evaluations": found.verification_evaluations,
-                }
-            records.append({**optimum_record(found.optimum, **counts), **accuracy, **extra})
+    model = design_model(args)
+    records = [model.optimum_record(design_problem(args, h_p), posterior, args.method) for h_p in ceramic_thicknesses(args)]
     if not args.json:
         for record in records:
             _print_human(record)
@@ -161,7 +127,7 @@ def _robust(args, calibration) -> dict:
     from workflow.pipeline.calibration_files import robust_record
     from workflow.units import MM, UM
 
-    if args.model != "fem":
+    if not DESIGN_MODELS[args.model].calibrated:
         raise TactileError("--calibration corrects the FEM: give --model fem")
     if args.damping is not None:
         raise TactileError("--calibration and --damping cannot be combined yet: the robust design uses the constant --q")

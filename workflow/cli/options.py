@@ -14,12 +14,13 @@ from workflow.models import materials
 from workflow.models.analytical import resonance_frequency
 from workflow.models.fem.accuracy import ACCURACY_RANGE, DEFAULT_ACCURACY, SIMULATION_ACCURACY_TARGET, FemAccuracy
 from workflow.models.fem.settings import PIEZO_MODELS
+from workflow.pipeline.design_models import DESIGN_MODELS
 from workflow.models.limits import LIMITS, point_problem, problem, unit
 from workflow.models.plate import ORIGINAL_PLATE, Plate, check_design_space
 from workflow.optimise.problem import DesignProblem
 from workflow.units import MM, UM
 
-MODELS = ("analytical", "fem")
+MODELS = tuple(DESIGN_MODELS)
 
 
 def finite_float(text: str) -> float:
@@ -596,6 +597,13 @@ def calibration_fem_model(calibration, q: float, voltage: float):
     from workflow.pipeline.calibration_files import calibration_accuracy
 
     return command_fem_model(q, voltage, calibration_accuracy(calibration.fem), scheduler="synchronous")
+
+
+def design_model(args, scheduler=None):
+    """The ``--model`` of a design command at --q and --voltage (the FEM at --accuracy and --piezo, cached, on
+    ``scheduler``) (:mod:`workflow.pipeline.design_models`)."""
+    return DESIGN_MODELS[args.model].for_command(
+        args.q, args.voltage, lambda: command_fem_model(args.q, args.voltage, fem_accuracy(args), scheduler))
 
 
 def command_fem_model(q: float, voltage: float, settings, scheduler=None):

@@ -112,7 +112,7 @@ def optimise_fem(
     Parameters as :func:`optimise_fem_on_mesh`.
     """
     accuracy = fem_model.settings
-    if not isinstance(accuracy, FemAccuracy):
+    if not accuracy.refines:
         return optimise_fem_on_mesh(problem, fem_model, method, q, coarse_model)
     if coarse_model is None:
         coarse_model = analytical_model(fem_model.q if q is None else q, problem.voltage)

@@ -97,6 +97,17 @@ class FemAccuracy:
         """Plain dict (content hashing and JSON)."""
         return {"kind": "accuracy", **asdict(self)}
 
+    refines = True
+    """An evaluation refines its mesh until the target is met (a :class:`~workflow.models.fem.settings.FemSettings`
+    is one fixed mesh)."""
+
+    def resolved(self, plate: Plate, evaluate: Callable) -> tuple:
+        """(the fixed mesh an evaluation of ``plate`` to this accuracy ends on, its error estimate), from one
+        evaluation ``evaluate()`` -> FemResult; a :class:`~workflow.models.fem.settings.FemSettings` answers with
+        itself and no estimate, evaluating nothing."""
+        error = evaluate().error
+        return mesh_for_level(plate, error.level, self.n_modes, self.piezo), error
+
     def evaluated(self, plate: Plate, evaluate_mesh: Callable, start=None, keep_solution: bool = False):
         """The FEM result of ``plate`` to this accuracy (:func:`evaluate_to_accuracy`; ``start`` unused: each level
         starts from the one below).  A :class:`~workflow.models.fem.settings.FemSettings` answers the same call on its

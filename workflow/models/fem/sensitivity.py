@@ -34,7 +34,7 @@ from threadpoolctl import threadpool_limits
 from workflow.errors import TactileError
 from workflow.models import analytical
 from workflow.models.fem.assembly import PlateSystem, assemble_piezo_load, element_types, free_dofs, reduced_matrices
-from workflow.models.fem.accuracy import FemAccuracy, mesh_for_level
+from workflow.models.fem.accuracy import FemAccuracy
 from workflow.models.fem.evaluate import discretise, evaluate_fem, working_modes
 from workflow.models.fem.result import FemResult, fem_result
 from workflow.models.fem.harmonic import ProbeModalModel, probe_modal_model, shifted_residual
@@ -342,18 +342,14 @@ def evaluate_fem_with_tangents(
     FemResult
         The same numbers as ``evaluate_fem``, with ``tangents`` {parameter: d probe_model / d parameter}.
     """
-    if isinstance(settings, FemAccuracy):
-        error = evaluate_fem(plate, q, voltage, settings).error
-        with_tangents = evaluate_fem_with_tangents(
-            plate, q, voltage, mesh_for_level(plate, error.level, settings.n_modes, settings.piezo), parameters, n_blocks
-        )
-        return replace(with_tangents, error=error)
+    settings, error = settings.resolved(plate, lambda: evaluate_fem(plate, q, voltage, settings))
     mesh, system, probes = discretise(plate, voltage, settings)
     modes = working_modes(plate, system, settings)
     parameters = tuple(parameters)
     system_tangents = [system_tangent(plate, name, voltage, settings, mesh) for name in parameters]
     tangents = probe_model_tangents(system, modes, probes, system_tangents, n_blocks)
-    return fem_result(probe_modal_model(system, modes, probes), q, voltage, system, dict(zip(parameters, tangents)))
+    result = fem_result(probe_modal_model(system, modes, probes), q, voltage, system, dict(zip(parameters, tangents)))
+    return result if error is None else replace(result, error=error)
 
 
 def gradient(function: Callable, model, tangents: Iterable, step: float = DIRECTIONAL_STEP) -> np.ndarray:

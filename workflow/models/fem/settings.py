@@ -69,6 +69,14 @@ class FemSettings:
         """The settings as a plain dict (for content hashing and JSON)."""
         return asdict(self)
 
+    refines = False
+    """One fixed mesh (the counterpart of :attr:`~workflow.models.fem.accuracy.FemAccuracy.refines`)."""
+
+    def resolved(self, plate, evaluate) -> tuple:
+        """(this mesh, no error estimate): the counterpart of
+        :meth:`~workflow.models.fem.accuracy.FemAccuracy.resolved` (``evaluate`` is not called)."""
+        return self, None
+
     def evaluated(self, plate, evaluate_mesh, start=None, keep_solution: bool = False):
         """The FEM result of ``plate`` on this mesh: ``evaluate_mesh(self, start)`` (the counterpart of
         :meth:`~workflow.models.fem.accuracy.FemAccuracy.evaluated`; ``plate`` and ``keep_solution`` unused: one

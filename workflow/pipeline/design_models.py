@@ -1,0 +1,166 @@
+"""The plate models the design commands offer (``--model``), each one object with the same methods: ``evaluate``,
+``optimize`` and ``maps`` look the model up by name (:data:`DESIGN_MODELS`) and call it, instead of switching on
+the name.  The beam model and the FEM (eigenstrain or coupled, at an accuracy or on a mesh) differ in what they give
+(the FEM also its modes, its error estimate, its electrical quantities) and in how their optimum is found (NLopt on
+the beam; space mapping or NLopt on the FEM); both give their working mode as a
+:class:`~workflow.models.response.PlateResponse`, so Q(v) is applied to either the same way
+(:mod:`workflow.optimise.damped`).
+"""
+
+from dataclasses import dataclass
+from typing import Any, Optional
+
+from workflow.models import analytical
+from workflow.models.plate import Plate
+from workflow.optimise.damped import (
+    DampedMaps,
+    damped_fem_optimum,
+    damped_maps,
+    damped_optimum,
+    fem_damped_maps,
+)
+from workflow.optimise.fem_optimum import optimise_fem
+from workflow.optimise.problem import DesignProblem, Optimum, PlateModel, analytical_model, optimise_analytical
+from workflow.pipeline.records import (
+    damped_optimum_record,
+    damping_record,
+    fem_accuracy_record,
+    fem_coupled_record,
+    fem_damping_record,
+    optimum_record,
+)
+from workflow.units import KHZ, UM
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """One geometry evaluated by a design model: its JSON keys and, for the FEM, its result and working mode.
+
+    Attributes
+    ----------
+    record : dict
+        ``w_dyn_um``, ``f_r_khz`` and what the model adds (error estimate, electrical keys, modes, Q(v)).
+    result : object or None
+        The FEM result (None for the beam model).
+    working_mode : int or None
+        Index of the mode whose deflection is reported (None for the beam model).
+    """
+
+    record: dict
+    result: Any = None
+    working_mode: Optional[int] = None
+
+
+@dataclass(frozen=True)
+class BeamDesignModel:
+    """The calibrated beam model with constant Q (docs/model.md): analytical, vectorised, no discretisation error."""
+
+    q: float
+    voltage: float
+    name = "analytical"
+    label = "analytical"
+    """How help texts name it."""
+    default_grid = 81
+    """Points per axis of a map (a vectorised evaluation: fine grids cost nothing)."""
+    resolves_width = False
+    """The beam model does not depend on the plate's width b: no width sweep."""
+    calibrated = False
+    """A calibration corrects the FEM, not this model."""
+
+    @classmethod
+    def for_command(cls, q: float, voltage: float, make_fem) -> "BeamDesignModel":
+        """The model at Q [-] and ``voltage`` [V peak] (``make_fem``, the command's FEM factory, unused)."""
+        return cls(q, voltage)
+
+    @property
+    def plate_model(self) -> PlateModel:
+        return analytical_model(self.q, self.voltage)
+
+    def evaluate(self, plate: Plate, posterior=None) -> Evaluation:
+        record = {"w_dyn_um": float(analytical.dynamic_deflection(plate, self.voltage, self.q)) / UM,
+                  "f_r_khz": float(analytical.resonance_frequency(plate)) / KHZ}
+        if posterior is not None:
+            record.update(damping_record(posterior, plate, self.voltage))
+        return Evaluation(record)
+
+    def optimum_record(self, problem: DesignProblem, posterior=None, method: str | None = None) -> dict:
+        """The optimum's JSON keys with the constant Q, or with the posterior-median Q(v) and its keys."""
+        if posterior is None:
+            optimum = optimise_analytical(problem, q=self.q)
+            return optimum_record(optimum, coarse_evaluations=optimum.evaluations)
+        optimum = damped_optimum(posterior.median_law(), problem)
+        return optimum_record(optimum, coarse_evaluations=optimum.evaluations, **damped_optimum_record(posterior, optimum))
+
+    def optimum(self, problem: DesignProblem) -> Optimum:
+        """The optimum with the constant Q."""
+        return optimise_analytical(problem, self.q)
+
+    def damped(self, posterior, problem: DesignProblem, points: int, draws: int) -> tuple[Optimum, dict, DampedMaps]:
+        """(optimum, its Q(v) keys, the maps) with the posterior-median Q(v) on a points x points grid."""
+        optimum = damped_optimum(posterior.median_law(), problem)
+        return optimum, damped_optimum_record(posterior, optimum), damped_maps(posterior, problem, points, draws=draws,
+                                                                               optimum=optimum)
+
+
+@dataclass(frozen=True)
+class FemDesignModel:
+    """The FEM (:class:`~workflow.optimise.fem_model.FemModel`: cached, refined to its accuracy or on a mesh)."""
+
+    fem: Any
+    name = "fem"
+    label = "FEM"
+    default_grid = 12
+    """Points per axis of a map (each point one FEM evaluation)."""
+    resolves_width = True
+    calibrated = True
+
+    @classmethod
+    def for_command(cls, q: float, voltage: float, make_fem) -> "FemDesignModel":
+        """The command's FEM (``make_fem()``, at its Q and voltage)."""
+        return cls(make_fem())
+
+    @property
+    def plate_model(self) -> PlateModel:
+        return self.fem
+
+    def evaluate(self, plate: Plate, posterior=None) -> Evaluation:
+        from workflow.models.fem import evaluate_fem
+
+        result = evaluate_fem(plate, q=self.fem.q, voltage=self.fem.voltage, settings=self.fem.settings)
+        record = {"w_dyn_um": result.deflection / UM, "f_r_khz": result.frequency / KHZ,
+                  **fem_accuracy_record(result.error), **fem_coupled_record(result),
+                  "modes": [{"f_khz": m.frequency / KHZ, "w_um": m.deflection / UM, "transverse": m.transverse_indicator}
+                            for m in result.modes]}
+        if posterior is not None:
+            record.update(fem_damping_record(posterior, result))
+        return Evaluation(record, result, result.best_index)
+
+    def optimum_record(self, problem: DesignProblem, posterior=None, method: str = "space-mapping") -> dict:
+        """The optimum's JSON keys (constant Q, or the posterior-median Q(v) and its keys), with the evaluation counts
+        and the accurate check's error estimate."""
+        extra = {}
+        if posterior is None:
+            found = optimise_fem(problem, self.fem, method)
+        else:
+            found, result = damped_fem_optimum(posterior.median_law(), problem, self.fem, method)
+            extra = fem_damping_record(posterior, result)
+        counts = dict(method=found.method, fine_evaluations=found.fine_evaluations, coarse_evaluations=found.coarse_evaluations)
+        accuracy = {}
+        if found.error is not None:
+            accuracy = {**fem_accuracy_record(found.error), "verified": found.verified,
+                        "verification_evaluations": found.verification_evaluations}
+        return {**optimum_record(found.optimum, **counts), **accuracy, **extra}
+
+    def optimum(self, problem: DesignProblem) -> Optimum:
+        """The optimum with the constant Q, by space mapping."""
+        return optimise_fem(problem, self.fem, "space-mapping").optimum
+
+    def damped(self, posterior, problem: DesignProblem, points: int, draws: int) -> tuple[Optimum, dict, DampedMaps]:
+        """(optimum, its Q(v) keys, the maps) with the posterior-median Q(v) on a points x points grid."""
+        found, result = damped_fem_optimum(posterior.median_law(), problem, self.fem, "space-mapping")
+        return found.optimum, fem_damping_record(posterior, result), fem_damped_maps(posterior, problem, self.fem, points,
+                                                                                      draws, found.optimum)
+
+
+DESIGN_MODELS = {"analytical": BeamDesignModel, "fem": FemDesignModel}
+"""``--model`` name -> its design model class."""
