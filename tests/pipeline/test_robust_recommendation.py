@@ -8,6 +8,7 @@ docs/calibration.md."""
 import re
 import shutil
 import types
+from dataclasses import replace
 from importlib import resources
 
 import pytest
@@ -126,7 +127,7 @@ def test_robust_step_without_a_separated_stock_and_without_built_plates(beam_run
     assert choice.best is None, "the stand-in's transverse mode is 2 % away: not separated at the default 3 %"
     assert [float(c.plate.resonator_thickness) for c in choice.candidates] == [0.75 * MM, 1.0 * MM]
     text = robust_section(run, recommendation)
-    assert text.startswith("## What to build") and "**No h_p has a robust design**" in text
+    assert text.startswith("## What to build") and "**No h_p has a robust design that also reaches 1.15 µm**" in text
     assert "| 1 | robust: **none** |" in text and "No robust design: h_p = 1 mm: no stock thickness" in text
     assert "| 1 | nominal FEM optimum | " in text
 
@@ -143,7 +144,7 @@ def test_the_first_table_recommends_the_robust_row_and_shows_the_nominal_one_bel
                               f"{float(best.plate.resonator_thickness) / MM:.3f} |")
     assert f"| {best.probability:.3f} ± {best.probability_error:.1g} |" in rows[0] and "**build this**" in rows[0]
     assert rows[1].startswith(f"| 1 | nominal FEM optimum | {float(NOMINAL.wavelength) / MM:.3f} | 0.750 |")
-    assert "**likely to miss**: P 0." in rows[1]
+    assert "**likely below 25 kHz: P 0." in rows[1] and "| – |" in rows[1], "no Q(v) column without a fit"
     assert "on the measured built plates (P1, P2)" in text and "Build: h_p = 1 mm from the robust rows." in text
     assert "What these bands contain" in text and "constant Q = 54" in text
     assert f"{recommendation.evaluations} FEM evaluations" in text
@@ -166,3 +167,24 @@ def test_a_bad_built_plate_log_fails_the_run_before_any_step(tmp_path, capsys):
     status, _, err = run_cli(capsys, "run", "--built-plates", bad, "--out", tmp_path / "out")
     assert status != 0 and len(err.strip().splitlines()) == 1 and "bad.csv" in err, err
     assert not (tmp_path / "out" / "report.md").exists()
+
+
+def test_a_robust_design_that_misses_the_deflection_with_q_of_v_is_not_recommended(beam_run):
+    """The verdict weighs the target deflection too: a robust design whose voltage for 1.15 µm with Q(v) exceeds the
+    design voltage says so instead of "build this", and the opening sentence leaves it out."""
+    run, _ = beam_run
+    choices = robust.robust_choices(beam_calibration(300), {1 * MM: NOMINAL}, [0.75 * MM, 1 * MM], 2, SEPARATED,
+                                    beam_evaluate([]), 54.0)
+    weak = types.SimpleNamespace(reaches_target=False, target=1.15e-6, problem=types.SimpleNamespace(voltage=15.0),
+                                 required_voltage=(19.0, 21.04, 24.0))
+    strong = types.SimpleNamespace(reaches_target=True, required_voltage=(5.0, 6.0, 7.0))
+    choice = choices[1 * MM]
+    for damped, verdict, opening in ((weak, "**misses 1.15 µm at 15 V: needs 21.0 V with Q(v)**", "**No h_p has"),
+                                     (strong, "**build this**", "Build: h_p = 1 mm")):
+        recommendation = robust.RobustRecommendation({1 * MM: replace(choice, best_damped=damped, nominal_damped=weak)},
+                                                     ("P1",), 0.95, 25 * KHZ, 54.0)
+        text = robust_section(run, recommendation)
+        rows = [line for line in text.splitlines() if line.startswith("| 1 |")]
+        assert rows[0].endswith(f"| {verdict} |") and opening in text
+        assert f"| {damped.required_voltage[1]:.1f} [{damped.required_voltage[0]:.1f}, " in rows[0]
+        assert "misses 1.15 µm at 15 V" in rows[1] and "likely below 25 kHz" in rows[1]

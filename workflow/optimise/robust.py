@@ -19,7 +19,7 @@ the nominal optimum) is checked the same way with its own lambda instead of a so
 (:func:`robust_candidates` with ``solve`` False): its probability under the same posterior and scatter.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
@@ -118,6 +118,8 @@ class RobustCandidate:
         FEM evaluations for this candidate [-].
     lambda_at_edge : bool
         The solved lambda sits at the edge of the surrogate's box (the result is then an extrapolation).
+    working : FemResult or None
+        The FEM result at the posterior median (its modes and deflection as a function of Q, for Q(v)); not compared.
     """
 
     plate: Plate
@@ -133,6 +135,7 @@ class RobustCandidate:
     surrogate_error: float
     evaluations: int
     lambda_at_edge: bool
+    working: object = field(default=None, compare=False, repr=False)
 
 
 @dataclass(frozen=True)
@@ -321,6 +324,7 @@ def _candidate(solved: _Solved, result, settings: RobustSettings, q: float) -> R
         surrogate_error=solved.surrogate.log_frequency.loo_rms,
         evaluations=solved.surrogate.evaluations + 1,
         lambda_at_edge=solved.at_edge,
+        working=result,
     )
 
 

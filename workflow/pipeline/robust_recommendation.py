@@ -20,8 +20,9 @@ from workflow.calibration.published import PUBLISHED_PLATES, published_plates
 from workflow.errors import InfeasibleError
 from workflow.models.plate import Plate
 from workflow.optimise.robust import RobustCandidate
+from workflow.pipeline.recommendation import RecommendedDesign
 from workflow.pipeline.runner import RunContext
-from workflow.units import KHZ, MM
+from workflow.units import KHZ, MM, UM
 
 CALIBRATION_FOLDER = "calibration"
 """Sub-folder of the run's output with the calibration on the built plates (``calibration.json``, its pairs figure)."""
@@ -71,12 +72,17 @@ class RobustChoice:
         Why there is no robust design.
     nominal : RobustCandidate
         The nominal optimum's geometry checked under the calibration and the tolerances (its own lambda).
+    best_damped, nominal_damped : RecommendedDesign or None
+        The robust and the nominal design at their posterior-median plates with the fitted Q(v): deflection at the
+        design voltage and voltage for the target (quantiles over Q(v) draws); None without a Q(v) fit.
     """
 
     candidates: tuple
     best: Optional[RobustCandidate]
     reason: Optional[str]
     nominal: RobustCandidate
+    best_damped: Optional[RecommendedDesign] = None
+    nominal_damped: Optional[RecommendedDesign] = None
 
     @property
     def evaluations(self) -> int:
@@ -174,7 +180,7 @@ def nearest_stocks(thickness: float, stock: Sequence[float], count: int) -> list
 
 
 def robust_choices(calibration: Calibration, nominals: Dict[float, Plate], stock: Sequence[float], count: int,
-                   settings, evaluate, q: float) -> Dict[float, RobustChoice]:
+                   settings, evaluate, q: float, with_damping=None) -> Dict[float, RobustChoice]:
     """Per h_p: the robust design from the ``count`` stocks nearest the nominal optimum's h_i, and the nominal
     optimum checked under the calibration; all surrogates in one batch (:func:`~workflow.optimise.robust.robust_candidates`).
 
@@ -191,6 +197,8 @@ def robust_choices(calibration: Calibration, nominals: Dict[float, Plate], stock
         Plates -> FemResults.
     q : float
         Constant Q of the deflections [-].
+    with_damping : callable, optional
+        (h_p, RobustCandidate) -> RecommendedDesign with Q(v) at the candidate's posterior-median FEM result.
     """
     from workflow.optimise.robust import robust_candidates, select_robust
 
@@ -209,10 +217,28 @@ def robust_choices(calibration: Calibration, nominals: Dict[float, Plate], stock
         mine = [c for c, s, o in zip(candidates, solve, owner) if o == hp and s]
         (nominal,) = [c for c, s, o in zip(candidates, solve, owner) if o == hp and not s]
         try:
-            choices[hp] = RobustChoice(tuple(mine), select_robust(mine).best, None, nominal)
+            best, reason = select_robust(mine).best, None
         except InfeasibleError as error:
-            choices[hp] = RobustChoice(tuple(mine), None, str(error), nominal)
+            best, reason = None, str(error)
+        damped = (lambda candidate: None) if with_damping is None else (lambda candidate: with_damping(hp, candidate))
+        choices[hp] = RobustChoice(tuple(mine), best, reason, nominal, None if best is None else damped(best), damped(nominal))
     return choices
+
+
+def damped_evaluation(context: RunContext):
+    """(h_p, RobustCandidate) -> its :class:`RecommendedDesign` with the run's fitted Q(v) (posterior draws as in the
+    recommended design), at the candidate's posterior-median FEM result; None without a Q(v) fit."""
+    from workflow.pipeline.domain import design_problems
+    from workflow.pipeline.recommendation import fem_recommendation
+
+    fit = context.results.get("damping_fit")
+    if fit is None:
+        return None
+    damping = context.config["damping"]
+    draws = fit.answer.draws(damping["posterior_draws"], damping["seed"])
+    problems = design_problems(context.config)
+    target = context.config["design"]["target_deflection_um"] * UM
+    return lambda hp, candidate: fem_recommendation(candidate.working, candidate.plate, problems[hp], draws, target)
 
 
 def robust_recommendation(context: RunContext) -> Optional[RobustRecommendation]:
@@ -230,5 +256,5 @@ def robust_recommendation(context: RunContext) -> Optional[RobustRecommendation]
     nominals = {hp: d.plate for hp, d in context.results["recommended_design"].designs.items()}
     stock = [t * MM for t in section["stock_hi_mm"] if t >= design["hi_min_mm"] - 1e-9]
     choices = robust_choices(built.calibration, nominals, stock, section["stocks_per_design"], settings,
-                             model.evaluate_plates, design["q"])
+                             model.evaluate_plates, design["q"], damped_evaluation(context))
     return RobustRecommendation(choices, built.names, settings.reliability, settings.min_frequency, design["q"])

@@ -20,7 +20,7 @@ def _nearest(candidate: RobustCandidate) -> str:
     return f"{nearest['f'] / KHZ:.3f} kHz ({100 * nearest['relative_distance']:.1f} % away)"
 
 
-def _row(label: str, design: str, candidate: RobustCandidate, verdict: str) -> tuple:
+def _row(label: str, design: str, candidate: RobustCandidate, damped, verdict: str) -> tuple:
     plate = candidate.plate
     return (
         label,
@@ -31,6 +31,7 @@ def _row(label: str, design: str, candidate: RobustCandidate, verdict: str) -> t
         _band(candidate.frequency, KHZ, 3),
         f"{candidate.probability:.3f} ± {candidate.probability_error:.1g}",
         _band(candidate.deflection, UM, 2),
+        "–" if damped is None else _band(damped.required_voltage, 1.0, 1),
         _nearest(candidate),
         verdict,
     )
@@ -41,14 +42,32 @@ def _meets(candidate: RobustCandidate, reliability: float) -> bool:
     return candidate.probability >= reliability - 2 * candidate.probability_error
 
 
-def _robust_verdict(candidate: RobustCandidate, reliability: float) -> str:
-    return "**build this**" if _meets(candidate, reliability) else f"P below {reliability:g}: widen the stocks tried"
+def _deflection_shortfall(damped) -> str:
+    """Empty when the design reaches the target deflection at the design voltage with Q(v) (median), else why not."""
+    if damped is None or damped.reaches_target:
+        return ""
+    return (f"misses {damped.target / UM:g} µm at {damped.problem.voltage:g} V: needs {damped.required_voltage[1]:.1f} V "
+            "with Q(v)")
 
 
-def _nominal_verdict(candidate: RobustCandidate, reliability: float) -> str:
-    if _meets(candidate, reliability):
-        return "robust as it is"
-    return f"**likely to miss**: P {candidate.probability:.3f} < {reliability:g}"
+def buildable(choice, reliability: float) -> bool:
+    """A robust design whose P meets the reliability and which reaches the target deflection with Q(v)."""
+    return (choice.best is not None and _meets(choice.best, reliability)
+            and not _deflection_shortfall(choice.best_damped))
+
+
+def _robust_verdict(choice, reliability: float) -> str:
+    if not _meets(choice.best, reliability):
+        return f"P below {reliability:g}: widen the stocks tried"
+    shortfall = _deflection_shortfall(choice.best_damped)
+    return f"**{shortfall}**" if shortfall else "**build this**"
+
+
+def _nominal_verdict(candidate: RobustCandidate, damped, reliability: float) -> str:
+    reasons = [] if _meets(candidate, reliability) else [f"likely below 25 kHz: P {candidate.probability:.3f} < {reliability:g}"]
+    if _deflection_shortfall(damped):
+        reasons.append(_deflection_shortfall(damped))
+    return "**" + "; ".join(reasons) + "**" if reasons else "robust as it is"
 
 
 def robust_section(context: RunContext, robust: RobustRecommendation) -> str:
@@ -61,13 +80,15 @@ def robust_section(context: RunContext, robust: RobustRecommendation) -> str:
         label = f"{hp / MM:g}"
         if choice.best is not None:
             rows.append(_row(label, f"robust (stock h_i of {len(choice.candidates)} tried)", choice.best,
-                             _robust_verdict(choice.best, robust.reliability)))
+                             choice.best_damped, _robust_verdict(choice, robust.reliability)))
         else:
-            rows.append((label, "robust: **none**", "–", "–", "–", "–", "–", "–", "–", "see below"))
+            rows.append((label, "robust: **none**", *["–"] * 8, "see below"))
             missing.append(f"h_p = {label} mm: {choice.reason}")
-        rows.append(_row(label, "nominal FEM optimum", choice.nominal, _nominal_verdict(choice.nominal, robust.reliability)))
+        rows.append(_row(label, "nominal FEM optimum", choice.nominal, choice.nominal_damped,
+                         _nominal_verdict(choice.nominal, choice.nominal_damped, robust.reliability)))
     plates = ", ".join(robust.calibrated_on)
-    built = [hp for hp, c in robust.choices.items() if c.best is not None]
+    built = [hp for hp, c in robust.choices.items() if buildable(c, robust.reliability)]
+    target = context.config["design"]["target_deflection_um"]
     text = [
         "## What to build\n\n"
         f"The FEM calibrated on the measured built plates ({plates}) predicts how a plate of each design would "
@@ -76,10 +97,10 @@ def robust_section(context: RunContext, robust: RobustRecommendation) -> str:
         "and the largest deflection among the stocks tried (docs/calibration.md, \"The recommended design in "
         "tactile run\"). The nominal FEM optimum (the next section) is checked the same way, for comparison."
         + (f" Build: {', '.join(f'h_p = {hp / MM:g} mm' for hp in built)} from the robust rows." if built else
-           " **No h_p has a robust design**: see below."),
+           f" **No h_p has a robust design that also reaches {target:g} µm**: see the verdicts."),
         table(["h_p [mm]", "design", "λ [mm]", "h_i [mm]", "L [mm]", "f_r as built [kHz], median [5 %, 95 %]",
                f"P(f_r ≥ {limit:g} kHz)", f"w at {voltage:g} V, Q = {robust.q:g} [µm]",
-               "nearest transverse-mixing mode", "verdict"], rows),
+               f"V for {target:g} µm with Q(v)", "nearest transverse-mixing mode", "verdict"], rows),
     ]
     if missing:
         text.append("No robust design: " + "; ".join(missing) + ".")
@@ -90,7 +111,8 @@ def robust_section(context: RunContext, robust: RobustRecommendation) -> str:
         f"{tolerances.resonator_thickness / UM:g} µm, h_p {tolerances.ceramic_thickness / UM:g} µm, λ "
         f"{tolerances.wavelength / UM:g} µm, bond {tolerances.glue_thickness / UM:g} µm), and the surrogate's and the "
         "FEM's errors; P is from fresh Monte Carlo draws (± its standard error). What they do not contain: Q(v) (the "
-        f"deflections are at the constant Q = {robust.q:g}; the next section gives them with the fitted Q(v)), and "
+        f"deflections are at the constant Q = {robust.q:g}; the voltage for {target:g} µm is with the fitted Q(v) at "
+        "the posterior-median plate, median [5 %, 95 %] over the Q(v) posterior only), and "
         "ways a new plate may differ from the calibration plates beyond what the discrepancy term learned from them "
         "(another ceramic, another bonding process). The nearest transverse-mixing mode is the FEM's at the "
         f"posterior-median plate; a robust design needs it more than {100 * RobustSettings().separation:g} % away. "
