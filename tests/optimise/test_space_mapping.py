@@ -6,7 +6,7 @@ import pytest
 
 from workflow.models.fem import FemSettings
 from workflow.optimise.fem_model import FemModel
-from workflow.optimise.fem_optimum import optimise_fem, optimise_fem_on_mesh
+from workflow.optimise.fem_optimum import ResponsesModel, optimise_fem, optimise_fem_on_mesh
 from workflow.optimise.maps import TRANSVERSE_THRESHOLD
 from workflow.optimise.problem import DesignProblem, analytical_model, maximise_deflection
 from workflow.optimise.space_mapping import (
@@ -175,7 +175,7 @@ def test_trajectory_figure_shows_every_fine_point():
     from workflow.pipeline.figures.space_mapping import trajectory_figure
 
     problem = DesignProblem(2e-3)
-    found = optimise_fem_on_mesh(problem, mixing_fine, "space-mapping", coarse_model=COARSE)
+    found = optimise_fem_on_mesh(problem, ResponsesModel(mixing_fine), "space-mapping", coarse_model=COARSE)
     assert len(found.trajectory) == found.fine_evaluations
     figure = trajectory_figure({problem.ceramic_thickness: (found, None)}, problem.min_frequency)
     top, bottom = figure.axes[:2]

@@ -110,6 +110,12 @@ class DampedFemModel:
     def __call__(self, plate: Plate):
         return self.responses(plate)[:2]
 
+    def space_mapping_fine(self) -> tuple:
+        """(fine model, mapping) of space mapping on the FEM with Q(v): its responses (no sensitivities of Q(v))."""
+        from workflow.optimise.space_mapping import ResponseMapping
+
+        return self.responses, ResponseMapping
+
 
 def damped_beam_model(law, voltage: float = materials.DESIGN_VOLTAGE) -> PlateModel:
     """The beam model with Q(v), usable by :func:`~workflow.optimise.problem.maximise_deflection`

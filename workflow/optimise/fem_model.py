@@ -184,6 +184,12 @@ class FemModel:
         """Deflection [m], frequency [Hz] and transverse indicator [-] of the best mode of each plate."""
         return best_mode_values(self.results(plate), plate.batch_shape)
 
+    def space_mapping_fine(self) -> tuple:
+        """(fine model, mapping) of space mapping on this FEM: its responses with the exact design sensitivities."""
+        from workflow.optimise.space_mapping import SensitivityMapping
+
+        return self.responses_with_gradients, SensitivityMapping
+
     def __call__(self, plate: Plate) -> tuple[np.ndarray, np.ndarray]:
         """Deflection [m] and frequency [Hz] of the best mode of each plate, shaped like the batch."""
         return self.responses(plate)[:2]

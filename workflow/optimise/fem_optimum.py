@@ -18,7 +18,7 @@ from workflow.optimise.problem import (
     analytical_model,
     maximise_deflection,
 )
-from workflow.optimise.space_mapping import ResponseMapping, SensitivityMapping, space_mapping_optimum
+from workflow.optimise.space_mapping import ResponseMapping, space_mapping_optimum
 
 METHODS = ("nlopt", "space-mapping")
 """Ways to reach the FEM optimum."""
@@ -140,6 +140,20 @@ def optimise_fem(
     )
 
 
+@dataclass(frozen=True)
+class ResponsesModel:
+    """A fine model given by its responses alone (deflection [m], frequency [Hz], optionally the transverse
+    indicator [-], batched over the plate's arrays), for space mapping from the responses or a direct NLopt run."""
+
+    responses: object
+
+    def space_mapping_fine(self) -> tuple:
+        return self.responses, ResponseMapping
+
+    def __call__(self, plate):
+        return self.responses(plate)[:2]
+
+
 def optimise_fem_on_mesh(
     problem: DesignProblem,
     fem_model,
@@ -153,7 +167,9 @@ def optimise_fem_on_mesh(
     ----------
     problem : DesignProblem
     fem_model : PlateModel
-        Usually a :class:`~workflow.optimise.fem_model.FemModel` (its ``q`` is used when ``q`` is None).
+        With ``space_mapping_fine()`` -> (fine model, mapping): a :class:`~workflow.optimise.fem_model.FemModel` (its
+        ``q`` is used when ``q`` is None), the FEM with Q(v) (:class:`~workflow.optimise.damped.DampedFemModel`) or
+        any responses function wrapped as :class:`ResponsesModel`.
     method : {"nlopt", "space-mapping"}
     q : float, optional
         Quality factor of the coarse (beam) model [-]; ignored when ``coarse_model`` is given.
@@ -164,10 +180,7 @@ def optimise_fem_on_mesh(
     if coarse_model is None:
         coarse_model = analytical_model(fem_model.q if q is None else q, problem.voltage)
     if method == "space-mapping":
-        if hasattr(fem_model, "responses_with_gradients"):  # the FEM: exact design sensitivities
-            fine, mapping = fem_model.responses_with_gradients, SensitivityMapping
-        else:  # e.g. the FEM with Q(v): responses only, with the transverse indicator when there is one
-            fine, mapping = getattr(fem_model, "responses", fem_model), ResponseMapping
+        fine, mapping = fem_model.space_mapping_fine()
         result = space_mapping_optimum(fine, coarse_model, problem, mapping)
         return FemOptimum(result.optimum, method, result.fine_evaluations, result.coarse_evaluations, result.trajectory)
     if method == "nlopt":
