@@ -55,7 +55,10 @@ def run(args):
         print(to_toml(config), end="")
         return None
     load_calibration_option(args)  # a bad file fails before any step
-    own_plates(config)  # a bad built-plate log fails before any step
+    warnings = []
+    own_plates(config, warnings)  # a bad built-plate log fails before any step
+    for warning in warnings:
+        print(f"tactile run: warning: {warning}", file=sys.stderr)
     with output_folder(args.out, RUN_OUTPUTS, force=args.force) as out:
         context = RunContext(
             config=config,

@@ -118,9 +118,10 @@ class RobustRecommendation:
         return sum(choice.evaluations for choice in self.choices.values())
 
 
-def own_plates(config: dict) -> list:
+def own_plates(config: dict, warnings: list | None = None) -> list:
     """The plates measured in the logs of ``[recommendation] built_plates`` (resonance logs, with a scan log where
-    there is one); reading them first, before any step, makes a bad log fail early (naming the file)."""
+    there is one); reading them first, before any step, makes a bad log fail early (naming the file).  A scan of
+    another plate accepted by ``[damping] mixed_plates = "warn"`` is appended to ``warnings``."""
     from workflow.calibration.parameters import load_settings
     from workflow.pipeline.calibration_files import measured_plates
 
@@ -128,7 +129,7 @@ def own_plates(config: dict) -> list:
     if not paths:
         return []
     return measured_plates([Path(p) for p in paths], load_settings(), mixed_plates=config["damping"]["mixed_plates"],
-                           warnings=[])
+                           warnings=[] if warnings is None else warnings)
 
 
 def built_plates(config: dict) -> tuple:
@@ -220,8 +221,8 @@ def robust_choices(calibration: Calibration, nominals: Dict[float, Plate], stock
             best, reason = select_robust(mine).best, None
         except InfeasibleError as error:
             best, reason = None, str(error)
-        damped = (lambda candidate: None) if with_damping is None else (lambda candidate: with_damping(hp, candidate))
-        choices[hp] = RobustChoice(tuple(mine), best, reason, nominal, None if best is None else damped(best), damped(nominal))
+        damped = [None if with_damping is None or c is None else with_damping(hp, c) for c in (best, nominal)]
+        choices[hp] = RobustChoice(tuple(mine), best, reason, nominal, *damped)
     return choices
 
 
