@@ -136,7 +136,7 @@ def test_the_first_table_recommends_the_robust_row_and_shows_the_nominal_one_bel
     run, _ = beam_run
     choices = robust.robust_choices(beam_calibration(800), {1 * MM: NOMINAL}, [0.75 * MM, 1 * MM], 2, SEPARATED,
                                     beam_evaluate([]), 54.0)
-    recommendation = robust.RobustRecommendation(choices, ("P1", "P2"), 0.95, 25 * KHZ, 54.0)
+    recommendation = robust.RobustRecommendation(choices, ("P1", "P2"), RobustSettings(), 54.0)
     text = robust_section(run, recommendation)
     rows = [line for line in text.splitlines() if line.startswith("| 1 |")]
     best = choices[1 * MM].best
@@ -182,7 +182,7 @@ def test_a_robust_design_that_misses_the_deflection_with_q_of_v_is_not_recommend
     for damped, verdict, opening in ((weak, "**misses 1.15 µm at 15 V: needs 21.0 V with Q(v)**", "**No h_p has"),
                                      (strong, "**build this**", "Build: h_p = 1 mm")):
         recommendation = robust.RobustRecommendation({1 * MM: replace(choice, best_damped=damped, nominal_damped=weak)},
-                                                     ("P1",), 0.95, 25 * KHZ, 54.0)
+                                                     ("P1",), RobustSettings(), 54.0)
         text = robust_section(run, recommendation)
         rows = [line for line in text.splitlines() if line.startswith("| 1 |")]
         assert rows[0].endswith(f"| {verdict} |") and opening in text

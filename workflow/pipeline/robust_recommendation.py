@@ -19,7 +19,7 @@ from workflow.calibration.calibration import Calibration
 from workflow.calibration.published import PUBLISHED_PLATES, published_plates
 from workflow.errors import InfeasibleError
 from workflow.models.plate import Plate
-from workflow.optimise.robust import RobustCandidate
+from workflow.optimise.robust import RobustCandidate, RobustSettings
 from workflow.pipeline.recommendation import RecommendedDesign
 from workflow.pipeline.runner import RunContext
 from workflow.units import KHZ, MM, UM
@@ -98,18 +98,15 @@ class RobustRecommendation:
     choices : dict
     calibrated_on : tuple of str
         The built plates' names.
-    reliability : float
-        Required P(f_r >= f_min) [-].
-    min_frequency : float
-        [Hz].
+    settings : RobustSettings
+        The reliability, frequency limit, mode separation and tolerances the designs were made with.
     q : float
         The constant Q of the deflections [-].
     """
 
     choices: Dict[float, RobustChoice]
     calibrated_on: tuple
-    reliability: float
-    min_frequency: float
+    settings: RobustSettings
     q: float
 
     @property
@@ -245,7 +242,6 @@ def damped_evaluation(context: RunContext):
 def robust_recommendation(context: RunContext) -> Optional[RobustRecommendation]:
     """Per h_p of the run: the robust design under the built plates' calibration, beside the nominal optimum
     (the recommended design's geometry) checked the same way; None without a calibration."""
-    from workflow.optimise.robust import RobustSettings
     from workflow.pipeline.loop import calibration_model
 
     built = context.results["built_calibration"]
@@ -258,4 +254,4 @@ def robust_recommendation(context: RunContext) -> Optional[RobustRecommendation]
     stock = [t * MM for t in section["stock_hi_mm"] if t >= design["hi_min_mm"] - 1e-9]
     choices = robust_choices(built.calibration, nominals, stock, section["stocks_per_design"], settings,
                              model.evaluate_plates, design["q"], damped_evaluation(context))
-    return RobustRecommendation(choices, built.names, settings.reliability, settings.min_frequency, design["q"])
+    return RobustRecommendation(choices, built.names, settings, design["q"])

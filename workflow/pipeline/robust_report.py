@@ -1,7 +1,7 @@
 """The report's first table: the robust design per h_p beside the nominal optimum, under the calibration on the
 built plates (:mod:`workflow.pipeline.robust_recommendation`)."""
 
-from workflow.optimise.robust import RobustCandidate, RobustSettings, Tolerances
+from workflow.optimise.robust import RobustCandidate
 from workflow.pipeline.markdown import step_figures, table
 from workflow.pipeline.robust_recommendation import RobustRecommendation
 from workflow.pipeline.runner import RunContext
@@ -63,8 +63,10 @@ def _robust_verdict(choice, reliability: float) -> str:
     return f"**{shortfall}**" if shortfall else "**build this**"
 
 
-def _nominal_verdict(candidate: RobustCandidate, damped, reliability: float) -> str:
-    reasons = [] if _meets(candidate, reliability) else [f"likely below 25 kHz: P {candidate.probability:.3f} < {reliability:g}"]
+def _nominal_verdict(candidate: RobustCandidate, damped, settings) -> str:
+    reliability, limit = settings.reliability, settings.min_frequency / KHZ
+    reasons = [] if _meets(candidate, reliability) else [
+        f"likely below {limit:g} kHz: P {candidate.probability:.3f} < {reliability:g}"]
     if _deflection_shortfall(damped):
         reasons.append(_deflection_shortfall(damped))
     return "**" + "; ".join(reasons) + "**" if reasons else "robust as it is"
@@ -73,27 +75,28 @@ def _nominal_verdict(candidate: RobustCandidate, damped, reliability: float) -> 
 def robust_section(context: RunContext, robust: RobustRecommendation) -> str:
     """"What to build": per h_p the robust row, then the nominal optimum's, with their predicted f_r and w bands and
     P(f_r >= f_min); a line per h_p without a robust design; what the bands contain."""
-    limit = robust.min_frequency / KHZ
+    settings = robust.settings
+    reliability, limit = settings.reliability, settings.min_frequency / KHZ
     voltage = context.config["design"]["voltage_v"]
     rows, missing = [], []
     for hp, choice in robust.choices.items():
         label = f"{hp / MM:g}"
         if choice.best is not None:
             rows.append(_row(label, f"robust (stock h_i of {len(choice.candidates)} tried)", choice.best,
-                             choice.best_damped, _robust_verdict(choice, robust.reliability)))
+                             choice.best_damped, _robust_verdict(choice, reliability)))
         else:
             rows.append((label, "robust: **none**", *["–"] * 8, "see below"))
             missing.append(f"h_p = {label} mm: {choice.reason}")
         rows.append(_row(label, "nominal FEM optimum", choice.nominal, choice.nominal_damped,
-                         _nominal_verdict(choice.nominal, choice.nominal_damped, robust.reliability)))
+                         _nominal_verdict(choice.nominal, choice.nominal_damped, settings)))
     plates = ", ".join(robust.calibrated_on)
-    built = [hp for hp, c in robust.choices.items() if buildable(c, robust.reliability)]
+    built = [hp for hp, c in robust.choices.items() if buildable(c, reliability)]
     target = context.config["design"]["target_deflection_um"]
     text = [
         "## What to build\n\n"
         f"The FEM calibrated on the measured built plates ({plates}) predicts how a plate of each design would "
         f"resonate as built; the **robust** design per h_p is the stock resonator thickness and wavelength with "
-        f"P(f_r ≥ {limit:g} kHz) ≥ {robust.reliability:g} under that calibration and the manufacturing tolerances, "
+        f"P(f_r ≥ {limit:g} kHz) ≥ {reliability:g} under that calibration and the manufacturing tolerances, "
         "and the largest deflection among the stocks tried (docs/calibration.md, \"The recommended design in "
         "tactile run\"). The nominal FEM optimum (the next section) is checked the same way, for comparison."
         + (f" Build: {', '.join(f'h_p = {hp / MM:g} mm' for hp in built)} from the robust rows." if built else
@@ -104,7 +107,7 @@ def robust_section(context: RunContext, robust: RobustRecommendation) -> str:
     ]
     if missing:
         text.append("No robust design: " + "; ".join(missing) + ".")
-    tolerances = Tolerances()
+    tolerances = settings.tolerances
     text.append(
         "What these bands contain: the calibration's posterior (its parameters and its model-discrepancy term, "
         f"from the built plates' measurements), manufacturing scatter (standard deviations h_i "
@@ -115,7 +118,7 @@ def robust_section(context: RunContext, robust: RobustRecommendation) -> str:
         "the posterior-median plate, median [5 %, 95 %] over the Q(v) posterior only), and "
         "ways a new plate may differ from the calibration plates beyond what the discrepancy term learned from them "
         "(another ceramic, another bonding process). The nearest transverse-mixing mode is the FEM's at the "
-        f"posterior-median plate; a robust design needs it more than {100 * RobustSettings().separation:g} % away. "
+        f"posterior-median plate; a robust design needs it more than {100 * settings.separation:g} % away. "
         f"{robust.evaluations} FEM evaluations."
     )
     figures = step_figures(context, "built_calibration")
