@@ -11,12 +11,15 @@ import types
 from dataclasses import replace
 from importlib import resources
 
+import numpy as np
 import pytest
 from calibration_setup import P1, SHORT, BeamResult, beam_calibration
 from user_facing import run_cli
 
 from workflow.calibration import parameters
 from workflow.execution.cache import EvaluationCache
+from workflow.models.response import ScaledResponse
+from workflow.optimise.problem import DesignProblem
 from workflow.optimise.robust import RobustSettings, beam_wavelength, robust_candidates
 from workflow.pipeline import loop
 from workflow.pipeline import robust_recommendation as robust
@@ -188,3 +191,30 @@ def test_a_robust_design_that_misses_the_deflection_with_q_of_v_is_not_recommend
         assert rows[0].endswith(f"| {verdict} |") and opening in text
         assert f"| {damped.required_voltage[1]:.1f} [{damped.required_voltage[0]:.1f}, " in rows[0]
         assert "misses 1.15 µm at 15 V" in rows[1] and "likely below 25 kHz" in rows[1]
+
+
+def test_the_q_of_v_columns_come_from_the_fem_at_each_rows_posterior_median_plate(beam_run, coarse_model):
+    """With the coarse FEM as the model: each row's Q(v) numbers are those of the recommended-design code at the FEM
+    result of its posterior-median plate (the robust row's solved λ, the nominal row's own), and the voltage for the
+    target inverts the self-consistent deflection there."""
+    from workflow.damping.posterior import DampingPosterior
+    from workflow.optimise.damped import damped_deflection
+    from workflow.pipeline.recommendation import fem_recommendation
+
+    run, _ = beam_run
+    rng = np.random.default_rng(0)
+    posterior = DampingPosterior("quadratic", {"q0": rng.normal(150, 3, 40), "alpha": rng.normal(0.25, 0.005, 40)})
+    run.results["damping_fit"] = types.SimpleNamespace(answer=posterior)
+    run.config["damping"]["posterior_draws"] = 8
+    with_damping = robust.damped_evaluation(run)
+    choices = robust.robust_choices(beam_calibration(300), {1 * MM: NOMINAL}, [0.75 * MM], 1,
+                                    RobustSettings(separation=0.0), coarse_model.evaluate_plates, 54.0, with_damping)
+    choice = choices[1 * MM]
+    draws = posterior.draws(8, run.config["damping"]["seed"])
+    for candidate, damped in ((choice.best, choice.best_damped), (choice.nominal, choice.nominal_damped)):
+        assert candidate.working.frequency > 0 and damped.plate == candidate.plate
+        expected = fem_recommendation(candidate.working, candidate.plate, DesignProblem(1 * MM), draws, 1.15e-6)
+        assert damped.required_voltage == pytest.approx(expected.required_voltage, rel=1e-12)
+        w = damped_deflection(ScaledResponse(candidate.working, damped.required_voltage[1] / candidate.working.voltage),
+                              posterior.median_law())
+        assert float(w) == pytest.approx(1.15e-6, rel=0.02), "the median voltage gives about the target"
