@@ -1,10 +1,12 @@
 """The run configuration: defaults, overrides, and errors that name the key."""
 
+import re
+
 import pytest
 
 from workflow.errors import InputFileError
 from workflow.models import materials
-from workflow.pipeline.config import default_config, load_config, to_toml
+from workflow.pipeline.config import default_config, load_config, merge, to_toml
 
 
 def test_design_defaults_come_from_table_1():
@@ -100,3 +102,27 @@ def test_an_unknown_material_record_is_refused_at_load(tmp_path):
     path.write_text('[design]\nresonator = "PZT-5H"\nglue_um = 20.0\n[fem]\npiezo = "coupled"\n', encoding="utf-8")
     with pytest.raises(InputFileError, match="resonator"):
         load_config(path)
+
+
+def test_the_simulated_deviations_are_declared_once_for_the_configuration_its_ranges_and_the_options():
+    """[simulator] built_* keys, their ranges and ``tactile measure``'s --dev-* options all come from
+    SIMULATED_DEVIATIONS: the defaults give back the demonstration deviations, each key refuses a value outside its
+    quantity's range, and every option exists with that range."""
+    import argparse
+
+    from workflow.cli.options import add_built_plate_arguments, deviations_from_args
+    from workflow.models.builtplate import DEMONSTRATION_DEVIATIONS, SIMULATED_DEVIATIONS
+    from workflow.models.limits import LIMITS
+    from workflow.pipeline.domain import built_plate_deviations
+
+    config = default_config()
+    assert sorted(k for k in config["simulator"] if k.startswith("built_")) == sorted(s.config_key for s in SIMULATED_DEVIATIONS)
+    assert built_plate_deviations(config) == DEMONSTRATION_DEVIATIONS
+    parser = argparse.ArgumentParser()
+    add_built_plate_arguments(parser)
+    for setting in SIMULATED_DEVIATIONS:
+        high = LIMITS[setting.quantity][1]
+        with pytest.raises(InputFileError, match=re.escape(f"'simulator.{setting.config_key}'")):
+            merge(config, {"simulator": {setting.config_key: high * 2 + 1}})
+        args = parser.parse_args(["--deviations", "none", setting.option, f"{high:g}"])
+        assert getattr(deviations_from_args(args), setting.field) == pytest.approx(high * setting.scale)

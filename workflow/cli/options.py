@@ -366,6 +366,7 @@ def _point(text: str) -> tuple:
 def add_built_plate_arguments(parser) -> None:
     """The built plate's nominal design (written to logs) and, for the simulator, its hidden deviations."""
     from workflow.models.builtplate import DEMONSTRATION_DEVIATIONS as demo
+    from workflow.models.builtplate import SIMULATED_DEVIATIONS
 
     group = parser.add_argument_group(
         "built plate",
@@ -385,15 +386,10 @@ def add_built_plate_arguments(parser) -> None:
     group.add_argument("--deviations", choices=("demo", "none"), default="demo",
                        help="simulator: the built plate's hidden deviations, the documented demonstration set or "
                        "none (default demo); the --dev-* flags override single values")
-    for flag, value, key, text in (
-        ("--dev-glue-um", demo.glue_thickness / UM, "glue_um", "bond thickness [um]"),
-        ("--dev-ceramic-factor", demo.ceramic_modulus_factor, "modulus_factor", "ceramic stiffness factor [-]"),
-        ("--dev-resonator-factor", demo.resonator_modulus_factor, "modulus_factor", "resonator Young's modulus factor [-]"),
-        ("--dev-hi-offset-um", demo.resonator_thickness_offset / UM, "hi_offset_um", "resonator thickness offset [um]"),
-        ("--dev-ceramic-offset-mm", demo.ceramic_offset / MM, "ceramic_offset_mm", "offset of the ceramics along x [mm]"),
-    ):
-        group.add_argument(flag, type=bounded(float, *LIMITS[key], unit(key)),
-                           help=f"simulator: {text}, {limit_text(key, unit(key))} (demo {value:g})")
+    for setting in SIMULATED_DEVIATIONS:
+        key = setting.quantity
+        group.add_argument(setting.option, type=bounded(float, *LIMITS[key], unit(key)),
+                           help=f"simulator: {setting.text}, {limit_text(key, unit(key))} (demo {setting.value(demo):g})")
     default = SIMULATION_ACCURACY_TARGET
     group.add_argument("--sim-accuracy", type=bounded(float, *ACCURACY_RANGE), default=default, metavar="REL",
                        help="FEM accuracy of the simulated built plate and of the nominal map a scan is compared "
@@ -430,23 +426,15 @@ def built_plate_from_args(args):
 def deviations_from_args(args):
     """The simulated built plate's :class:`~workflow.models.builtplate.PlateDeviations` of --deviations and --dev-*
     (each within its plausible range: the options' types)."""
-    from dataclasses import replace
-
-    from workflow.models.builtplate import DEMONSTRATION_DEVIATIONS, PlateDeviations
+    from workflow.models.builtplate import (
+        DEMONSTRATION_DEVIATIONS,
+        SIMULATED_DEVIATIONS,
+        PlateDeviations,
+        deviations_from_settings,
+    )
 
     base = DEMONSTRATION_DEVIATIONS if args.deviations == "demo" else PlateDeviations()
-    changes = {
-        field: getattr(args, option) * scale
-        for option, field, scale in (
-            ("dev_glue_um", "glue_thickness", UM),
-            ("dev_ceramic_factor", "ceramic_modulus_factor", 1.0),
-            ("dev_resonator_factor", "resonator_modulus_factor", 1.0),
-            ("dev_hi_offset_um", "resonator_thickness_offset", UM),
-            ("dev_ceramic_offset_mm", "ceramic_offset", MM),
-        )
-        if getattr(args, option) is not None
-    }
-    return replace(base, **changes)
+    return deviations_from_settings({s.name: getattr(args, s.dest) for s in SIMULATED_DEVIATIONS}, base)
 
 
 def built_plate_model(args, built, deviations=None):

@@ -155,6 +155,65 @@ plate designed for 25 kHz about 8 % low, as the paper's built plates were (compu
 not fitted to the paper)."""
 
 
+@dataclass(frozen=True)
+class DeviationSetting:
+    """One hidden deviation of a simulated built plate as the settings name it: ``built_<name>`` in the run's
+    [simulator] section, ``--dev-<name>`` of ``tactile measure --simulate``.
+
+    Attributes
+    ----------
+    field : str
+        The :class:`PlateDeviations` field.
+    name : str
+        The settings' name, ending in its unit.
+    quantity : str
+        Its range in :data:`~workflow.models.limits.LIMITS`.
+    scale : float
+        SI per unit of the setting (um: 1e-6, mm: 1e-3, factors: 1).
+    text : str
+        What it is, for help texts.
+    """
+
+    field: str
+    name: str
+    quantity: str
+    scale: float
+    text: str
+
+    @property
+    def config_key(self) -> str:
+        return f"built_{self.name}"
+
+    @property
+    def option(self) -> str:
+        return f"--dev-{self.name.replace('_', '-')}"
+
+    @property
+    def dest(self) -> str:
+        return f"dev_{self.name}"
+
+    def value(self, deviations: PlateDeviations) -> float:
+        """The setting's value of ``deviations`` [its unit]."""
+        return getattr(deviations, self.field) / self.scale
+
+
+SIMULATED_DEVIATIONS = (
+    DeviationSetting("glue_thickness", "glue_um", "glue_um", UM, "bond thickness [um]"),
+    DeviationSetting("ceramic_modulus_factor", "ceramic_factor", "modulus_factor", 1.0, "ceramic stiffness factor [-]"),
+    DeviationSetting("resonator_modulus_factor", "resonator_factor", "modulus_factor", 1.0,
+                     "resonator Young's modulus factor [-]"),
+    DeviationSetting("resonator_thickness_offset", "hi_offset_um", "hi_offset_um", UM, "resonator thickness offset [um]"),
+    DeviationSetting("ceramic_offset", "ceramic_offset_mm", "ceramic_offset_mm", MM, "offset of the ceramics along x [mm]"),
+)
+"""The deviations a simulated built plate's settings set (the rest keep :class:`PlateDeviations`' defaults): one
+declaration for the run's configuration, its ranges and the measure command's options."""
+
+
+def deviations_from_settings(values: dict, base: PlateDeviations = PlateDeviations()) -> PlateDeviations:
+    """``base`` with the deviations of ``values`` (setting name -> value in its unit; None or absent: kept)."""
+    return replace(base, **{s.field: values[s.name] * s.scale for s in SIMULATED_DEVIATIONS if values.get(s.name) is not None})
+
+
 def deviated_plate(plate: Plate, deviations: PlateDeviations) -> Plate:
     """The plate as built: ``plate`` with the bond, materials, thickness, width and ceramic length of ``deviations``.
 

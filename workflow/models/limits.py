@@ -93,9 +93,6 @@ LIMITS = {
 for _key, _quantity in (
     ("design.q", "q"), ("design.glue_um", "glue_um"), ("simulator.low_velocity_q", "q"), ("simulator.working_q", "q"),
     ("simulator.amplifier_gain", "amplifier_gain"), ("simulator.softening_s2_m2", "softening_s2_m2"),
-    ("simulator.built_glue_um", "glue_um"), ("simulator.built_ceramic_factor", "modulus_factor"),
-    ("simulator.built_resonator_factor", "modulus_factor"), ("simulator.built_hi_offset_um", "hi_offset_um"),
-    ("simulator.built_ceramic_offset_mm", "ceramic_offset_mm"),
 ):
     LIMITS[_key] = LIMITS[_quantity]
 """Accepted range [low, high] of each quantity, in the unit its name ends with.
@@ -133,6 +130,10 @@ def unit(key: str) -> str:
     return next((name for suffix, name in _UNITS if key.endswith(suffix)), "")
 
 
+SI_ROUNDING = 1e-12
+"""Relative slack of a range for a value given in SI: the conversion from the key's unit and back rounds [-]."""
+
+
 def problem(key: str, value: float, si: bool = False, name: str | None = None) -> str | None:
     """Why ``value`` is not a plausible ``key`` (None when it is), e.g. ``"lambda_mm = 1e+06 is outside
     the plausible range 5 to 200 mm"``.
@@ -150,7 +151,8 @@ def problem(key: str, value: float, si: bool = False, name: str | None = None) -
     shown = float(value) / (MM if key.endswith("_mm") else UM if key.endswith("_um") else 1.0) if si else float(value)
     if not math.isfinite(shown):
         return f"{name or key} = {shown!r} is not a finite number"
-    if low <= shown <= high:
+    slack = SI_ROUNDING * max(abs(low), abs(high)) if si else 0.0  # 500 um as 5e-4 m reads back as 500.00000000000006
+    if low - slack <= shown <= high + slack:
         return None
     return f"{name or key} = {shown:g} is outside the plausible range {low:g} to {high:g} {unit(key)}".rstrip()
 

@@ -89,6 +89,7 @@ def simulator_defaults() -> dict:
     from instruments.simulator.bench import DEFAULT_DRIFT_RATE, BenchSettings
     from instruments.simulator.physics import DEFAULT_LOW_VELOCITY_Q
     from workflow.models.builtplate import DEMONSTRATION_DEVIATIONS as built
+    from workflow.models.builtplate import SIMULATED_DEVIATIONS
 
     bench = {f.name: f.default for f in fields(BenchSettings) if f.default is not MISSING}
     return {
@@ -101,11 +102,7 @@ def simulator_defaults() -> dict:
         "relative_noise": bench["relative_noise"],
         "floor_fraction": bench["floor_fraction"],
         "phase_noise_deg": bench["phase_noise"],
-        "built_glue_um": built.glue_thickness / UM,
-        "built_ceramic_factor": built.ceramic_modulus_factor,
-        "built_resonator_factor": built.resonator_modulus_factor,
-        "built_hi_offset_um": built.resonator_thickness_offset / UM,
-        "built_ceramic_offset_mm": built.ceramic_offset / MM,
+        **{setting.config_key: setting.value(built) for setting in SIMULATED_DEVIATIONS},
     }
 
 
@@ -218,9 +215,17 @@ def _check_campaign_size(campaign: dict, source: str) -> None:
         raise InputFileError(f"{source}: {error}") from None
 
 
+def _limits(name: str):
+    """(low, high) of the key ``name`` (section.key): its :data:`LIMITS`, or those of the deviation it sets."""
+    from workflow.models.builtplate import SIMULATED_DEVIATIONS
+
+    deviations = {f"simulator.{setting.config_key}": setting.quantity for setting in SIMULATED_DEVIATIONS}
+    return LIMITS.get(name) or LIMITS.get(deviations.get(name, ""))
+
+
 def _check_range(value, name: str, source: str) -> None:
     """Refuse a non-finite number, or one outside its :data:`LIMITS`, naming the key and the range."""
-    bounds = LIMITS.get(name)
+    bounds = _limits(name)
     for item in value if isinstance(value, list) else [value]:
         if isinstance(item, float) and not math.isfinite(item):
             raise InputFileError(f"{source}: '{name}' must be a finite number, got {item!r}")

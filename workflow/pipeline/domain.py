@@ -70,16 +70,10 @@ def bench_settings(config: dict):
 
 def built_plate_deviations(config: dict):
     """The hidden deviations of the simulated built plate: the ``built_*`` keys of the [simulator] section."""
-    from workflow.models.builtplate import PlateDeviations
+    from workflow.models.builtplate import SIMULATED_DEVIATIONS, deviations_from_settings
 
     simulator = config["simulator"]
-    return PlateDeviations(
-        glue_thickness=simulator["built_glue_um"] * UM,
-        ceramic_modulus_factor=simulator["built_ceramic_factor"],
-        resonator_modulus_factor=simulator["built_resonator_factor"],
-        resonator_thickness_offset=simulator["built_hi_offset_um"] * UM,
-        ceramic_offset=simulator["built_ceramic_offset_mm"] * MM,
-    )
+    return deviations_from_settings({s.name: simulator[s.config_key] for s in SIMULATED_DEVIATIONS})
 
 
 def fem_settings(config: dict, key: str = "accuracy"):
