@@ -34,6 +34,10 @@ MAX_BURSTS = 1000
 """Most bursts of one ring-down procedure."""
 
 
+RINGDOWN_INTERVAL_ASKED = 50e-6
+"""The sample interval asked for by default [s]; the plan takes the lock-in's nearest capture interval (51.2 us)."""
+
+
 @dataclass(frozen=True)
 class RingdownPlan:
     """Bursts at one frequency, one per level (burst id = index).
@@ -57,7 +61,7 @@ class RingdownPlan:
     voltages: tuple = (5.0, 10.0, 15.0)
     cycles: int = 2000
     samples: int = 100
-    interval: float = capture_interval(50e-6)
+    interval: float = capture_interval(RINGDOWN_INTERVAL_ASKED)
 
     def __post_init__(self):
         check_frequencies(self.frequency, self.frequency, "ring-down plan")

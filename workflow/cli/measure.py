@@ -15,6 +15,9 @@ from pathlib import Path
 
 from instruments.drivers.amplifier import DEFAULT_CERAMIC_VOLTAGE_LIMIT, DEFAULT_GAIN
 from instruments.procedures.hold import DEFAULT_START_VOLTAGE
+from instruments.procedures.render import RenderPlan
+from instruments.procedures.ringdown import RINGDOWN_INTERVAL_ASKED, RingdownPlan
+from instruments.procedures.sweeps import CampaignPlan, ResonancePlan, VoltageSweepPlan
 from instruments.procedures.readout import DEFAULT_TIME_CONSTANT
 from instruments.procedures.scan import DEFAULT_GRID, DEFAULT_MARGIN, DEFAULT_VOLTAGE
 from workflow.cli.options import (
@@ -111,25 +114,28 @@ def register(subparsers) -> None:
 
     resonance = procedures.add_parser("resonance", parents=[common], help="coarse then fine sweep to find f_r",
                                       description="Find the resonance: a coarse sweep then a fine one around its peak.")
-    _add_search_flags(resonance, 25e3, 61)
-    resonance.add_argument("--voltage", type=VOLTAGE, default=2.0, help="drive, peak volts across the ceramics (default 2)")
+    _add_search_flags(resonance, ResonancePlan.start, ResonancePlan.coarse_points)
+    resonance.add_argument("--voltage", type=VOLTAGE, default=ResonancePlan.voltage,
+                           help=f"drive, peak volts across the ceramics (default {ResonancePlan.voltage:g})")
 
     campaign = procedures.add_parser("campaign", parents=[common], help="Q(v) campaign: sweeps at several voltages",
                                      description="Frequency sweeps around the resonance at several drive voltages "
                                      "(sweep id = voltage index). Without --center-hz the centre comes from the log "
                                      "being resumed or from a resonance search logged to <out>-resonance.csv.")
-    campaign.add_argument("--voltages", type=_voltages, default=(2.5, 5.0, 7.5, 10.0, 12.5, 15.0),
-                          help="peak volts across the ceramics, comma-separated (default 2.5,5,7.5,10,12.5,15)")
-    campaign.add_argument("--points", type=int, default=51, help="frequency points per sweep, 3 to 10000; at most 100000 points in all (default 51)")
-    campaign.add_argument("--span-hz", type=bounded(float, *LIMITS["campaign.span_hz"], "Hz"), default=1600.0,
-                          help=f"sweep width [Hz], {limit_text('campaign.span_hz', 'Hz')} (default 1600)")
+    campaign.add_argument("--voltages", type=_voltages, default=CampaignPlan.voltages,
+                          help=f"peak volts across the ceramics, comma-separated (default {_listed(CampaignPlan.voltages)})")
+    campaign.add_argument("--points", type=int, default=CampaignPlan.points_per_sweep,
+                          help="frequency points per sweep, 3 to 10000; at most 100000 points in all "
+                          f"(default {CampaignPlan.points_per_sweep})")
+    campaign.add_argument("--span-hz", type=bounded(float, *LIMITS["campaign.span_hz"], "Hz"), default=CampaignPlan.span,
+                          help=f"sweep width [Hz], {limit_text('campaign.span_hz', 'Hz')} (default {CampaignPlan.span:g})")
     campaign.add_argument("--center-hz", type=float, help="sweep centre [Hz] (default: see above)")
 
     sweep = procedures.add_parser("voltage-sweep", parents=[common], help="deflection versus voltage at resonance",
                                   description="Velocity and deflection at one frequency for several voltages. Without "
                                   "--frequency-hz the frequency comes from the log being resumed or from a resonance "
                                   "search logged to <out>-resonance.csv.")
-    sweep.add_argument("--voltages", type=_voltages, default=tuple(float(v) for v in range(1, 16)),
+    sweep.add_argument("--voltages", type=_voltages, default=VoltageSweepPlan.voltages,
                        help="peak volts across the ceramics, comma-separated, at most 100000 (default 1,2,...,15)")
     sweep.add_argument("--frequency-hz", type=float, help="drive frequency [Hz] (default: see above)")
     ring = procedures.add_parser("ringdown", parents=[common], help="free decays after bursts at resonance",
@@ -138,16 +144,16 @@ def register(subparsers) -> None:
                                  "the plate temperature where the bench reports it (docs/log-format.md). Without "
                                  "--frequency-hz the frequency comes from the log being resumed or from a resonance "
                                  "search logged to <out>-resonance.csv.")
-    ring.add_argument("--voltages", type=_voltages, default=(5.0, 10.0, 15.0),
-                      help="burst levels, peak volts across the ceramics, comma-separated (default 5,10,15)")
+    ring.add_argument("--voltages", type=_voltages, default=RingdownPlan.voltages,
+                      help=f"burst levels, peak volts across the ceramics, comma-separated (default {_listed(RingdownPlan.voltages)})")
     ring.add_argument("--frequency-hz", type=float, help="burst frequency [Hz] (default: see above)")
-    ring.add_argument("--cycles", type=bounded(int, 1, 100_000_000), default=2000,
-                      help="cycles per burst, 1 to 100000000 (default 2000)")
-    ring.add_argument("--samples", type=bounded(int, 2, 256), default=100,
-                      help="envelope samples after each burst, 2 to 256 (default 100)")
-    ring.add_argument("--interval-us", type=bounded(float, 0.8, 1_000_000.0, "us"), default=50.0,
+    ring.add_argument("--cycles", type=bounded(int, 1, 100_000_000), default=RingdownPlan.cycles,
+                      help=f"cycles per burst, 1 to 100000000 (default {RingdownPlan.cycles})")
+    ring.add_argument("--samples", type=bounded(int, 2, 256), default=RingdownPlan.samples,
+                      help=f"envelope samples after each burst, 2 to 256 (default {RingdownPlan.samples})")
+    ring.add_argument("--interval-us", type=bounded(float, 0.8, 1_000_000.0, "us"), default=RINGDOWN_INTERVAL_ASKED * 1e6,
                       help="time between samples [us], taken to the lock-in's nearest capture interval 2^k x 0.8 us "
-                      "(default 50: 51.2)")
+                      f"(default {RINGDOWN_INTERVAL_ASKED * 1e6:g}: {RingdownPlan.interval * 1e6:g})")
     scan = procedures.add_parser(
         "scan", parents=[common], help="deflection map: the laser spot moved over a grid of points at resonance",
         description="Drive the plate at one frequency and voltage and measure the velocity at each point of a grid "
@@ -180,8 +186,8 @@ def register(subparsers) -> None:
     _add_search_flags(render, 15e3, 101)
     render.add_argument("--loops", type=bounded(float, 0.1, 100.0), default=2.0,
                         help="loops of the drive each capture spans (256 samples), 0.1 to 100 (default 2)")
-    render.add_argument("--settle-s", type=bounded(float, 0.0, 60.0, "s"), default=0.5,
-                        help="time the drive loops before each capture [s], 0 to 60 (default 0.5)")
+    render.add_argument("--settle-s", type=bounded(float, 0.0, 60.0, "s"), default=RenderPlan.settle,
+                        help=f"time the drive loops before each capture [s], 0 to 60 (default {RenderPlan.settle:g})")
     render.add_argument("--figure", type=Path, help="the comparison figure (default: <out> with .png)")
     hold = procedures.add_parser(
         "hold", parents=[common], help="hold the plate at resonance and at a target amplitude (closed loop)",
@@ -214,13 +220,20 @@ def register(subparsers) -> None:
         sub.set_defaults(handler=run)
 
 
+def _listed(values) -> str:
+    """Volts as a help text lists them: 2.5,5,7.5."""
+    return ",".join(f"{v:g}" for v in values)
+
+
 def _add_search_flags(parser, start: float, coarse: int) -> None:
     """The flags of a resonance search's plan."""
     parser.add_argument("--start-hz", type=float, default=start, help=f"coarse sweep start [Hz] (default {start:g})")
-    parser.add_argument("--stop-hz", type=float, default=40e3, help="coarse sweep stop [Hz] (default 40000)")
+    parser.add_argument("--stop-hz", type=float, default=ResonancePlan.stop,
+                        help=f"coarse sweep stop [Hz] (default {ResonancePlan.stop:g})")
     parser.add_argument("--coarse-points", type=int, default=coarse,
                         help=f"points of the coarse sweep, 3 to 10000 (default {coarse})")
-    parser.add_argument("--fine-points", type=int, default=41, help="points of the fine sweep, 3 to 10000 (default 41)")
+    parser.add_argument("--fine-points", type=int, default=ResonancePlan.fine_points,
+                        help=f"points of the fine sweep, 3 to 10000 (default {ResonancePlan.fine_points})")
 
 
 def _points(text: str) -> tuple:
@@ -377,7 +390,7 @@ def _measure(args, station, metadata: dict, out: Path):
         return _hold(args, station, metadata, out, frequency)
     if args.procedure == "ringdown":
         from instruments.drivers.lockin import capture_interval
-        from instruments.procedures.ringdown import RingdownPlan, ringdown
+        from instruments.procedures.ringdown import ringdown
 
         interval = capture_interval(args.interval_us * 1e-6)
         if not args.json and abs(interval / (args.interval_us * 1e-6) - 1) > 1e-9:
