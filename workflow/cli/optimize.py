@@ -18,10 +18,14 @@ from workflow.cli.options import (
     damping_line,
     design_model,
     design_problem,
+    limit_text,
     load_damping,
 )
 from workflow.pipeline.design_models import DESIGN_MODELS
 from workflow.errors import TactileError
+from workflow.models.limits import LIMITS
+from workflow.optimise.robust import RobustSettings, Tolerances
+from workflow.units import UM
 from workflow.optimise.fem_optimum import METHODS
 
 DEFAULT_METHOD = "space-mapping"
@@ -52,20 +56,24 @@ def register(subparsers) -> None:
     add_damping_option(parser)
     add_calibration_option(parser)
     robust = parser.add_argument_group("robust design (with --calibration and --model fem, docs/calibration.md)")
-    robust.add_argument("--reliability", type=bounded(float, 0.5, 0.999), default=0.95,
-                        help="required P(f_r >= 25 kHz) under the calibration posterior and the tolerances, 0.5 to 0.999 "
-                        "(default 0.95)")
+    defaults, tolerances = RobustSettings(), Tolerances()
+    robust.add_argument("--reliability", type=bounded(float, *LIMITS["reliability"]), default=defaults.reliability,
+                        help="required P(f_r >= 25 kHz) under the calibration posterior and the tolerances, "
+                        f"{limit_text('reliability')} (default {defaults.reliability:g})")
     robust.add_argument("--stock-hi-mm", type=stock_list, default=DEFAULT_STOCK_MM, metavar="LIST",
                         help="comma-separated resonator thicknesses available [mm]; lambda is solved for each "
                         f"(default {','.join(f'{t:g}' for t in DEFAULT_STOCK_MM)})")
-    for name, what, default in (("hi", "h_i", 10.0), ("hp", "h_p", 10.0), ("lambda", "lambda", 50.0), ("glue", "the glue", 5.0)):
+    for name, what, field in (("hi", "h_i", "resonator_thickness"), ("hp", "h_p", "ceramic_thickness"),
+                              ("lambda", "lambda", "wavelength"), ("glue", "the glue", "glue_thickness")):
+        default = getattr(tolerances, field) / UM
         robust.add_argument(f"--sigma-{name}-um", type=bounded(float, 0.0, 1000.0, "um"), default=default,
                             help=f"manufacturing standard deviation of {what} [um], 0 to 1000 (default {default:g})")
-    robust.add_argument("--separation", type=bounded(float, 0.0, 0.5), default=0.03,
+    robust.add_argument("--separation", type=bounded(float, 0.0, 0.5), default=defaults.separation,
                         help="no strongly transverse mode within this relative distance of the working frequency "
-                        "(default 0.03)")
-    robust.add_argument("--transverse-threshold", type=bounded(float, 0.0, 1.0), default=0.3,
-                        help="transverse indicator above which a mode counts as transverse, 0 to 1 (default 0.3)")
+                        f"(default {defaults.separation:g})")
+    robust.add_argument("--transverse-threshold", type=bounded(float, 0.0, 1.0), default=defaults.transverse_threshold,
+                        help="transverse indicator above which a mode counts as transverse, 0 to 1 "
+                        f"(default {defaults.transverse_threshold:g})")
     add_fem_options(parser)
     add_json_flag(parser)
     parser.set_defaults(handler=run)
@@ -123,7 +131,7 @@ def _robust(args, calibration) -> dict:
     import time
 
     from workflow.models.plate import check_design_space
-    from workflow.optimise.robust import RobustSettings, Tolerances, robust_design
+    from workflow.optimise.robust import robust_design
     from workflow.pipeline.calibration_files import robust_record
     from workflow.units import MM, UM
 

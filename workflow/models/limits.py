@@ -83,16 +83,16 @@ LIMITS = {
     "damping.posterior_draws": (1, 10_000),
     "fem.width_points": (2, 1000),
     "loop.scan_grid": (1, 100),
-    "loop.reliability": (0.5, 0.999),
+    "reliability": (0.5, 0.999),
     "loop.stock_hi_mm": mm_range(materials.RESONATOR_THICKNESS_RANGE),
     "loop.search_start_khz": (1.0, 39.0),
-    "recommendation.reliability": (0.5, 0.999),
     "recommendation.stock_hi_mm": mm_range(materials.RESONATOR_THICKNESS_RANGE),
     "recommendation.stocks_per_design": (1, 9),
 }
 for _key, _quantity in (
     ("design.q", "q"), ("design.glue_um", "glue_um"), ("simulator.low_velocity_q", "q"), ("simulator.working_q", "q"),
     ("simulator.amplifier_gain", "amplifier_gain"), ("simulator.softening_s2_m2", "softening_s2_m2"),
+    ("loop.reliability", "reliability"), ("recommendation.reliability", "reliability"),
 ):
     LIMITS[_key] = LIMITS[_quantity]
 """Accepted range [low, high] of each quantity, in the unit its name ends with.
