@@ -10,6 +10,7 @@ import shutil
 import types
 from dataclasses import replace
 from importlib import resources
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -218,3 +219,18 @@ def test_the_q_of_v_columns_come_from_the_fem_at_each_rows_posterior_median_plat
         w = damped_deflection(ScaledResponse(candidate.working, damped.required_voltage[1] / candidate.working.voltage),
                               posterior.median_law())
         assert float(w) == pytest.approx(1.15e-6, rel=0.02), "the median voltage gives about the target"
+
+
+def test_a_cached_step_is_keyed_by_the_built_plates_contents(beam_run):
+    """The calibration on the built plates is cached: its key changes with the bytes of a --built-plates log, not only
+    with its path (an edited log is calibrated again)."""
+    from workflow.pipeline.runner import _step_key
+    from workflow.pipeline.steps import STEPS
+
+    run, _ = beam_run
+    (step,) = [s for s in STEPS if s.key == "built_calibration"]
+    assert step.cacheable
+    before = _step_key(run, step)
+    own = Path(run.config["recommendation"]["built_plates"][0])
+    own.write_text(own.read_text(encoding="utf-8") + "\n", encoding="utf-8")
+    assert _step_key(run, step) != before

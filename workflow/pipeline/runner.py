@@ -105,13 +105,17 @@ class Step:
 
 
 def _step_key(context: RunContext, step: Step) -> str:
-    """Content key of a step's result: step, configuration, logs' bytes, code."""
-    logs = [hashlib.sha256(read_input(path, str(path), MAX_LOG_BYTES)).hexdigest() for path in context.results.get("logs", [])]
+    """Content key of a step's result: step, configuration, the bytes of the logs it reads (the campaign's and the
+    built plates'), code."""
+    def digests(paths) -> list:
+        return [hashlib.sha256(read_input(path, str(path), MAX_LOG_BYTES)).hexdigest() for path in paths]
+
     return content_key(
         {
             "step": step.key,
             "config": context.config,
-            "logs": logs,
+            "logs": digests(context.results.get("logs", [])),
+            "built_plates": digests(context.config.get("recommendation", {}).get("built_plates", [])),
             "code": [source_version(package_directory(workflow)), source_version(package_directory(instruments))],
         }
     )
