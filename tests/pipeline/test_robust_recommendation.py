@@ -134,6 +134,7 @@ def test_robust_step_without_a_separated_stock_and_without_built_plates(beam_run
     assert text.startswith("## What to build") and "**No h_p has a robust design that also reaches 1.15 µm**" in text
     assert "| 1 | robust: **none** |" in text and "No robust design: h_p = 1 mm: no stock thickness" in text
     assert "| 1 | nominal FEM optimum | " in text
+    assert "The calibration (`calibration/calibration.json`): " in text, "the posterior-predictive check stated"
 
 
 def test_the_first_table_recommends_the_robust_row_and_shows_the_nominal_one_below_it(beam_run):

@@ -121,7 +121,20 @@ def robust_section(context: RunContext, robust: RobustRecommendation) -> str:
         f"posterior-median plate; a robust design needs it more than {100 * settings.separation:g} % away. "
         f"{robust.evaluations} FEM evaluations."
     )
+    built = context.results.get("built_calibration")
+    if built is not None:
+        text.append(_calibration_state(built.calibration))
     figures = step_figures(context, "built_calibration")
     if figures:
         text.append(figures)
     return "\n\n".join(text)
+
+
+def _calibration_state(calibration) -> str:
+    """Whether the calibration plates are represented by its parameters (the posterior-predictive check) and which
+    parameters only the prior bounds."""
+    check = calibration.check()
+    bounded = "".join(f" {name} is {where}: the prior, not the data, limits it."
+                      for name, where in calibration.at_prior_bounds().items())
+    statement = check["statement"].rstrip(".")
+    return f"The calibration (`calibration/calibration.json`): {statement}.{bounded}"
