@@ -31,11 +31,12 @@ def test_analytical_map_brackets_the_optimum():
 def test_fem_map_has_modes_and_uses_the_cache(tmp_path):
     problem = DesignProblem(1e-3)
     model = FemModel(settings=TINY, cache=EvaluationCache(tmp_path), scheduler="synchronous")
-    result = design_map(model, problem, 2, "fem")
+    result = design_map(model, problem, 2, "fem", results=model.results)
     assert result.modes is not None and len(result.modes) == 4
     assert all(len(modes) == 3 for modes in result.modes)
     assert result.frequency[0, 1] > result.frequency[1, 1]
-    again = design_map(FemModel(settings=TINY, cache=EvaluationCache(tmp_path), scheduler="synchronous"), problem, 2, "fem")
+    cached = FemModel(settings=TINY, cache=EvaluationCache(tmp_path), scheduler="synchronous")
+    again = design_map(cached, problem, 2, "fem", results=cached.results)
     np.testing.assert_array_equal(again.deflection, result.deflection)
 
 

@@ -31,7 +31,7 @@ from workflow.pipeline.design_models import DESIGN_MODELS
 from workflow.errors import TactileError
 from workflow.models.fem.accuracy import SURVEY_ACCURACY
 from workflow.optimise.damped import map_draws
-from workflow.optimise.maps import design_map, width_sweep
+from workflow.optimise.maps import width_sweep
 from workflow.models.limits import LIMITS
 from workflow.pipeline.outputs import output_folder, save_figure
 from workflow.units import KHZ, MM, UM
@@ -156,7 +156,7 @@ def _constant_q_record(args, problem, model, points: int) -> dict:
     from workflow.pipeline.figures.maps import map_figure
 
     optimum = model.optimum(problem)
-    result = design_map(model.plate_model, problem, points, model.name, optimum)
+    result = model.design_map(problem, points, optimum)
     correction = {}
     if getattr(args, "loaded_calibration", None) is not None:
         result, optimum, correction = calibrated_map(args, result, optimum)

@@ -6,7 +6,7 @@ shows): the beam model in one vectorised call, the FEM through
 """
 
 from dataclasses import dataclass
-from typing import Optional, Tuple
+from typing import Callable, Optional, Tuple
 
 import numpy as np
 
@@ -62,18 +62,20 @@ def grid_axes(points: int) -> Tuple[np.ndarray, np.ndarray]:
 
 
 def design_map(
-    model: PlateModel, problem: DesignProblem, points: int, name: str, optimum: Optional[Optimum] = None
+    model: PlateModel, problem: DesignProblem, points: int, name: str, optimum: Optional[Optimum] = None,
+    results: Optional[Callable] = None,
 ) -> DesignMap:
     """Evaluate ``model`` on a ``points`` x ``points`` grid in one batch.
 
-    A model with a ``results(plate)`` method (the FEM) also gives the modes of every point.
+    ``results`` (plate -> FEM results, the FEM's :meth:`~workflow.optimise.fem_model.FemModel.results`) gives the
+    values and the modes of every point instead of ``model``.
     """
     wavelength, thickness = grid_axes(points)
     grid_wavelength, grid_thickness = np.meshgrid(wavelength, thickness, indexing="ij")
     plate = problem.plate(grid_wavelength, grid_thickness)
     modes = None
-    if hasattr(model, "results"):
-        results = model.results(plate)
+    if results is not None:
+        results = results(plate)
         deflection = np.array([r.deflection for r in results]).reshape(grid_wavelength.shape)
         frequency = np.array([r.frequency for r in results]).reshape(grid_wavelength.shape)
         modes = tuple(r.modes for r in results)

@@ -20,6 +20,7 @@ from workflow.optimise.damped import (
     fem_damped_maps,
 )
 from workflow.optimise.fem_optimum import optimise_fem
+from workflow.optimise.maps import DesignMap, design_map
 from workflow.optimise.problem import DesignProblem, Optimum, PlateModel, analytical_model, optimise_analytical
 from workflow.pipeline.records import (
     damped_optimum_record,
@@ -95,6 +96,10 @@ class BeamDesignModel:
         """The optimum with the constant Q."""
         return optimise_analytical(problem, self.q)
 
+    def design_map(self, problem: DesignProblem, points: int, optimum: Optimum) -> DesignMap:
+        """w and f_r over a points x points (lambda, h_i) grid, one vectorised evaluation."""
+        return design_map(self.plate_model, problem, points, self.name, optimum)
+
     def damped(self, posterior, problem: DesignProblem, points: int, draws: int) -> tuple[Optimum, dict, DampedMaps]:
         """(optimum, its Q(v) keys, the maps) with the posterior-median Q(v) on a points x points grid."""
         optimum = damped_optimum(posterior.median_law(), problem)
@@ -154,6 +159,10 @@ class FemDesignModel:
     def optimum(self, problem: DesignProblem) -> Optimum:
         """The optimum with the constant Q, by space mapping."""
         return optimise_fem(problem, self.fem, "space-mapping").optimum
+
+    def design_map(self, problem: DesignProblem, points: int, optimum: Optimum) -> DesignMap:
+        """w, f_r and every point's modes over a points x points (lambda, h_i) grid, one FEM batch."""
+        return design_map(self.fem, problem, points, self.name, optimum, self.fem.results)
 
     def damped(self, posterior, problem: DesignProblem, points: int, draws: int) -> tuple[Optimum, dict, DampedMaps]:
         """(optimum, its Q(v) keys, the maps) with the posterior-median Q(v) on a points x points grid."""

@@ -362,13 +362,15 @@ def fem_maps(context: RunContext):
 
     problems = design_problems(context.config, context.config["maps"]["fem_ceramic_thicknesses_mm"])
     optima = context.results.get("fem_optima", {})
+    model = fem_model(context, accuracy="survey_accuracy")
     return {
         hp: design_map(
-            fem_model(context, accuracy="survey_accuracy"),
+            model,
             problem,
             context.config["maps"]["fem_grid"],
             "fem",
             optima[hp].space_mapping.optimum if hp in optima else None,
+            model.results,
         )
         for hp, problem in problems.items()
     }
