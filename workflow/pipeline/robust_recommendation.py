@@ -117,13 +117,14 @@ class RobustRecommendation:
 
 def own_plates(config: dict, warnings: list | None = None) -> list:
     """The plates measured in the logs of ``[recommendation] built_plates`` (resonance logs, with a scan log where
-    there is one); reading them first, before any step, makes a bad log fail early (naming the file).  A scan of
+    there is one; none read when ``robust`` is off); reading them first, before any step, makes a bad log fail early
+    (naming the file).  A scan of
     another plate accepted by ``[damping] mixed_plates = "warn"`` is appended to ``warnings``."""
     from workflow.calibration.parameters import load_settings
     from workflow.pipeline.calibration_files import measured_plates
 
     paths = config["recommendation"]["built_plates"]
-    if not paths:
+    if not (paths and config["recommendation"]["robust"]):
         return []
     return measured_plates([Path(p) for p in paths], load_settings(), mixed_plates=config["damping"]["mixed_plates"],
                            warnings=[] if warnings is None else warnings)
