@@ -102,7 +102,7 @@ def beam_run(tmp_path, monkeypatch):
     config = default_config()
     config["recommendation"].update(built_plates=[str(own)], stock_hi_mm=[0.75, 1.0])
     run = RunContext(config=config, out=tmp_path / "run", cache=EvaluationCache(tmp_path / "cache"))
-    run.results["recommended_design"] = types.SimpleNamespace(designs={1 * MM: types.SimpleNamespace(plate=NOMINAL)})
+    run.results["recommended_design"] = types.SimpleNamespace(designs={1 * MM: types.SimpleNamespace(plate=NOMINAL, model="FEM")})
     return run, batches
 
 
@@ -131,7 +131,7 @@ def test_robust_step_without_a_separated_stock_and_without_built_plates(beam_run
     assert choice.best is None, "the stand-in's transverse mode is 2 % away: not separated at the default 3 %"
     assert [float(c.plate.resonator_thickness) for c in choice.candidates] == [0.75 * MM, 1.0 * MM]
     text = robust_section(run, recommendation)
-    assert text.startswith("## What to build") and "**No h_p has a robust design that also reaches 1.15 µm**" in text
+    assert text.startswith("## What to build") and "**No h_p has a design to build**" in text
     assert "| 1 | robust: **none** |" in text and "No robust design: h_p = 1 mm: no stock thickness" in text
     assert "| 1 | nominal FEM optimum | " in text
     assert "The calibration (`calibration/calibration.json`): " in text, "the posterior-predictive check stated"
@@ -235,3 +235,42 @@ def test_a_cached_step_is_keyed_by_the_built_plates_contents(beam_run):
     own = Path(run.config["recommendation"]["built_plates"][0])
     own.write_text(own.read_text(encoding="utf-8") + "\n", encoding="utf-8")
     assert _step_key(run, step) != before
+
+
+def test_the_nominal_verdict_weighs_the_mode_separation_like_the_robust_rows(beam_run):
+    """A nominal plate whose frequency clears the limit but with a transverse mode nearer than the separation is not
+    "robust as it is" (the stand-in's transverse mode is 2 % away; the default separation 3 %)."""
+    run, _ = beam_run
+    clear = NOMINAL.with_(wavelength=0.9 * float(NOMINAL.wavelength))  # f_r well above 25 kHz: P = 1
+    choices = robust.robust_choices(beam_calibration(300), {1 * MM: clear}, [0.75 * MM], 1, RobustSettings(),
+                                    beam_evaluate([]), 54.0, sources={1 * MM: "beam model"})
+    recommendation = robust.RobustRecommendation(choices, ("P1",), RobustSettings(), 54.0)
+    (nominal_row,) = [line for line in robust_section(run, recommendation).splitlines()
+                      if line.startswith("| 1 | nominal beam model optimum |")]
+    assert choices[1 * MM].nominal.probability == 1.0
+    assert nominal_row.endswith("| **a transverse mode 2.0 % away (< 3 %)** |")
+
+
+def test_the_robust_design_keeps_to_the_runs_design_space(beam_run):
+    """λ outside the configured range is no robust design; a stock the beam model cannot bring to the limit at any
+    wavelength is reported, not fatal."""
+    calibration = beam_calibration(300)
+    narrow = robust.robust_choices(calibration, {1 * MM: NOMINAL}, [0.75 * MM], 1, SEPARATED, beam_evaluate([]), 54.0,
+                                   wavelength_range=(15 * MM, 16 * MM))
+    assert narrow[1 * MM].best is None and "lambda inside its range" in narrow[1 * MM].reason
+    unreachable = RobustSettings(separation=0.01, min_frequency=1e6)  # no wavelength puts the beam at 1 MHz
+    choices = robust.robust_choices(calibration, {1 * MM: NOMINAL}, [0.75 * MM], 1, unreachable, beam_evaluate([]), 54.0)
+    assert choices[1 * MM].best is None and choices[1 * MM].candidates == ()
+    assert choices[1 * MM].reason.startswith("h_i 0.75 mm: no wavelength gives")
+
+
+def test_built_plates_are_not_read_when_the_robust_recommendation_is_off(beam_run, tmp_path, capsys):
+    run, _ = beam_run
+    config = dict(run.config, recommendation={**run.config["recommendation"], "robust": False,
+                                               "built_plates": [str(tmp_path / "missing.csv")]})
+    assert robust.own_plates(config) == []
+    toml = tmp_path / "off.toml"
+    toml.write_text("[recommendation]\nrobust = false\n", encoding="utf-8")
+    status, _, err = run_cli(capsys, "run", "--config", toml, "--built-plates", tmp_path / "missing.csv",
+                             "--print-config")
+    assert status == 0 and "warning: --built-plates is not used" in err

@@ -36,9 +36,6 @@ from workflow.models.limits import LIMITS
 from workflow.pipeline.outputs import output_folder, save_figure
 from workflow.units import KHZ, MM, UM
 
-
-"""Grid points per axis when --grid is not given."""
-
 OUTPUTS = ("*.png",)
 """Glob patterns of the files the command writes into --out (:mod:`workflow.pipeline.outputs`)."""
 

@@ -51,6 +51,9 @@ def run(args):
     config = override_config(load_config(args.config), args)
     if args.built_plates:
         config["recommendation"]["built_plates"] = [str(path) for path in args.built_plates]
+        if not config["recommendation"]["robust"]:
+            print("tactile run: warning: --built-plates is not used: the configuration's [recommendation] robust is "
+                  "false", file=sys.stderr)
     if args.print_config:
         print(to_toml(config), end="")
         return None

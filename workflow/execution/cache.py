@@ -44,11 +44,17 @@ def package_directory(package) -> str:
     return str(Path(package.__path__[0]))
 
 
+VERSIONED_SUFFIXES = (".py", ".toml", ".csv")
+"""What :func:`source_version` reads: the sources and the package data they read (material records, defaults, the
+published plates' logs)."""
+
+
 @lru_cache(maxsize=None)
 def source_version(package_directory: str) -> str:
-    """SHA-256 of the Python sources under a directory: changes whenever the code does."""
+    """SHA-256 of the Python sources and package data under a directory: changes whenever the code or its data does."""
     digest = hashlib.sha256()
-    for path in sorted(Path(package_directory).rglob("*.py")):
+    paths = (path for path in Path(package_directory).rglob("*") if path.suffix in VERSIONED_SUFFIXES)
+    for path in sorted(paths):
         digest.update(path.relative_to(package_directory).as_posix().encode())
         digest.update(path.read_bytes())
     return digest.hexdigest()

@@ -236,6 +236,16 @@ class RobustSurrogate:
                 self.log_deflection(inside) + rng.normal(0, self.log_deflection.loo_rms, len(draws)) + discrepancy[:, 1])
 
 
+def start_problem(calibration: Calibration, plate: Plate, settings: RobustSettings) -> str | None:
+    """Why no robust lambda can be sought for ``plate`` (the beam model reaches the calibrated frequency limit at no
+    wavelength), or None."""
+    try:
+        beam_wavelength(plate, settings.min_frequency / calibration_ratio(calibration))
+    except InfeasibleError as error:
+        return str(error)
+    return None
+
+
 def robust_design_points(calibration: Calibration, plate: Plate, settings: RobustSettings, solve: bool = True) -> tuple:
     """(bounds, points, plates) of the FEM design of a nominal plate's robust surrogate (the module's step 1): lambda
     around the beam model's estimate of the robust lambda when ``solve``, around the plate's own otherwise."""
@@ -378,16 +388,17 @@ def robust_design(calibration: Calibration, plate: Plate, stock: Sequence[float]
     return select_robust(candidates)
 
 
-def select_robust(candidates: Sequence[RobustCandidate]) -> RobustDesign:
-    """The candidate with the largest median deflection among those with separated modes and lambda inside its
-    range (not at its surrogate's box edge).
+def select_robust(candidates: Sequence[RobustCandidate],
+                  wavelength_range: tuple = materials.WAVELENGTH_RANGE) -> RobustDesign:
+    """The candidate with the largest median deflection among those with separated modes and lambda inside
+    ``wavelength_range`` [m] (and not at its surrogate's box edge).
 
     Raises
     ------
     InfeasibleError
         When there is none, with each candidate's reason.
     """
-    low, high = materials.WAVELENGTH_RANGE
+    low, high = wavelength_range
     feasible = [k for k, c in enumerate(candidates)
                 if c.separated and not c.lambda_at_edge and low <= float(c.plate.wavelength) <= high]
     if not feasible:

@@ -46,11 +46,17 @@ def _recommended_design(context: RunContext, recommendation) -> str:
     robust = context.results.get("robust_recommendation")
     if robust is None:
         return _nominal_designs(context, recommendation, "Recommended design")
-    return robust_section(context, robust) + "\n\n" + _nominal_designs(context, recommendation, NOMINAL_HEADING)
+    nominal = _nominal_designs(context, recommendation, NOMINAL_HEADING)
+    heading, _, body = nominal.partition("\n\n")
+    return robust_section(context, robust) + "\n\n" + heading + "\n\n" + NOMINAL_PREFACE + " " + body
 
 
 NOMINAL_HEADING = "Nominal optima with Q(v)"
 """The recommended-design section's heading when "What to build" comes first (the nominal optima, for comparison)."""
+NOMINAL_PREFACE = ("The numbers of this section are the uncalibrated model's: a goal \"met\" here is met by the nominal "
+                   "plate, not necessarily by one built from it (\"What to build\" above says how these designs would "
+                   "resonate as built).")
+"""How the nominal section opens when "What to build" precedes it."""
 
 
 def _nominal_designs(context: RunContext, recommendation, heading: str) -> str:

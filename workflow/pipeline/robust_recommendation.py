@@ -18,6 +18,7 @@ import numpy as np
 from workflow.calibration.calibration import Calibration
 from workflow.calibration.published import PUBLISHED_PLATES, published_plates
 from workflow.errors import InfeasibleError
+from workflow.models.materials import WAVELENGTH_RANGE
 from workflow.models.plate import Plate
 from workflow.optimise.robust import RobustCandidate, RobustSettings
 from workflow.pipeline.recommendation import RecommendedDesign
@@ -75,6 +76,8 @@ class RobustChoice:
     best_damped, nominal_damped : RecommendedDesign or None
         The robust and the nominal design at their posterior-median plates with the fitted Q(v): deflection at the
         design voltage and voltage for the target (quantiles over Q(v) draws); None without a Q(v) fit.
+    nominal_source : str
+        The model whose optimum the nominal design is ("FEM", or "beam model" without the FEM optima).
     """
 
     candidates: tuple
@@ -83,6 +86,7 @@ class RobustChoice:
     nominal: RobustCandidate
     best_damped: Optional[RecommendedDesign] = None
     nominal_damped: Optional[RecommendedDesign] = None
+    nominal_source: str = "FEM"
 
     @property
     def evaluations(self) -> int:
@@ -179,7 +183,8 @@ def nearest_stocks(thickness: float, stock: Sequence[float], count: int) -> list
 
 
 def robust_choices(calibration: Calibration, nominals: Dict[float, Plate], stock: Sequence[float], count: int,
-                   settings, evaluate, q: float, with_damping=None) -> Dict[float, RobustChoice]:
+                   settings, evaluate, q: float, with_damping=None, wavelength_range: tuple = WAVELENGTH_RANGE,
+                   sources: Dict[float, str] | None = None) -> Dict[float, RobustChoice]:
     """Per h_p: the robust design from the ``count`` stocks nearest the nominal optimum's h_i, and the nominal
     optimum checked under the calibration; all surrogates in one batch (:func:`~workflow.optimise.robust.robust_candidates`).
 
@@ -198,13 +203,22 @@ def robust_choices(calibration: Calibration, nominals: Dict[float, Plate], stock
         Constant Q of the deflections [-].
     with_damping : callable, optional
         (h_p, RobustCandidate) -> RecommendedDesign with Q(v) at the candidate's posterior-median FEM result.
+    wavelength_range : tuple of float
+        The design space's lambda bounds [m] a robust design must lie within.
+    sources : dict, optional
+        h_p -> the model of the nominal optimum (default "FEM").
     """
-    from workflow.optimise.robust import robust_candidates, select_robust
+    from workflow.optimise.robust import robust_candidates, select_robust, start_problem
 
-    plates, solve, owner = [], [], []
+    plates, solve, owner, unstarted = [], [], [], {}
     for hp, nominal in nominals.items():
         for thickness in nearest_stocks(float(nominal.resonator_thickness), stock, count):
-            plates.append(nominal.with_(resonator_thickness=thickness))
+            plate = nominal.with_(resonator_thickness=thickness)
+            problem = start_problem(calibration, plate, settings)
+            if problem is not None:  # this stock cannot reach the limit at any wavelength: said, not fatal
+                unstarted.setdefault(hp, []).append(f"h_i {thickness * 1e3:g} mm: {problem}")
+                continue
+            plates.append(plate)
             solve.append(True)
             owner.append(hp)
         plates.append(nominal)
@@ -216,11 +230,11 @@ def robust_choices(calibration: Calibration, nominals: Dict[float, Plate], stock
         mine = [c for c, s, o in zip(candidates, solve, owner) if o == hp and s]
         (nominal,) = [c for c, s, o in zip(candidates, solve, owner) if o == hp and not s]
         try:
-            best, reason = select_robust(mine).best, None
+            best, reason = select_robust(mine, wavelength_range).best, None
         except InfeasibleError as error:
-            best, reason = None, str(error)
+            best, reason = None, "; ".join(([str(error)] if mine else []) + unstarted.get(hp, []))
         damped = [None if with_damping is None or c is None else with_damping(hp, c) for c in (best, nominal)]
-        choices[hp] = RobustChoice(tuple(mine), best, reason, nominal, *damped)
+        choices[hp] = RobustChoice(tuple(mine), best, reason, nominal, *damped, (sources or {}).get(hp, "FEM"))
     return choices
 
 
@@ -251,8 +265,11 @@ def robust_recommendation(context: RunContext) -> Optional[RobustRecommendation]
     section, design = context.config["recommendation"], context.config["design"]
     settings = RobustSettings(reliability=section["reliability"], min_frequency=design["min_frequency_khz"] * KHZ)
     model, _ = calibration_model(context)
-    nominals = {hp: d.plate for hp, d in context.results["recommended_design"].designs.items()}
-    stock = [t * MM for t in section["stock_hi_mm"] if t >= design["hi_min_mm"] - 1e-9]
+    designs = context.results["recommended_design"].designs
+    nominals = {hp: d.plate for hp, d in designs.items()}
+    stock = [t * MM for t in section["stock_hi_mm"] if design["hi_min_mm"] - 1e-9 <= t <= design["hi_max_mm"] + 1e-9]
+    wavelengths = (design["wavelength_min_mm"] * MM, design["wavelength_max_mm"] * MM)
+    sources = {hp: "FEM" if d.model == "FEM" else "beam model" for hp, d in designs.items()}
     choices = robust_choices(built.calibration, nominals, stock, section["stocks_per_design"], settings,
-                             model.evaluate_plates, design["q"], damped_evaluation(context))
+                             model.evaluate_plates, design["q"], damped_evaluation(context), wavelengths, sources)
     return RobustRecommendation(choices, built.names, settings, design["q"])

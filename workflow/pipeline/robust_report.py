@@ -64,9 +64,14 @@ def _robust_verdict(choice, reliability: float) -> str:
 
 
 def _nominal_verdict(candidate: RobustCandidate, damped, settings) -> str:
+    """What the nominal design fails of the robust design's tests (frequency probability, mode separation, target
+    deflection), or "robust as it is"."""
     reliability, limit = settings.reliability, settings.min_frequency / KHZ
     reasons = [] if _meets(candidate, reliability) else [
         f"likely below {limit:g} kHz: P {candidate.probability:.3f} < {reliability:g}"]
+    if not candidate.separated:
+        reasons.append(f"a transverse mode {100 * candidate.nearest_transverse['relative_distance']:.1f} % away "
+                       f"(< {100 * settings.separation:g} %)")
     if _deflection_shortfall(damped):
         reasons.append(_deflection_shortfall(damped))
     return "**" + "; ".join(reasons) + "**" if reasons else "robust as it is"
@@ -87,7 +92,7 @@ def robust_section(context: RunContext, robust: RobustRecommendation) -> str:
         else:
             rows.append((label, "robust: **none**", *["–"] * 8, "see below"))
             missing.append(f"h_p = {label} mm: {choice.reason}")
-        rows.append(_row(label, "nominal FEM optimum", choice.nominal, choice.nominal_damped,
+        rows.append(_row(label, f"nominal {choice.nominal_source} optimum", choice.nominal, choice.nominal_damped,
                          _nominal_verdict(choice.nominal, choice.nominal_damped, settings)))
     plates = ", ".join(robust.calibrated_on)
     built = [hp for hp, c in robust.choices.items() if buildable(c, reliability)]
@@ -98,9 +103,9 @@ def robust_section(context: RunContext, robust: RobustRecommendation) -> str:
         f"resonate as built; the **robust** design per h_p is the stock resonator thickness and wavelength with "
         f"P(f_r ≥ {limit:g} kHz) ≥ {reliability:g} under that calibration and the manufacturing tolerances, "
         "and the largest deflection among the stocks tried (docs/calibration.md, \"The recommended design in "
-        "tactile run\"). The nominal FEM optimum (the next section) is checked the same way, for comparison."
+        "tactile run\"). The nominal optimum (the next section) is checked the same way, for comparison."
         + (f" Build: {', '.join(f'h_p = {hp / MM:g} mm' for hp in built)} from the robust rows." if built else
-           f" **No h_p has a robust design that also reaches {target:g} µm**: see the verdicts."),
+           " **No h_p has a design to build**: see the verdicts."),
         table(["h_p [mm]", "design", "λ [mm]", "h_i [mm]", "L [mm]", "f_r as built [kHz], median [5 %, 95 %]",
                f"P(f_r ≥ {limit:g} kHz)", f"w at {voltage:g} V, Q = {robust.q:g} [µm]",
                f"V for {target:g} µm with Q(v)", "nearest transverse-mixing mode", "verdict"], rows),

@@ -342,7 +342,7 @@ def evaluate_fem_with_tangents(
     FemResult
         The same numbers as ``evaluate_fem``, with ``tangents`` {parameter: d probe_model / d parameter}.
     """
-    settings, error = settings.resolved(plate, lambda: evaluate_fem(plate, q, voltage, settings))
+    settings, error = settings.resolved(plate, lambda asked=settings: evaluate_fem(plate, q, voltage, asked))
     mesh, system, probes = discretise(plate, voltage, settings)
     modes = working_modes(plate, system, settings)
     parameters = tuple(parameters)
