@@ -125,7 +125,7 @@ def test_robust_step_without_a_separated_stock_and_without_built_plates(beam_run
     run, _ = beam_run
     run.config["recommendation"].update(built_plates=[], published_plates=False)
     assert robust.built_calibration(run) is None, "no built plate: no calibration"
-    run.results["built_calibration"] = robust.BuiltCalibration(beam_calibration(300), ("P1",))
+    run.results["built_calibration"] = robust.BuiltCalibration(beam_calibration(300))
     recommendation = robust.robust_recommendation(run)
     (choice,) = recommendation.choices.values()
     assert choice.best is None, "the stand-in's transverse mode is 2 % away: not separated at the default 3 %"

@@ -35,20 +35,17 @@ from workflow.units import KHZ, UM
 
 @dataclass(frozen=True)
 class Evaluation:
-    """One geometry evaluated by a design model: its JSON keys and, for the FEM, its result and working mode.
+    """One geometry evaluated by a design model: its JSON keys and, for the FEM, its working mode.
 
     Attributes
     ----------
     record : dict
         ``w_dyn_um``, ``f_r_khz`` and what the model adds (error estimate, electrical keys, modes, Q(v)).
-    result : object or None
-        The FEM result (None for the beam model).
     working_mode : int or None
         Index of the mode whose deflection is reported (None for the beam model).
     """
 
     record: dict
-    result: Any = None
     working_mode: Optional[int] = None
 
 
@@ -86,11 +83,8 @@ class BeamDesignModel:
 
     def optimum_record(self, problem: DesignProblem, posterior=None, method: str | None = None) -> dict:
         """The optimum's JSON keys with the constant Q, or with the posterior-median Q(v) and its keys."""
-        if posterior is None:
-            optimum = optimise_analytical(problem, q=self.q)
-            return optimum_record(optimum, coarse_evaluations=optimum.evaluations)
-        optimum = damped_optimum(posterior.median_law(), problem)
-        return optimum_record(optimum, coarse_evaluations=optimum.evaluations, **damped_optimum_record(posterior, optimum))
+        optimum, keys = (self.optimum(problem), {}) if posterior is None else self._damped_optimum(posterior, problem)
+        return optimum_record(optimum, coarse_evaluations=optimum.evaluations, **keys)
 
     def optimum(self, problem: DesignProblem) -> Optimum:
         """The optimum with the constant Q."""
@@ -102,9 +96,14 @@ class BeamDesignModel:
 
     def damped(self, posterior, problem: DesignProblem, points: int, draws: int) -> tuple[Optimum, dict, DampedMaps]:
         """(optimum, its Q(v) keys, the maps) with the posterior-median Q(v) on a points x points grid."""
+        optimum, keys = self._damped_optimum(posterior, problem)
+        return optimum, keys, damped_maps(posterior, problem, points, draws=draws, optimum=optimum)
+
+    @staticmethod
+    def _damped_optimum(posterior, problem: DesignProblem) -> tuple[Optimum, dict]:
+        """The optimum with the posterior-median Q(v) and its Q(v) keys."""
         optimum = damped_optimum(posterior.median_law(), problem)
-        return optimum, damped_optimum_record(posterior, optimum), damped_maps(posterior, problem, points, draws=draws,
-                                                                               optimum=optimum)
+        return optimum, damped_optimum_record(posterior, optimum)
 
 
 @dataclass(frozen=True)
@@ -138,17 +137,13 @@ class FemDesignModel:
                             for m in result.modes]}
         if posterior is not None:
             record.update(fem_damping_record(posterior, result))
-        return Evaluation(record, result, result.best_index)
+        return Evaluation(record, result.best_index)
 
     def optimum_record(self, problem: DesignProblem, posterior=None, method: str = "space-mapping") -> dict:
         """The optimum's JSON keys (constant Q, or the posterior-median Q(v) and its keys), with the evaluation counts
         and the accurate check's error estimate."""
-        extra = {}
-        if posterior is None:
-            found = optimise_fem(problem, self.fem, method)
-        else:
-            found, result = damped_fem_optimum(posterior.median_law(), problem, self.fem, method)
-            extra = fem_damping_record(posterior, result)
+        found, extra = (optimise_fem(problem, self.fem, method), {}) if posterior is None else \
+            self._damped_optimum(posterior, problem, method)
         counts = dict(method=found.method, fine_evaluations=found.fine_evaluations, coarse_evaluations=found.coarse_evaluations)
         accuracy = {}
         if found.error is not None:
@@ -166,9 +161,13 @@ class FemDesignModel:
 
     def damped(self, posterior, problem: DesignProblem, points: int, draws: int) -> tuple[Optimum, dict, DampedMaps]:
         """(optimum, its Q(v) keys, the maps) with the posterior-median Q(v) on a points x points grid."""
-        found, result = damped_fem_optimum(posterior.median_law(), problem, self.fem, "space-mapping")
-        return found.optimum, fem_damping_record(posterior, result), fem_damped_maps(posterior, problem, self.fem, points,
-                                                                                      draws, found.optimum)
+        found, keys = self._damped_optimum(posterior, problem, "space-mapping")
+        return found.optimum, keys, fem_damped_maps(posterior, problem, self.fem, points, draws, found.optimum)
+
+    def _damped_optimum(self, posterior, problem: DesignProblem, method: str) -> tuple:
+        """(FemOptimum with the posterior-median Q(v), the Q(v) keys of its FEM result)."""
+        found, result = damped_fem_optimum(posterior.median_law(), problem, self.fem, method)
+        return found, fem_damping_record(posterior, result)
 
 
 DESIGN_MODELS = {"analytical": BeamDesignModel, "fem": FemDesignModel}

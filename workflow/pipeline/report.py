@@ -46,9 +46,8 @@ def _recommended_design(context: RunContext, recommendation) -> str:
     robust = context.results.get("robust_recommendation")
     if robust is None:
         return _nominal_designs(context, recommendation, "Recommended design")
-    nominal = _nominal_designs(context, recommendation, NOMINAL_HEADING)
-    heading, _, body = nominal.partition("\n\n")
-    return robust_section(context, robust) + "\n\n" + heading + "\n\n" + NOMINAL_PREFACE + " " + body
+    return robust_section(context, robust) + "\n\n" + _nominal_designs(context, recommendation, NOMINAL_HEADING,
+                                                                        NOMINAL_PREFACE)
 
 
 NOMINAL_HEADING = "Nominal optima with Q(v)"
@@ -59,8 +58,8 @@ NOMINAL_PREFACE = ("The numbers of this section are the uncalibrated model's: a 
 """How the nominal section opens when "What to build" precedes it."""
 
 
-def _nominal_designs(context: RunContext, recommendation, heading: str) -> str:
-    section = recommendation_section(recommendation, heading)
+def _nominal_designs(context: RunContext, recommendation, heading: str, preface: str = "") -> str:
+    section = recommendation_section(recommendation, heading, preface)
     fit = context.results.get("damping_fit")
     if not section or fit is None:
         return section
@@ -115,8 +114,8 @@ def _basis(recommendation, measured_velocity, simulated: bool) -> str:
     return " ".join(text)
 
 
-def recommendation_section(recommendation, heading: str = "Recommended design") -> str:
-    """The report's "Recommended design" section (or its ``heading``) from a
+def recommendation_section(recommendation, heading: str = "Recommended design", preface: str = "") -> str:
+    """The report's "Recommended design" section (or its ``heading``, its text opening with ``preface``) from a
     :class:`~workflow.pipeline.recommendation.Recommendation`."""
     designs = recommendation.designs
     rows = [(f"{hp / MM:g}", _SOURCES[d.model], d) for hp, d in designs.items()]
@@ -129,7 +128,7 @@ def recommendation_section(recommendation, heading: str = "Recommended design") 
     problem, target = rows[0][2].problem, rows[0][2].target / UM
     voltage, limit = problem.voltage, problem.min_frequency / KHZ
     text = [
-        _verdict(recommendation),
+        " ".join(t for t in (preface, _verdict(recommendation)) if t),
         table(
             [
                 "h_p [mm]",

@@ -16,7 +16,7 @@ from typing import Dict, Optional, Sequence
 import numpy as np
 
 from workflow.calibration.calibration import Calibration
-from workflow.calibration.published import PUBLISHED_PLATES, published_plates
+from workflow.calibration.published import published_plates
 from workflow.errors import InfeasibleError
 from workflow.models.materials import WAVELENGTH_RANGE
 from workflow.models.plate import Plate
@@ -36,17 +36,14 @@ STOCKS_PER_DESIGN = 2
 
 @dataclass(frozen=True)
 class BuiltCalibration:
-    """The calibration on the measured built plates.
-
-    Attributes
-    ----------
-    calibration : Calibration
-    names : tuple of str
-        The plates' names as the report gives them (P1, P2, then the log files' names).
-    """
+    """The calibration on the measured built plates (the published ones named P1 and P2, the user's by their logs)."""
 
     calibration: Calibration
-    names: tuple
+
+    @property
+    def names(self) -> tuple:
+        """The plates' names as the report gives them: P1, P2, then the log files' names."""
+        return tuple(Path(plate.name).name for plate in self.calibration.plates)
 
     def surrogates_of(self, names: Sequence[str]) -> Optional[tuple]:
         """The prior surrogates of the plates ``names`` (all among :attr:`names`), else None."""
@@ -122,8 +119,8 @@ class RobustRecommendation:
 def own_plates(config: dict, warnings: list | None = None) -> list:
     """The plates measured in the logs of ``[recommendation] built_plates`` (resonance logs, with a scan log where
     there is one; none read when ``robust`` is off); reading them first, before any step, makes a bad log fail early
-    (naming the file).  A scan of
-    another plate accepted by ``[damping] mixed_plates = "warn"`` is appended to ``warnings``."""
+    (naming the file).  A scan of another plate accepted by ``[damping] mixed_plates = "warn"`` is appended to
+    ``warnings``."""
     from workflow.calibration.parameters import load_settings
     from workflow.pipeline.calibration_files import measured_plates
 
@@ -134,13 +131,10 @@ def own_plates(config: dict, warnings: list | None = None) -> list:
                            warnings=[] if warnings is None else warnings)
 
 
-def built_plates(config: dict) -> tuple:
-    """(measured plates, their names): the published ones when ``[recommendation] published_plates``, then
+def built_plates(config: dict) -> list:
+    """The measured built plates: the published ones when ``[recommendation] published_plates``, then
     :func:`own_plates`."""
-    published = config["recommendation"]["published_plates"]
-    plates, own = published_plates() if published else [], own_plates(config)
-    names = (tuple(PUBLISHED_PLATES) if published else ()) + tuple(Path(p.name).name for p in own)
-    return plates + own, names
+    return (published_plates() if config["recommendation"]["published_plates"] else []) + own_plates(config)
 
 
 def built_calibration(context: RunContext) -> Optional[BuiltCalibration]:
@@ -152,12 +146,11 @@ def built_calibration(context: RunContext) -> Optional[BuiltCalibration]:
 
     if not context.config["recommendation"]["robust"]:
         return None
-    plates, names = built_plates(context.config)
+    plates = built_plates(context.config)
     if not plates:
         return None
     model, fem = calibration_model(context)
-    calibration = calibrate(plates, load_settings(), model.evaluate_plates, fem, model.results_with_surfaces)
-    return BuiltCalibration(calibration, names)
+    return BuiltCalibration(calibrate(plates, load_settings(), model.evaluate_plates, fem, model.results_with_surfaces))
 
 
 CALIBRATION_CAPTION = "Posterior of the calibration on the built plates"
