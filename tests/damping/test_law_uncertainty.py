@@ -67,16 +67,16 @@ def test_the_answer_mixes_in_equal_shares_the_laws_the_data_do_not_tell_apart_th
     assert answer_shares(apart, {"threshold": True, "flexible": True}) == {"threshold": 1.0}
 
 
-def test_softening_and_drift_are_fitted_by_default_where_the_logs_can_show_them_and_the_drift_is_bounded(tmp_path):
+def test_softening_drift_and_heating_are_fitted_by_default_where_the_logs_can_show_them_and_the_drift_is_bounded(tmp_path):
     campaign = simulate_campaign(seed=1, **SMALL)
-    assert default_forward_model(campaign) == ForwardModel(softening=True, drift=True)
+    assert default_forward_model(campaign) == ForwardModel(softening=True, drift=True, heating=True)
     untimed = type(campaign)(**{**vars(campaign), "timestamp": None})
-    assert default_forward_model(untimed) == ForwardModel(softening=True, drift=False)
+    assert default_forward_model(untimed) == ForwardModel(softening=True, drift=False, heating=False)
     data = fit_data(campaign, "quadratic", default_forward_model(campaign))
     sweep_rate = 2 * 1000.0 / (SMALL["points_per_sweep"] - 1)  # the synthetic sweeps: 2 kHz at one point a second
     bound = data.upper[data.layout.names.index("drift_rate")]
     assert bound == pytest.approx(MAX_DRIFT_SHARE * sweep_rate, rel=1e-6)
     simulate_bench_campaign(tmp_path / "c.csv", points_per_sweep=11, voltages=(5.0,))
     simulate_ringdown(tmp_path / "r.csv", voltages=(5.0,), samples=20)
-    assert default_forward_model(read_logs([tmp_path / "r.csv"])) == ForwardModel(softening=False, drift=False)
+    assert default_forward_model(read_logs([tmp_path / "r.csv"])) == ForwardModel()
     assert default_forward_model(read_logs([tmp_path / "c.csv"])).drift

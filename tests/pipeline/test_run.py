@@ -192,7 +192,7 @@ def test_the_run_fits_sweeps_and_ringdowns_jointly_and_reports_them(tiny_run):
     _, out, config, _ = tiny_run
     assert (out / "simulated_ringdown.csv").is_file()
     summary = json.loads((out / "damping" / "fit.json").read_text())
-    assert summary["forward_model"] == {"softening": True, "drift": True}
+    assert summary["forward_model"] == {"softening": True, "drift": True, "heating": True}
     kappa = summary["parameters"]["kappa"]
     assert kappa["p05"] <= default_config()["simulator"]["softening_s2_m2"] <= kappa["p95"]
     ringdown = summary["ringdown"]

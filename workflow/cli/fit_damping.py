@@ -48,6 +48,10 @@ def register(subparsers) -> None:
     parser.add_argument("--drift", action=argparse.BooleanOptionalAction, default=None,
                         help="fit a drift rate of the resonance within each sweep (needs timestamp_s); default: fitted "
                         "whenever the sweep logs have timestamp_s, --no-drift leaves it out")
+    parser.add_argument("--heating", action=argparse.BooleanOptionalAction, default=None,
+                        help="fit the fall of the resonance with the energy the plate has dissipated since its sweep "
+                        "began (its heating while driven; needs timestamp_s); default: fitted whenever the sweep logs "
+                        "have timestamp_s, --no-heating leaves it out")
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     add_json_flag(parser)
     parser.set_defaults(handler=run)
@@ -63,7 +67,8 @@ def run(args) -> dict:
         noise = stated_noise(args.logs)
         automatic = default_forward_model(log)
         forward = ForwardModel(softening=automatic.softening if args.softening is None else args.softening,
-                               drift=automatic.drift if args.drift is None else args.drift)
+                               drift=automatic.drift if args.drift is None else args.drift,
+                               heating=automatic.heating if args.heating is None else args.heating)
         fit = fit_damping(log, laws=laws, seed=args.seed, max_steps=args.max_steps, progress=True, forward=forward,
                           stated_noise=noise, mapper=partial(map_evaluations, description="laws sampled"))
         summary = dict(fit_summary(fit), files=write_fit(fit, out, figures=not args.no_figures, protect=input_paths))

@@ -153,7 +153,7 @@ def misfit_check(
         return MisfitCheck(np.zeros(0), np.zeros(0), 1.0, np.zeros(0), 1.0, float("nan"), stated_noise, None, True,
                            ("no sweeps: the residual and noise checks apply to sweeps only",))
     model = np.median(predicted_velocity(chosen, layout, data.frequency, data.voltage, data.sweep, data.time_offset,
-                                         data.mode_factor), axis=0)
+                                         data.mode_factor, heat=data.heat), axis=0)
     sigma_rel, sigma_abs = (float(np.median(np.exp(layout.column(chosen, name)))) for name in ("ln_sigma_rel", "ln_sigma_abs"))
     standardised = (data.velocity[: data.n_rows] - model) / np.sqrt((sigma_rel * model) ** 2 + sigma_abs**2)
     z, p, chi2, dof = [], [], [], []

@@ -389,7 +389,7 @@ def aic(log_likelihood: float, n_parameters: int) -> float:
 def minimum_walkers(laws: Sequence[str], n_sweeps: int, forward: ForwardModel = ForwardModel(), n_bursts: int = 0) -> int:
     """Fewest walkers emcee's differential-evolution moves accept for ``laws`` fitted to ``n_sweeps`` sweeps and
     ``n_bursts`` ring-downs: twice the largest number of sampled parameters (law, gain, one resonance per sweep,
-    softening and drift, one initial velocity per burst, noise)."""
+    softening, drift and heating, one initial velocity per burst, noise)."""
     return 2 * max(ParameterLayout(name, n_sweeps, forward, n_bursts).dimension for name in laws)
 
 
@@ -639,7 +639,7 @@ def ringdown_agreement(log: CampaignLog, law_name: str, forward: ForwardModel = 
 
 
 _UNITS = {"gain": "m/V", "sigma_rel": "-", "sigma_abs": "m/s", "kappa": "s^2/m^2", "drift_rate": "Hz/s",
-          "sigma_decay_rel": "-", "sigma_decay_abs": "m/s"}
+          "heating": "kg/J", "sigma_decay_rel": "-", "sigma_decay_abs": "m/s"}
 """Units of the fitted parameters beside the law's own (the law's are in its ``units``)."""
 
 
@@ -696,32 +696,40 @@ against kappa = 0 (no softening) has 0.09, one clear of zero by three standard e
 
 
 def effects_summary(fit: DampingFit, parameters: dict) -> dict:
-    """Softening and drift: whether the fit modelled them and whether the logs show them (``parameters``: the preferred
-    law's :func:`parameter_summary`).  Softening is detected by :data:`SOFTENING_DETECTED`; a drift when its 90 %
-    interval excludes zero."""
+    """Softening, drift and heating: whether the fit modelled them and whether the logs show them (``parameters``: the
+    preferred law's :func:`parameter_summary`).  Softening and heating are detected by :data:`SOFTENING_DETECTED`
+    (their priors start at zero); a drift when its 90 % interval excludes zero."""
     forward = fit.best.data.layout.forward
-    kappa, drift = parameters.get("kappa"), parameters.get("drift_rate")
+
+    def from_zero(name):
+        value = parameters.get(name)
+        return None if value is None else bool(value["p05"] > SOFTENING_DETECTED * value["median"])
+
+    drift = parameters.get("drift_rate")
     return {
-        "softening": {"fitted": forward.softening,
-                      "detected": None if kappa is None else bool(kappa["p05"] > SOFTENING_DETECTED * kappa["median"]),
+        "softening": {"fitted": forward.softening, "detected": from_zero("kappa"),
                       "rule": f"kappa's 5 % quantile above {SOFTENING_DETECTED:g} of its median"},
         "drift": {"fitted": forward.drift,
                   "detected": None if drift is None else bool(drift["p05"] > 0 or drift["p95"] < 0),
                   "rule": "the drift rate's 90 % interval excludes zero",
-                  **({} if forward.drift else {"not_fitted_because": _drift_left_out(fit.log)})},
+                  **({} if forward.drift else {"not_fitted_because": _left_out(fit.log, "drift")})},
+        "heating": {"fitted": forward.heating, "detected": from_zero("heating"),
+                    "rule": f"the heating coefficient's 5 % quantile above {SOFTENING_DETECTED:g} of its median",
+                    **({} if forward.heating else {"not_fitted_because": _left_out(fit.log, "heating")})},
     }
 
 
-def _drift_left_out(log: CampaignLog) -> str:
-    """Why a fit did not model the drift within the sweeps (:func:`default_forward_model`)."""
-    return "the logs have no timestamp_s" if log.timestamp is None else "left out by the caller (--no-drift)"
+def _left_out(log: CampaignLog, effect: str) -> str:
+    """Why a fit did not model the timed ``effect`` ("drift" or "heating") of the sweeps (:func:`default_forward_model`)."""
+    return "the logs have no timestamp_s" if log.timestamp is None else f"left out by the caller (--no-{effect})"
 
 
 def band_contents(fit: DampingFit) -> dict:
     """What the 90 % band of Q(v) (``q_of_v``, and the draws the design uses) contains and what it does not."""
     laws = ", ".join(f"{name} {share:.2g}" for name, share in fit.shares.items())
     forward = fit.best.data.layout.forward
-    effects = [name for name, fitted in (("the softening", forward.softening), ("the drift", forward.drift)) if fitted]
+    effects = [name for name, fitted in (("the softening", forward.softening), ("the drift", forward.drift),
+                                         ("the heating", forward.heating)) if fitted]
     return {
         "contains": [
             "the measurement noise (fitted: relative and absolute)",
@@ -734,9 +742,12 @@ def band_contents(fit: DampingFit) -> dict:
             "Q(v) outside the measured velocities (the laws extrapolate)",
             "another plate's Q(v): the fit is of the plate measured",
             "the drift of Q itself with temperature or time beyond the resonance's drift",
-            "a shift of the resonance that follows the amplitude with a lag, as the plate's heating while it is driven "
-            "(a steady drift rate cannot follow it; on the simulated bench it made Q 1-5 % high, outside the band: "
-            "docs/damping.md#coverage-over-truths-the-fit-does-not-contain)",
+            *([] if forward.heating else [
+                "a shift of the resonance that follows the amplitude with a lag, as the plate's heating while it is "
+                "driven (not fitted: a steady drift rate cannot follow it; on the simulated bench it made Q 1-5 % high, "
+                "outside the band: docs/damping.md#coverage-over-truths-the-fit-does-not-contain)"]),
+            *(["the plate's cooling within a sweep (the heating term counts the energy dissipated since the sweep "
+               "began; the drift rate takes up a steady cooling)"] if forward.heating else []),
             "a measurement point or a velocity calibration other than the logs say",
         ],
     }
@@ -782,7 +793,8 @@ def fit_summary(fit: DampingFit) -> dict:
             "peak_velocity_m_s": fit.sweeps.peak_velocity,
             "half_power_q": [None if not np.isfinite(q) else float(q) for q in fit.sweeps.quality_factor],
         },
-        "forward_model": {"softening": best.data.layout.forward.softening, "drift": best.data.layout.forward.drift},
+        "forward_model": {"softening": best.data.layout.forward.softening, "drift": best.data.layout.forward.drift,
+                          "heating": best.data.layout.forward.heating},
         "effects": effects_summary(fit, parameters),
         "ringdown": ringdown_summary(fit, parameters),
         "velocity_convention": VELOCITY_CONVENTION,

@@ -4,11 +4,16 @@ Forward model of the sweeps (one resonant mode, amplitude-dependent damping): a 
 measured at drive frequency f, peak voltage V and time t in sweep k has the antinode deflection
 
     w = g V / sqrt((1 - r^2)^2 + (r / Q(v))^2),   r = f / f_r(v, t),   v = 2 pi f w,
-    f_r(v, t) = (f_r,k + beta (t - t_k)) (1 - kappa v^2),
+    f_r(v, t) = (f_r,k + beta (t - t_k)) (1 - h E(t)) (1 - kappa v^2),
+    E(t) = sum over the sweep's rows j read by t of pi f_j u_j^2 dt_j / Q(u_j),
 
 solved self-consistently (:mod:`workflow.damping.harmonic`, the bench simulator's solve),
-with t_k the sweep's mean time; without softening (kappa) every row is solved at once,
-with it the rows of each sweep are solved in the order they were measured, each from the
+with t_k the sweep's mean time and E the energy per modal mass the plate has dissipated since the
+sweep began (u_j the measured antinode velocity of row j, dt_j the time since the previous reading): a
+plate of heat capacity C, modal mass m_eff and relative frequency coefficient c [1/K] heats by
+m_eff E / C and has h = -c m_eff / C [kg/J] while the sweep is short beside its cooling time C / G
+(:class:`HeatData`; the simulator's plate: h = 2.2e-7 kg/J, C / G = 7.6 min).  Without softening
+(kappa) every row is solved at once, with it the rows of each sweep are solved in the order they were measured, each from the
 previous one's amplitude (branch following; walkers whose curves are provably
 single-valued skip the ordering).  The vibrometer reads v |phi| at its point (|phi| from
 the log's ``x_mm``, ``y_mm``, :mod:`~workflow.damping.mode_shape`), so the law is fitted
@@ -22,7 +27,7 @@ Parameters, in the order of :attr:`ParameterLayout.names`:
   knots are fixed by the data, :func:`spline_knots`, :attr:`ParameterLayout.fixed`);
 - with sweeps: ``ln_gain`` (ln g, g the quasi-static deflection per volt [m/V]) and
   ``f_r_<k>``, one resonance frequency per sweep [Hz] (drift between sweeps is free);
-- ``kappa`` (softening [s^2/m^2], >= 0) and ``drift_rate`` (beta [Hz/s]) when fitted;
+- ``kappa`` (softening [s^2/m^2], >= 0), ``drift_rate`` (beta [Hz/s]) and ``heating`` (h [kg/J], >= 0) when fitted;
 - with ring-downs: ``ln_v0_<j>``, each burst's initial antinode velocity [m/s], and the
   ring-down record's noise ``ln_sigma_decay_rel``, ``ln_sigma_decay_abs``;
 - with sweeps: ``ln_sigma_rel``, ``ln_sigma_abs``: the noise, Gaussian with variance
@@ -68,20 +73,29 @@ class ForwardModel:
         Fit kappa in f_r(v) = f_r0 (1 - kappa v^2) (branch-following solve along each sweep).
     drift : bool
         Fit a campaign-wide drift rate of f_r within each sweep (needs ``timestamp_s``).
+    heating : bool
+        Fit the fall of f_r with the energy the plate has dissipated since its sweep began (its heating while it is
+        driven; needs ``timestamp_s``): :func:`dissipated_energy`.
     """
 
     softening: bool = False
     drift: bool = False
+    heating: bool = False
 
 
 def default_forward_model(log: CampaignLog) -> ForwardModel:
     """The effects fitted unless the caller says otherwise (issue 29: a fit that left them out blamed the law for their
-    mark on the curves, and its band missed the truth): softening whenever the logs have sweeps, drift whenever they
-    also have ``timestamp_s``.  Each prior includes the effect's absence (kappa = 0, beta = 0); the drift's is bounded
-    by :data:`MAX_DRIFT_SHARE`."""
-    return ForwardModel(softening=log.n_sweeps > 0, drift=log.n_sweeps > 0 and log.timestamp is not None)
+    mark on the curves, and its band missed the truth): softening whenever the logs have sweeps, drift and heating
+    whenever they also have ``timestamp_s``.  Each prior includes the effect's absence (kappa = 0, beta = 0, h = 0);
+    the drift's is bounded by :data:`MAX_DRIFT_SHARE`, the heating's by :data:`HEATING_RANGE`."""
+    timed = log.n_sweeps > 0 and log.timestamp is not None
+    return ForwardModel(softening=log.n_sweeps > 0, drift=timed, heating=timed)
 
 
+HEATING_RANGE = (0.0, 1e-3 / 300.0)
+"""Prior range of the heating coefficient h = |c| m_eff / C [kg/J]: a relative frequency coefficient |c| up to
+1e-3 /K (CuBe's is 1.75e-4 /K: half its modulus's) and m_eff / C up to 1 / (300 J/(kg K)) (the modal mass at most the
+plate's, the specific heats of metals and ceramics above 300 J/(kg K)); the simulator's plate has 2.2e-7."""
 MAX_DRIFT_SHARE = 0.1
 """Prior bound of the drift within a sweep, as a share of the slowest sweep's rate (span / duration) [-]: a resonance
 moving by more than a tenth of the span while it is swept leaves no curve to fit, and near the sweep rate the drift
@@ -133,7 +147,8 @@ class ParameterLayout:
         """All sampled coordinates, in order (computed once)."""
         law = tuple(SAMPLED_LAW_PARAMETERS[name] for name in self.law_parameters)
         sweeps = ("ln_gain",) + tuple(f"f_r_{k}" for k in range(self.n_sweeps)) if self.n_sweeps else ()
-        effects = ("kappa",) * self.forward.softening + ("drift_rate",) * self.forward.drift
+        effects = (("kappa",) * self.forward.softening + ("drift_rate",) * self.forward.drift
+                   + ("heating",) * self.forward.heating)
         bursts = tuple(f"ln_v0_{j}" for j in range(self.n_bursts))
         decay_noise = ("ln_sigma_decay_rel", "ln_sigma_decay_abs") if self.n_bursts else ()
         noise = ("ln_sigma_rel", "ln_sigma_abs") if self.n_sweeps else ()
@@ -172,7 +187,7 @@ class ParameterLayout:
 
     def natural(self, theta: np.ndarray) -> dict:
         """Parameter name -> values in natural units (q0, alpha, gain [m/V], f_r_k [Hz], kappa [s^2/m^2],
-        drift_rate [Hz/s], v0_j [m/s], sigma_rel, sigma_abs [m/s] and their decay counterparts)."""
+        drift_rate [Hz/s], heating [kg/J], v0_j [m/s], sigma_rel, sigma_abs [m/s] and their decay counterparts)."""
         theta = np.atleast_2d(theta)
         out = {}
         for i, name in enumerate(self.names):
@@ -210,6 +225,43 @@ class DecayData:
 
 
 @dataclass(frozen=True)
+class HeatData:
+    """The measured sweep rows as the heating term needs them (:func:`dissipated_energy`).
+
+    Attributes
+    ----------
+    velocity : numpy.ndarray
+        Measured antinode velocity of each sweep row [m/s].
+    weight : numpy.ndarray
+        pi f u^2 dt of each row [m^2/s]: the energy per modal mass its drive dissipated until its reading, times Q
+        (dt from the previous reading of its sweep, the sweep's median step for the first).
+    grid : SweepGrid
+        The rows of each sweep in measuring order.
+    """
+
+    velocity: np.ndarray
+    weight: np.ndarray
+    grid: "SweepGrid"
+
+    @classmethod
+    def of(cls, log: CampaignLog) -> "HeatData":
+        grid = SweepGrid.of(log.sweep)
+        time = log.timestamp[grid.index]
+        step = np.diff(time, axis=1)
+        first = np.array([np.median(row[row > 0]) if np.any(row > 0) else 0.0 for row in step])
+        dt = np.maximum(np.concatenate([first[:, None], step], axis=1), 0.0).ravel()[grid.position]
+        velocity = log.velocity / log.measurement_factor()
+        return cls(velocity, np.pi * log.frequency * velocity**2 * dt, grid)
+
+    def energy(self, quality_factor) -> np.ndarray:
+        """Energy per modal mass dissipated in each row's sweep until its reading [J/kg], one row per walker, for
+        the Q(u) of each walker's law at the rows' velocities (W, N) [-]: (W, N)."""
+        per_row = self.weight / quality_factor
+        along = np.cumsum(per_row[:, self.grid.index], axis=2)
+        return along.reshape(len(per_row), -1)[:, self.grid.position]
+
+
+@dataclass(frozen=True)
 class FitData:
     """The measured rows, the parameter layout and the prior box, for the log-probability.
 
@@ -229,6 +281,8 @@ class FitData:
     mode_factor : numpy.ndarray or None
         |phi| at each row's measurement point [-] (None: 1).
     decays : DecayData or None
+    heat : HeatData or None
+        The rows as the heating term needs them (with ``forward.heating``).
     """
 
     frequency: np.ndarray
@@ -241,6 +295,7 @@ class FitData:
     time_offset: Optional[np.ndarray] = None
     mode_factor: Optional[np.ndarray] = None
     decays: Optional[DecayData] = None
+    heat: Optional[HeatData] = None
 
     @property
     def n_rows(self) -> int:
@@ -259,7 +314,7 @@ def fit_data(log: CampaignLog, law_name: str, forward: ForwardModel = ForwardMod
     Raises
     ------
     InputFileError
-        Drift requested of logs without ``timestamp_s``, or softening and drift without sweeps.
+        Drift or heating requested of logs without ``timestamp_s``, or softening, drift or heating without sweeps.
     """
     decays = log.ringdown
     layout = ParameterLayout(law_name, log.n_sweeps, forward, decays.n_bursts if decays else 0)
@@ -283,18 +338,21 @@ def fit_data(log: CampaignLog, law_name: str, forward: ForwardModel = ForwardMod
         span = max(f.max() - f.min(), 0.01 * f.mean())
         bounds[f"f_r_{k}"] = (max(f.min() - span, 0.5 * f.min()), f.max() + span)
     time_offset = None
-    if (forward.softening or forward.drift) and not log.n_sweeps:
+    if (forward.softening or forward.drift or forward.heating) and not log.n_sweeps:
         raise InputFileError(f"{', '.join(log.sources + (decays.sources if decays else ()))}: "
-                             "softening and drift are fitted from sweeps; no sweep log given")
+                             "softening, drift and heating are fitted from sweeps; no sweep log given")
+    if (forward.drift or forward.heating) and log.timestamp is None:
+        what = "the drift" if forward.drift else "the heating"
+        raise InputFileError(f"{', '.join(log.sources)}: fitting {what} needs the 'timestamp_s' column in every sweep log")
     if forward.drift:
-        if log.timestamp is None:
-            raise InputFileError(f"{', '.join(log.sources)}: fitting the drift needs the 'timestamp_s' column in every sweep log")
         means = np.array([np.mean(log.timestamp[log.sweep == k]) for k in range(log.n_sweeps)])
         time_offset = log.timestamp - means[log.sweep]
         durations = np.array([np.ptp(time_offset[log.sweep == k]) for k in range(log.n_sweeps)])
         spans = np.array([np.ptp(log.frequency[log.sweep == k]) for k in range(log.n_sweeps)])
         limit = MAX_DRIFT_SHARE * float(np.min(spans / np.maximum(durations, 1e-9)))
         bounds["drift_rate"] = (-limit, limit)
+    heat = HeatData.of(log) if forward.heating else None
+    bounds["heating"] = HEATING_RANGE
     decay_data = None
     if decays:
         decay_data = DecayData(decays.frequency, decays.burst, decays.decay_time, decays.mode_factor)
@@ -305,7 +363,7 @@ def fit_data(log: CampaignLog, law_name: str, forward: ForwardModel = ForwardMod
     upper = np.array([bounds[name][1] for name in layout.names], dtype=float)
     velocity = np.concatenate([log.velocity] + ([decays.velocity] if decays else []))
     return FitData(log.frequency, log.drive_voltage, velocity, log.sweep, layout, lower, upper, time_offset,
-                   log.mode_factor, decay_data)
+                   log.mode_factor, decay_data, heat)
 
 
 def spline_knots(log: CampaignLog, v_top: float) -> Tuple[Tuple[str, float], ...]:
@@ -350,7 +408,8 @@ class SweepGrid:
 
 
 def predicted_velocity(theta, layout: ParameterLayout, frequency, voltage, sweep, time_offset=None,
-                       mode_factor=None, grid: Optional[SweepGrid] = None, warm: Optional["WarmStarts"] = None) -> np.ndarray:
+                       mode_factor=None, grid: Optional[SweepGrid] = None, warm: Optional["WarmStarts"] = None,
+                       heat: Optional[HeatData] = None) -> np.ndarray:
     """Noise-free velocity amplitude at the measurement point, 2 pi f w |phi|, at each sweep row, one row per walker [m/s].
 
     Parameters
@@ -370,6 +429,8 @@ def predicted_velocity(theta, layout: ParameterLayout, frequency, voltage, sweep
         ``SweepGrid.of(sweep)``, when already computed (with softening).
     warm : WarmStarts, optional
         Solutions of walkers evaluated before, to start the softened solve from (:class:`WarmStarts`).
+    heat : HeatData, optional
+        The measured rows, for the heating term (rows as ``frequency``); without it, no heating.
 
     Returns
     -------
@@ -381,6 +442,8 @@ def predicted_velocity(theta, layout: ParameterLayout, frequency, voltage, sweep
     resonance = theta[:, layout.resonance_slice][:, sweep]
     if layout.forward.drift and time_offset is not None:
         resonance = resonance + layout.column(theta, "drift_rate") * time_offset
+    if layout.forward.heating and heat is not None:
+        resonance = resonance * (1.0 - layout.column(theta, "heating") * heat.energy(layout.law(theta).quality_factor(heat.velocity)))
     if layout.forward.softening:
         deflection = _softened_rows(theta, layout, gain * voltage, frequency, resonance, grid or SweepGrid.of(sweep), warm)
     else:
@@ -496,7 +559,7 @@ def pointwise_log_likelihood(theta, data: FitData, warm: Optional[WarmStarts] = 
     if layout.n_sweeps:
         grid = data.sweep_grid if layout.forward.softening else None
         model = predicted_velocity(theta, layout, data.frequency, data.voltage, data.sweep, data.time_offset, data.mode_factor,
-                                   grid, warm)
+                                   grid, warm, data.heat)
         noise = (np.exp(layout.column(theta, name)) for name in ("ln_sigma_rel", "ln_sigma_abs"))
         parts.append(_gaussian(data.velocity[: data.n_rows], model, *noise))
     if data.decays is not None:
@@ -515,6 +578,9 @@ def initial_effects(data: FitData) -> Tuple[dict, dict]:
         start["kappa"], scale["kappa"] = 0.01 * data.upper[index], 0.01 * data.upper[index]
     if "drift_rate" in names:
         start["drift_rate"], scale["drift_rate"] = 0.0, 0.01 * data.upper[names.index("drift_rate")]
+    if "heating" in names:
+        index = names.index("heating")
+        start["heating"], scale["heating"] = 0.01 * data.upper[index], 0.01 * data.upper[index]
     if data.decays is not None:
         measured = data.velocity[data.n_rows :] / data.decays.mode_factor
         for j in range(data.layout.n_bursts):

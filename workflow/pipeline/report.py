@@ -500,12 +500,14 @@ def _interval_text(p: dict, digits: int = 4) -> str:
 
 
 def _effects(summary: dict) -> str:
-    """The softening and drift of the resonance fitted beyond Q(v), in words, whether the logs show them, and what the
+    """The softening, drift and heating of the resonance fitted beyond Q(v), in words, whether the logs show them, and what the
     band of Q(v) contains."""
     effects, parameters = summary["effects"], summary["parameters"]
     parts = []
     for name, text, key, digits in (("softening", "amplitude softening f_r(v) = f_r0 (1 − κ v²), κ", "kappa", 4),
-                                    ("drift", "drift of the resonance within a sweep β", "drift_rate", 3)):
+                                    ("drift", "drift of the resonance within a sweep β", "drift_rate", 3),
+                                    ("heating", "heating: f_r falls by h times the energy per modal mass dissipated "
+                                     "since the sweep began, h", "heating", 3)):
         if effects[name]["fitted"]:
             shown = "shown by the logs" if effects[name]["detected"] else "not resolved by the logs"
             parts.append(f"{text} = {_interval_text(parameters[key], digits)} ({shown}: {effects[name]['rule']})")

@@ -93,16 +93,19 @@ def damping_fit(context: RunContext):
 
 
 def run_forward_model(damping: dict, log):
-    """The effects the run fits beyond Q(v) (keys ``damping.softening``, ``damping.drift``): both need sweeps, the
-    drift also the logs' ``timestamp_s`` (without it a warning, and the drift is not fitted)."""
+    """The effects the run fits beyond Q(v) (keys ``damping.softening``, ``damping.drift``, ``damping.heating``): all
+    need sweeps, the drift and the heating also the logs' ``timestamp_s`` (without it a warning, and they are not
+    fitted)."""
     from workflow.damping.likelihood import ForwardModel
 
-    drift = damping["drift"] and log.n_sweeps > 0
-    if drift and log.timestamp is None:
-        print("warning: damping.drift: the logs have no timestamp_s column; the drift within a sweep is not fitted",
-              file=sys.stderr)
-        drift = False
-    return ForwardModel(softening=damping["softening"] and log.n_sweeps > 0, drift=drift)
+    timed = {}
+    for effect, what in (("drift", "the drift within a sweep"), ("heating", "the heating within a sweep")):
+        timed[effect] = damping[effect] and log.n_sweeps > 0
+        if timed[effect] and log.timestamp is None:
+            print(f"warning: damping.{effect}: the logs have no timestamp_s column; {what} is not fitted",
+                  file=sys.stderr)
+            timed[effect] = False
+    return ForwardModel(softening=damping["softening"] and log.n_sweeps > 0, **timed)
 
 
 def damping_fit_files(context: RunContext, fit) -> None:

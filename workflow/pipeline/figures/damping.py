@@ -119,7 +119,7 @@ def _predicted_rows(law_fit: LawFit, log, draws: int, seed: int) -> np.ndarray:
     theta = _posterior_draws(law_fit, draws, seed)
     data = law_fit.data
     return predicted_velocity(theta, data.layout, log.frequency, log.drive_voltage, log.sweep, data.time_offset,
-                              data.mode_factor)
+                              data.mode_factor, heat=data.heat)
 
 
 def resonance_curves_figure(fit: DampingFit, draws: int = 200, points: int = 200, seed: int = 0):
