@@ -182,6 +182,7 @@ def study_truth(truth: Truth, max_steps: int = 20000, draws: Path | None = None)
         "law": {key: value for key, value in vars(truth.law).items() if key != "curve"},
         "softening": truth.softening,
         "drift_rate": truth.drift_rate,
+        "heating": settings.response.thermal is not None,
         "coverage": float(np.mean(inside)),
         "width": float(np.median((high - low) / mid)),
         "median_error": float(np.max(np.abs(mid / true_q - 1))),
@@ -223,15 +224,15 @@ def summarise(records: list) -> dict:
     goals = CAMPAIGN_GOALS
 
     def effect(name, truth_key):
-        carried = [r for r in records if r[truth_key]]
-        absent = [r for r in records if not r[truth_key]]
+        carried = [r for r in records if r.get(truth_key)]
+        absent = [r for r in records if not r.get(truth_key)]
 
         def detected(chosen):
             return sum(bool((r.get("effects") or {}).get(name, {}).get("detected")) for r in chosen)
 
         return {"campaigns_carrying_it": len(carried),
-                "fitted_when_carried": sum(bool(r["forward_model"][name]) for r in carried),
-                "fitted_when_absent": sum(bool(r["forward_model"][name]) for r in absent),
+                "fitted_when_carried": sum(bool(r["forward_model"].get(name)) for r in carried),
+                "fitted_when_absent": sum(bool(r["forward_model"].get(name)) for r in absent),
                 "detected_when_carried": detected(carried),
                 "detected_when_absent": detected(absent)}
 
@@ -251,6 +252,7 @@ def summarise(records: list) -> dict:
                     for kind in FAMILIES if any(r["kind"] == kind for r in records)},
         "softening": effect("softening", "softening"),
         "drift": effect("drift", "drift_rate"),
+        "heating": effect("heating", "heating"),
         "fit_seconds_median": float(np.median([r["fit_seconds"] for r in records])),
         "goals": goals,
     }
