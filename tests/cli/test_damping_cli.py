@@ -9,7 +9,7 @@ import pytest
 
 from workflow.cli import main
 from workflow.damping.laws import LAWS
-from workflow.damping.posterior import DampingPosterior, save_posterior
+from workflow.damping.posterior import DampingPosterior, save_posterior, stacked_posterior
 from workflow.execution.cache import EvaluationCache
 from workflow.models import materials
 from workflow.models.fem import FemSettings
@@ -88,6 +88,26 @@ def test_analytical_maps_with_damping(tmp_path, capsys, posterior_file):
     assert optimum["f_r_khz"] >= 25 * (1 - 1e-6)
     assert optimum["q"] < 150 and optimum["required_voltage_v"]["p05"] <= optimum["required_voltage_v"]["p95"]
     assert len(record["figures"]) == 2 and all(Path(name).exists() for name in record["figures"])
+
+
+def test_optimize_with_a_mixture_of_laws_names_the_law_it_describes(tmp_path, capsys):
+    """A fit whose answer mixes laws (the default when they cannot be told apart) writes a stacked posterior: the
+    optimum's line describes the mixture's most frequent law at its median (it once failed on the mixture's name),
+    and the voltage's interval comes from draws of the whole mixture."""
+    rng = np.random.default_rng(1)
+    n = 400
+    quadratic = DampingPosterior("quadratic", {"q0": rng.normal(150, 3, n), "alpha": rng.normal(0.25, 0.005, n)})
+    linear = DampingPosterior("linear", {"q0": rng.normal(150, 3, n), "alpha": rng.normal(0.04, 0.001, n)})
+    mixed = stacked_posterior({"quadratic": quadratic, "linear": linear}, {"quadratic": 0.7, "linear": 0.3}, n)
+    path = save_posterior(mixed, tmp_path / "posterior.npz", np.zeros((n, 1)), ["component"])
+    record = run_json(capsys, "optimize", "--hp-mm", "1", "--damping", str(path), "--json")
+    assert record["damping"]["law"] == "quadratic" and record["damping"]["posterior_law"] == "stacking"
+    assert record["damping"]["median"]["q0"] == pytest.approx(150, abs=1)
+    voltage = record["required_voltage_v"]
+    assert voltage["p05"] < voltage["p50"] < voltage["p95"]
+    assert main(["optimize", "--hp-mm", "1", "--damping", str(path)]) == 0
+    line = capsys.readouterr().out.splitlines()[1]
+    assert line.startswith("  Q(v) used: quadratic law, Q0 1") and "the mixture's most frequent law" in line
 
 
 def test_fem_maps_with_damping(tmp_path, capsys, posterior_file, coarse_fem):

@@ -104,7 +104,8 @@ def _print_human(summary: dict) -> None:
     for name, effect in summary["effects"].items():
         state = ("not fitted" + (f" ({effect['not_fitted_because']})" if "not_fitted_because" in effect else "")
                  if not effect["fitted"]
-                 else "fitted, " + ("shown by the logs" if effect["detected"] else "not resolved by the logs") + f" ({effect['rule']})")
+                 else "fitted, " + ("shown by the logs" if effect["detected"] else "not resolved by the logs")
+                 + f" (shown when {effect['rule']})")
         print(f"  {name}: {state}")
     print(f"  velocity convention: {summary['velocity_convention']}")
     shares = ", ".join(f"{name} {share:.2g}" for name, share in summary["shares"].items())

@@ -316,10 +316,12 @@ def describe_law(name: str, parameters: dict) -> str:
 
 def damping_line(record: dict) -> str:
     """The ``--damping`` keys of a record for people: the Q(v) law used, the Q the plate settles
-    at, and the voltage for the target deflection with its 90 % interval."""
+    at, and the voltage for the target deflection with its 90 % interval (over draws of the whole posterior)."""
     damping, voltage = record["damping"], record["required_voltage_v"]
+    median = ("posterior median of" if damping.get("posterior_law", damping["law"]) == damping["law"]
+              else "posterior median of the mixture's most frequent law in")
     return (
-        f"  Q(v) used: {describe_law(damping['law'], damping['median'])} (posterior median of {damping['posterior']}); "
+        f"  Q(v) used: {describe_law(damping['law'], damping['median'])} ({median} {damping['posterior']}); "
         f"Q settles at {record['q']:.1f}; {voltage['p50']:.2f} V for {voltage['target_um']:g} µm "
         f"(90 %: {voltage['p05']:.2f} to {voltage['p95']:.2f} V)"
     )

@@ -708,13 +708,13 @@ def effects_summary(fit: DampingFit, parameters: dict) -> dict:
     drift = parameters.get("drift_rate")
     return {
         "softening": {"fitted": forward.softening, "detected": from_zero("kappa"),
-                      "rule": f"kappa's 5 % quantile above {SOFTENING_DETECTED:g} of its median"},
+                      "rule": f"kappa's 5 % quantile is above {SOFTENING_DETECTED:g} of its median"},
         "drift": {"fitted": forward.drift,
                   "detected": None if drift is None else bool(drift["p05"] > 0 or drift["p95"] < 0),
                   "rule": "the drift rate's 90 % interval excludes zero",
                   **({} if forward.drift else {"not_fitted_because": _left_out(fit.log, "drift")})},
         "heating": {"fitted": forward.heating, "detected": from_zero("heating"),
-                    "rule": f"the heating coefficient's 5 % quantile above {SOFTENING_DETECTED:g} of its median",
+                    "rule": f"the heating coefficient's 5 % quantile is above {SOFTENING_DETECTED:g} of its median",
                     **({} if forward.heating else {"not_fitted_because": _left_out(fit.log, "heating")})},
     }
 

@@ -103,12 +103,14 @@ def damped_optimum_record(posterior, optimum: Optimum, draws: int = POSTERIOR_DR
 
 def damping_keys(posterior, deflection: float, frequency: float, required_voltages) -> dict:
     """Deflection [um] and the Q it settles at, the voltage for the target deflection (median
-    and 90 % over posterior draws) and the law used."""
+    and 90 % over posterior draws) and the law used: ``law`` and ``median`` the posterior's median law (for a mixture
+    of laws, ``posterior_law`` "stacking", its most frequent law's), which gives ``q``."""
     law = posterior.median_law()
     v05, v50, v95 = np.quantile(required_voltages, QUANTILES)
     return {
         "w_dyn_um": deflection / UM,
         "q": float(law.quality_factor(2 * np.pi * frequency * deflection)),
         "required_voltage_v": {"target_um": TARGET_DEFLECTION / UM, "p05": v05, "p50": v50, "p95": v95},
-        "damping": {"law": posterior.law_name, "median": law_parameters(law), "posterior": posterior.source},
+        "damping": {"law": law.name, "median": law_parameters(law), "posterior": posterior.source,
+                    "posterior_law": posterior.law_name},
     }

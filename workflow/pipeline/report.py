@@ -510,7 +510,7 @@ def _effects(summary: dict) -> str:
                                      "since the sweep began, h", "heating", 3)):
         if effects[name]["fitted"]:
             shown = "shown by the logs" if effects[name]["detected"] else "not resolved by the logs"
-            parts.append(f"{text} = {_interval_text(parameters[key], digits)} ({shown}: {effects[name]['rule']})")
+            parts.append(f"{text} = {_interval_text(parameters[key], digits)} ({shown}; shown when {effects[name]['rule']})")
         elif "not_fitted_because" in effects[name]:
             parts.append(f"{name} within a sweep not fitted: {effects[name]['not_fitted_because']}")
     interval = summary["q_of_v"]["interval"]
