@@ -1,6 +1,8 @@
 """The Q(v) answer's law uncertainty (issue 29): the threshold law's fitted onset width, the close laws mixed in
 equal shares, the effects fitted by default where the logs can show them, old posterior files still read."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -80,3 +82,13 @@ def test_softening_drift_and_heating_are_fitted_by_default_where_the_logs_can_sh
     simulate_ringdown(tmp_path / "r.csv", voltages=(5.0,), samples=20)
     assert default_forward_model(read_logs([tmp_path / "r.csv"])) == ForwardModel()
     assert default_forward_model(read_logs([tmp_path / "c.csv"])).drift
+
+
+def test_a_mixture_describes_itself_by_its_laws_shares():
+    rng = np.random.default_rng(0)
+    n = 1000
+    quadratic = DampingPosterior("quadratic", {"q0": rng.normal(150, 3, n), "alpha": rng.normal(0.25, 0.005, n)})
+    linear = DampingPosterior("linear", {"q0": rng.normal(150, 3, n), "alpha": rng.normal(0.04, 0.001, n)})
+    assert quadratic.description == "quadratic"
+    mixed = stacked_posterior({"quadratic": quadratic, "linear": linear}, {"quadratic": 0.25, "linear": 0.75}, 4000)
+    assert re.fullmatch(r"mixture of linear 7\d %, quadratic 2\d %", mixed.description), mixed.description

@@ -92,7 +92,7 @@ def run(args) -> dict:
         record = _maps(args, model, problem, posterior, points)
     if not args.json:
         o = record["optimum"]
-        damping = "" if posterior is None else f" with {posterior.law_name} Q(v)"
+        damping = "" if posterior is None else f" with {posterior.description} Q(v)"
         voltage = "" if posterior is None else f", {o['required_voltage_v']['p50']:.3g} V for the target"
         print(
             f"{args.model} map {points}x{points}{damping}, h_p {args.hp_mm:g} mm: optimum lambda {o['lambda_mm']:.3f} mm, "

@@ -49,6 +49,16 @@ class DampingPosterior:
     def n_samples(self) -> int:
         return len(next(iter(self.parameters.values())))
 
+    @property
+    def description(self) -> str:
+        """The law for people: its name, or for a stacked posterior "mixture of <law> <share> %, ..." (shares of the
+        samples, largest first)."""
+        if self.law_name != StackedLaws.name:
+            return self.law_name
+        counts = np.bincount(self.parameters["component"].astype(int), minlength=len(STACKED_COMPONENTS))
+        shares = sorted(((c / counts.sum(), STACKED_COMPONENTS[i]) for i, c in enumerate(counts) if c), reverse=True)
+        return "mixture of " + ", ".join(f"{name} {100 * share:.0f} %" for share, name in shares)
+
     def median_law(self):
         """The law at the marginal posterior medians of its parameters; for a stacked posterior, the
         median law of its most frequent component."""

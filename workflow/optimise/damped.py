@@ -335,7 +335,7 @@ def damped_maps(
     return _damped_maps(
         problem,
         optimum,
-        "beam model, " + _law_label(posterior.law_name, median),
+        "beam model, " + _law_label(posterior, median),
         wavelength=wavelength,
         resonator_thickness=thickness,
         deflection=damped_deflection(response, median),
@@ -357,10 +357,12 @@ def _damped_maps(problem: DesignProblem, optimum, law_label: str, **grids) -> "D
     )
 
 
-def _law_label(law_name: str, law) -> str:
-    """"quadratic Q(v), median: q0 = ..., alpha = ..." for a figure's title."""
+def _law_label(posterior: DampingPosterior, law) -> str:
+    """"quadratic Q(v), median: q0 = ..., alpha = ..." for a figure's title (a mixture: its shares, and the median of
+    its most frequent law, ``law``)."""
     parameters = ", ".join(f"{k} = {v:.4g}" for k, v in law_parameters(law).items())
-    return f"{law_name} Q(v), median: {parameters}"
+    median = "median" if law.name == posterior.law_name else f"median of its {law.name} law"
+    return f"{posterior.description} Q(v), {median}: {parameters}"
 
 
 def design_summary(design: DampedDesign) -> dict:
@@ -450,7 +452,7 @@ def fem_damped_maps(posterior: DampingPosterior, problem: DesignProblem, fem_mod
     return _damped_maps(
         problem,
         optimum,
-        "FEM, " + _law_label(posterior.law_name, law),
+        "FEM, " + _law_label(posterior, law),
         wavelength=wavelength,
         resonator_thickness=thickness,
         deflection=grid([damped_deflection(r, law) for r in results]),

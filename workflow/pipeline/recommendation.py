@@ -131,7 +131,7 @@ class Recommendation:
     original : RecommendedDesign or None
         The original plate with the FEM, for reference.
     law : str
-        Name of the fitted Q(v) law.
+        The fitted Q(v) law for people (:attr:`~workflow.damping.posterior.DampingPosterior.description`).
     draws : int
         Posterior draws behind the quantiles.
     """

@@ -272,7 +272,7 @@ def recommended_design(context: RunContext):
     return Recommendation(
         designs=designs,
         original=original,
-        law=posterior.law_name,
+        law=posterior.description,
         draws=damping["posterior_draws"],
     )
 

@@ -5,6 +5,7 @@ They take the result objects of :mod:`workflow.damping.fit` and
 """
 
 import dataclasses
+import textwrap
 from functools import partial
 
 import matplotlib
@@ -325,5 +326,5 @@ def design_map_figure(maps, quantity: str = "deflection", design_voltage: float 
         handles.append(Line2D([], [], color="tab:blue", lw=1.8, ls=style, path_effects=WHITE_EDGE,
                               label=f"required voltage = {text}"))
     legend_below(figure, handles, columns=2)
-    ax.set_title(f"h_p = {maps.ceramic_thickness / MM:g} mm, {maps.law_label}", fontsize=9)
+    ax.set_title("\n".join(textwrap.wrap(f"h_p = {maps.ceramic_thickness / MM:g} mm, {maps.law_label}", 90)), fontsize=9)
     return figure
