@@ -133,6 +133,9 @@ def test_prior_bound_diagnostic_names_a_posterior_piled_at_a_bound():
     assert prior_bounds(FAST, samples) == {"glue_um": "at upper prior bound"}
     samples[:, 2] = rng.uniform(0, 60e-6, n)
     assert prior_bounds(FAST, samples) == {}
+    samples[:, 2] = rng.triangular(0, 60e-6, 60e-6, n)  # rising to the bound: 19 % in its top tenth (the prior's 10 %)
+    assert prior_bounds(FAST, samples) == {"glue_um": "at upper prior bound"}
+    samples[:, 2] = rng.uniform(0, 60e-6, n)
     samples[:, 0] = rng.normal(0.93, 0.055, n)
     assert prior_bounds(FAST, samples) == {}, "4 % in a normal prior's tail zone is no pile-up"
     samples[:, 0] = rng.normal(0.80, 0.03, n)

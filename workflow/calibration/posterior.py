@@ -35,8 +35,10 @@ CONSTRAINED_RATIO = 0.5
 """A direction is constrained when its posterior standard deviation is below this share of the prior's [-]."""
 BOUND_ZONE = 0.1
 """Share of a prior's range next to each bound in which :func:`prior_bounds` compares posterior and prior mass [-]."""
-BOUND_EXCESS = 2.0
-"""A posterior sits at a bound when it puts at least this many times the prior's mass in the bound's zone [-]..."""
+BOUND_EXCESS = 1.5
+"""A posterior sits at a bound when it puts at least this many times the prior's mass in the bound's zone [-]...
+(the published plates' calibration puts 18 % of its glue samples in the top tenth of the glue's uniform prior, its
+density as high there as anywhere: 2 missed it; a posterior equal to a uniform prior has 1)."""
 BOUND_MIN_SHARE = 0.1
 """... and at least this share of its samples [-] (a normal prior's thin tail next to its bound is not a pile-up)."""
 
