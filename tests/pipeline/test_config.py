@@ -74,8 +74,8 @@ def test_configuration_errors_name_the_key(tmp_path, text, words):
 
 
 def test_too_few_walkers_for_the_logs_is_a_configuration_error_before_the_chain(tmp_path):
-    """emcee needs twice the sampled parameters (the flexible law with softening and drift: 14 + one resonance per
-    sweep): the step says so, naming the key and the range, before any sampling."""
+    """emcee needs twice the sampled parameters (the flexible law with softening, drift and heating: 15 + one resonance
+    per sweep): the step says so, naming the key and the range, before any sampling."""
     from workflow.damping.synthetic import campaign_csv, simulate_campaign
     from workflow.pipeline.runner import RunContext
     from workflow.pipeline.steps import damping_fit
@@ -85,7 +85,7 @@ def test_too_few_walkers_for_the_logs_is_a_configuration_error_before_the_chain(
     config = default_config()
     config["damping"]["walkers"] = 15
     context = RunContext(config=config, out=tmp_path, results={"logs": [log]})
-    with pytest.raises(InputFileError, match=r"'damping.walkers' = 15 is outside the accepted range 34 to 10000 .* 3 sweeps"):
+    with pytest.raises(InputFileError, match=r"'damping.walkers' = 15 is outside the accepted range 36 to 10000 .* 3 sweeps"):
         damping_fit(context)
 
 
