@@ -13,9 +13,9 @@ sweep began (u_j the measured antinode velocity of row j, dt_j the time since th
 plate of heat capacity C, modal mass m_eff and relative frequency coefficient c [1/K] heats by
 m_eff E / C and has h = -c m_eff / C [kg/J] while the sweep is short beside its cooling time C / G
 (:class:`HeatData`; the simulator's plate: h = 2.2e-7 kg/J, C / G = 7.6 min).  Without softening
-(kappa) every row is solved at once, with it the rows of each sweep are solved in the order they were measured, each from the
-previous one's amplitude (branch following; walkers whose curves are provably
-single-valued skip the ordering).  The vibrometer reads v |phi| at its point (|phi| from
+(kappa) every row is solved at once, with it the rows of each sweep are solved in the order they
+were measured, each from the previous one's amplitude (branch following; walkers whose curves are
+provably single-valued skip the ordering).  The vibrometer reads v |phi| at its point (|phi| from
 the log's ``x_mm``, ``y_mm``, :mod:`~workflow.damping.mode_shape`), so the law is fitted
 in the antinode's peak velocity.  A ring-down sample at time t after burst j reads
 |phi| v_j(t), the free decay from v_j(0) = v0_j (:mod:`~workflow.damping.ringdown`).
@@ -75,7 +75,7 @@ class ForwardModel:
         Fit a campaign-wide drift rate of f_r within each sweep (needs ``timestamp_s``).
     heating : bool
         Fit the fall of f_r with the energy the plate has dissipated since its sweep began (its heating while it is
-        driven; needs ``timestamp_s``): :func:`dissipated_energy`.
+        driven; needs ``timestamp_s``): :meth:`HeatData.energy`.
     """
 
     softening: bool = False
@@ -226,7 +226,7 @@ class DecayData:
 
 @dataclass(frozen=True)
 class HeatData:
-    """The measured sweep rows as the heating term needs them (:func:`dissipated_energy`).
+    """The measured sweep rows as the heating term needs them (:meth:`energy`).
 
     Attributes
     ----------
