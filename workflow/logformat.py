@@ -85,6 +85,9 @@ BUILT_PLATE_KEYS = (LAMBDA_MM, HI_MM, HP_MM, B_MM)
 """The metadata keys every built-plate log has."""
 
 
+RESUME_HINTS = {"plan_alternate": "a campaign log made with every sweep upward (before sweeps alternated) resumes with "
+                                  "'tactile measure campaign --one-direction'"}
+"""What to do when a resumed log's ``plan_*`` key differs from the run's, where there is something to do."""
 MAX_HEADER_LINES = 10_000
 """Most lines read before the header row [-]."""
 MAX_LINE_LENGTH = 10_000

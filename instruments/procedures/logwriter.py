@@ -353,9 +353,10 @@ class LogWriter:
         wanted = {key: logformat.metadata_text(value) for key, value in self.metadata.items() if key == "procedure" or key.startswith("plan_")}
         for key, value in wanted.items():
             if not _same_value(logged.metadata.get(key), value):
+                hint = logformat.RESUME_HINTS.get(key, "use another output file or restart it")
                 raise InputFileError(
                     f"{self.path}: cannot resume: it was written with {key} = {logged.metadata.get(key)!r}, "
-                    f"this run has {value!r}; use another output file or restart it"
+                    f"this run has {value!r}; {hint}"
                 )
         self.rows, self.lines = logged.rows, logged.lines
         self.truncated_bytes = len(logged.tail)

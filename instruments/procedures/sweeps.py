@@ -470,12 +470,19 @@ class CampaignPlan:
     points_per_sweep : int
     voltages : tuple of float
         [V peak across the ceramics]
+    alternate : bool
+        Odd sweeps run downward in frequency.  A resonance drifting within a sweep stretches the curves of
+        upward sweeps and compresses those of downward ones, which a change of Q cannot do: with every sweep
+        upward the fit's drift rate traded against Q (a campaign without drift gave a drift of 1.4 Hz/s and Q
+        2 % high, outside its band; docs/damping.md).  False: every sweep upward, as logs made before this
+        option (their header has no ``plan_alternate``; resuming one needs it False).
     """
 
     center_frequency: float
     span: float = 1600.0
     points_per_sweep: int = 51
     voltages: tuple = (2.5, 5.0, 7.5, 10.0, 12.5, 15.0)
+    alternate: bool = True
 
     def __post_init__(self):
         check_sizes({"points_per_sweep": self.points_per_sweep}, self.points_per_sweep * len(self.voltages),
@@ -485,14 +492,20 @@ class CampaignPlan:
     def points(self) -> list[PlannedPoint]:
         half = self.span / 2
         frequencies = np.linspace(self.center_frequency - half, self.center_frequency + half, self.points_per_sweep)
-        return [PlannedPoint(sweep, f, v) for sweep, v in enumerate(self.voltages) for f in frequencies]
+        return [PlannedPoint(sweep, f, v) for sweep, v in enumerate(self.voltages)
+                for f in (frequencies[::-1] if self.alternate and sweep % 2 else frequencies)]
+
+    def header(self) -> dict:
+        """The plan's ``plan_*`` header keys: ``alternate`` only when on, so that a log made before the option (every
+        sweep upward) resumes with it off."""
+        return {key: value for key, value in vars(self).items() if key != "alternate" or value}
 
 
 def q_campaign(station: Station, path, plan: CampaignPlan, metadata: dict | None = None, restart: bool = False,
                fsync: bool = True) -> ProcedureResult:
     """Frequency sweeps at several voltages; summary ``sweeps``: voltage, peak frequency and velocity, Q estimate."""
     points = plan.points()
-    rows, counts = run_procedure(station, path, "campaign", vars(plan), plan.voltages, lambda log: [points], metadata or {},
+    rows, counts = run_procedure(station, path, "campaign", plan.header(), plan.voltages, lambda log: [points], metadata or {},
                                  restart, fsync, sweeps=range(len(plan.voltages)))
     sweeps = []
     for sweep, voltage in enumerate(plan.voltages):
