@@ -258,17 +258,19 @@ def summarise(records: list) -> dict:
     }
 
 
-def coverage_figure(records: list, before: list, examples: int = 4):
+def coverage_figure(records: list, before: list, examples: int = 4, labels=("before (main)", "after")):
     """Top: each truth's coverage and band width, after (``records``) and before (``before``, may be empty), with the
-    goals; bottom: the band against the truth of the ``examples`` truths with the lowest coverage."""
+    goals; bottom: the band against the truth of the ``examples`` truths with the lowest coverage.  ``labels``: the
+    legend's names of the two runs."""
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter
 
     shown = sorted(records, key=lambda r: r["coverage"])[:examples]
     examples = len(shown)
     figure, axes = plt.subplot_mosaic([["coverage"] * examples, ["width"] * examples, [f"band{k}" for k in range(examples)]],
                                       figsize=(12, 9.5), height_ratios=(1, 0.7, 1), layout="constrained")
     markers = {"power": "o", "threshold": "s", "spline": "^"}
-    for label, chosen, colour, shift in (("before (main)", before, "tab:grey", -0.15), ("after", records, "tab:blue", 0.15)):
+    for label, chosen, colour, shift in ((labels[0], before, "tab:grey", -0.15), (labels[1], records, "tab:blue", 0.15)):
         for kind, marker in markers.items():
             own = [r for r in chosen if r["kind"] == kind]
             if own:
@@ -284,6 +286,9 @@ def coverage_figure(records: list, before: list, examples: int = 4):
     axes["coverage"].legend(fontsize=7, ncol=4, loc="lower left")
     axes["width"].axhline(100 * goals["median_width"], color="tab:red", ls="--", lw=1)
     axes["width"].set(ylabel="median band width\n(p95 - p05) / p50 [%]", xlabel="hidden truth", yscale="log")
+    plain = FuncFormatter(lambda value, _: f"{value:g}")
+    axes["width"].yaxis.set_major_formatter(plain)
+    axes["width"].yaxis.set_minor_formatter(plain)
     for k, r in enumerate(shown):
         ax, band = axes[f"band{k}"], r["band"]
         v = np.asarray(band["v_m_s"])
@@ -326,12 +331,15 @@ def main(argv=None) -> dict:
                         help="keep each sampled law's draws of Q(v) and the comparison per truth in DIR (truthNN.npz)")
     parser.add_argument("--figure", type=Path, metavar="PNG", help="draw the study's figure from --records")
     parser.add_argument("--before", type=Path, metavar="LOG", help="with --figure: the records of the fit before")
+    parser.add_argument("--labels", nargs=2, metavar=("BEFORE", "AFTER"), default=("before (main)", "after"),
+                        help="with --figure: the legend's names of the two runs")
     args = parser.parse_args(argv)
     start = time.perf_counter()
     if args.records:
         records = read_records(args.records)
         if args.figure:
-            coverage_figure(records, read_records(args.before) if args.before else []).savefig(args.figure, dpi=100)
+            before = read_records(args.before) if args.before else []
+            coverage_figure(records, before, labels=args.labels).savefig(args.figure, dpi=100)
     else:
         if args.draws:
             args.draws.mkdir(parents=True, exist_ok=True)
