@@ -85,8 +85,8 @@ BUILT_PLATE_KEYS = (LAMBDA_MM, HI_MM, HP_MM, B_MM)
 """The metadata keys every built-plate log has."""
 
 
-RESUME_HINTS = {"plan_alternate": "a campaign log made with every sweep upward (before sweeps alternated) resumes with "
-                                  "'tactile measure campaign --one-direction'"}
+RESUME_HINTS = {"plan_alternate": "a campaign log resumes with the --alternate setting it was made with "
+                                  "('plan_alternate: True' in its header: with it; none: without)"}
 """What to do when a resumed log's ``plan_*`` key differs from the run's, where there is something to do."""
 MAX_HEADER_LINES = 10_000
 """Most lines read before the header row [-]."""

@@ -272,7 +272,7 @@ def _kept_tail(tail: bytes) -> bytes:
     return (INCOMPLETE_ROW + kept + "\n").encode() if text.strip() else b""
 
 
-def _same_value(old: str | None, new: str) -> bool:
+def _same_value(old: str | None, new: str | None) -> bool:
     """Whether two metadata texts say the same: equal, or the same numbers (comma-separated) to 1e-9."""
     if old == new:
         return True
@@ -351,6 +351,7 @@ class LogWriter:
         if not logged.length:
             return False
         wanted = {key: logformat.metadata_text(value) for key, value in self.metadata.items() if key == "procedure" or key.startswith("plan_")}
+        wanted.update({key: None for key in logged.metadata if key.startswith("plan_") and key not in wanted})
         for key, value in wanted.items():
             if not _same_value(logged.metadata.get(key), value):
                 hint = logformat.RESUME_HINTS.get(key, "use another output file or restart it")

@@ -471,18 +471,17 @@ class CampaignPlan:
     voltages : tuple of float
         [V peak across the ceramics]
     alternate : bool
-        Odd sweeps run downward in frequency.  A resonance drifting within a sweep stretches the curves of
-        upward sweeps and compresses those of downward ones, which a change of Q cannot do: with every sweep
-        upward the fit's drift rate traded against Q (a campaign without drift gave a drift of 1.4 Hz/s and Q
-        2 % high, outside its band; docs/damping.md).  False: every sweep upward, as logs made before this
-        option (their header has no ``plan_alternate``; resuming one needs it False).
+        Odd sweeps run downward in frequency (default: every sweep upward).  A resonance drifting within a
+        sweep stretches the curves of upward sweeps and compresses those of downward ones, which a change of Q
+        cannot do, so the fit's drift rate no longer trades against Q and its bands narrow 2-3 times; the
+        laws' shape error (about 1 %) then exceeds them (docs/damping.md), which is why it is not the default.
     """
 
     center_frequency: float
     span: float = 1600.0
     points_per_sweep: int = 51
     voltages: tuple = (2.5, 5.0, 7.5, 10.0, 12.5, 15.0)
-    alternate: bool = True
+    alternate: bool = False
 
     def __post_init__(self):
         check_sizes({"points_per_sweep": self.points_per_sweep}, self.points_per_sweep * len(self.voltages),
@@ -497,7 +496,7 @@ class CampaignPlan:
 
     def header(self) -> dict:
         """The plan's ``plan_*`` header keys: ``alternate`` only when on, so that a log made before the option (every
-        sweep upward) resumes with it off."""
+        sweep upward) resumes with the default plan."""
         return {key: value for key, value in vars(self).items() if key != "alternate" or value}
 
 

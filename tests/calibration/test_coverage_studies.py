@@ -28,8 +28,8 @@ def test_damping_study_the_threshold_truth_of_issue_29_is_inside_its_band_and_it
     truth = study.truths(2, 2029)[1]
     assert truth.law.name == "threshold" and truth.softening > 0 and truth.drift_rate != 0
     # 1500 steps: with the heating fitted too, 400 left the chains short of the softening's and the heating's joint
-    # posterior (kappa [0.026, 0.110], a band 27 % wide). At 1500, alternating sweeps, on fit seeds 0-2: coverage 0.90,
-    # width 0.012, kappa's 90 % interval about [0.0797, 0.0813] around the truth 0.0808, 18 s
+    # posterior (kappa [0.026, 0.110], a band 27 % wide). At 1500, on fit seeds 0-2: coverage 1.0, width 0.04-0.08,
+    # kappa's 90 % interval about [0.078, 0.087] around the truth 0.0808, 36-41 s
     record = study.study_truth(truth, max_steps=1500)
     assert record["coverage"] >= 0.7 and record["width"] < 0.10, record
     softening = record["effects"]["softening"]

@@ -611,8 +611,8 @@ def test_a_configuration_is_refused_naming_its_file_or_checked_and_printed_as_to
 
 # --- resuming a log after any hand edit ----------------------------------------------------------
 
-RESUMED_PLAN = CampaignPlan(32126.0, span=600.0, points_per_sweep=7, voltages=(5.0, 10.0), alternate=False)
-"""The plan of the corpus's campaign log (tests/data/hostile/resume/campaign/complete.csv; every sweep upward)."""
+RESUMED_PLAN = CampaignPlan(32126.0, span=600.0, points_per_sweep=7, voltages=(5.0, 10.0))
+"""The plan of the corpus's campaign log (tests/data/hostile/resume/campaign/complete.csv)."""
 RESUMED_LOG = (CORPUS / "resume" / "campaign" / "complete.csv").read_text(encoding="utf-8")
 edits = st.lists(st.tuples(st.sampled_from(["repeat", "delete", "reformat", "move", "comment", "blank", "spoil"]),
                            st.integers(0, 20), st.integers(0, 20)), max_size=5)

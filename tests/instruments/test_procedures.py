@@ -51,26 +51,28 @@ def test_simulate_campaign_is_fast_complete_and_readable_by_the_fit(tmp_path):
     assert peaks == sorted(peaks) and 0.2 < peaks[-1] < 0.235  # ~0.216 m/s at 15 V
 
 
-def test_campaign_sweeps_alternate_and_a_log_made_one_way_resumes_only_one_way(tmp_path):
-    """Odd sweeps run downward (a drift then shows against Q, docs/damping.md); a log made before plans alternated (no
-    plan_alternate in its header) is refused by the default plan with the way to resume it, and resumes one way."""
-    rows = read_log(simulate_campaign(tmp_path / "c.csv", voltages=(5.0, 10.0, 15.0), points_per_sweep=5).path).rows
+def test_alternating_sweeps_run_odd_sweeps_downward_and_a_log_resumes_only_with_its_own_setting(tmp_path):
+    """--alternate: odd sweeps run downward (a drift then shows against Q, docs/damping.md); the default plan runs every
+    sweep upward and writes no plan_alternate (the logs made before the option resume with it).  A log made one way is
+    refused by the other with the way to resume it, untouched, and resumes with its own."""
+    alternating = CampaignPlan(32126.0, span=600.0, points_per_sweep=5, voltages=(5.0, 10.0, 15.0), alternate=True)
     for sweep, upward in ((0, True), (1, False), (2, True)):
-        frequency = [float(r[logformat.FREQUENCY]) for r in rows if r[logformat.SWEEP] == str(sweep)]
+        frequency = [p.frequency for p in alternating.points() if p.sweep == sweep]
         assert frequency == sorted(frequency, reverse=not upward)
-    one_way = CampaignPlan(32126.0, span=600.0, points_per_sweep=5, voltages=(5.0, 10.0), alternate=False)
+    default = CampaignPlan(32126.0, span=600.0, points_per_sweep=5, voltages=(5.0, 10.0, 15.0))
+    assert [p.frequency for p in default.points() if p.sweep == 1] == sorted(p.frequency for p in default.points() if p.sweep == 1)
     station, _ = simulated_station(default_bench_settings(seed=1), settle_time=0.0)
-    path = tmp_path / "old.csv"
-    q_campaign(station, path, one_way, fsync=False)
-    assert "plan_alternate" not in read_log(path).metadata
+    path = tmp_path / "alternating.csv"
+    q_campaign(station, path, alternating, fsync=False)
+    assert read_log(path).metadata["plan_alternate"] == "True"
     lines = path.read_text().splitlines(keepends=True)
     path.write_text("".join(lines[:-3]))  # cut short
-    missing = 10 - len(read_log(path).rows)
+    missing = 15 - len(read_log(path).rows)
     before = path.read_bytes()
-    with pytest.raises(InputFileError, match="resumes with 'tactile measure campaign --one-direction'"):
-        q_campaign(station, path, CampaignPlan(32126.0, span=600.0, points_per_sweep=5, voltages=(5.0, 10.0)), fsync=False)
+    with pytest.raises(InputFileError, match="resumes with the --alternate setting it was made with"):
+        q_campaign(station, path, default, fsync=False)
     assert path.read_bytes() == before
-    assert missing > 0 and q_campaign(station, path, one_way, fsync=False).measured == missing
+    assert missing > 0 and q_campaign(station, path, alternating, fsync=False).measured == missing
 
 
 def test_simulate_campaign_is_deterministic(tmp_path):

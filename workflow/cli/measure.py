@@ -130,9 +130,10 @@ def register(subparsers) -> None:
     campaign.add_argument("--span-hz", type=bounded(float, *LIMITS["campaign.span_hz"], "Hz"), default=CampaignPlan.span,
                           help=f"sweep width [Hz], {limit_text('campaign.span_hz', 'Hz')} (default {CampaignPlan.span:g})")
     campaign.add_argument("--center-hz", type=float, help="sweep centre [Hz] (default: see above)")
-    campaign.add_argument("--one-direction", action="store_true",
-                          help="every sweep upward in frequency (default: odd sweeps downward, which separates a drift "
-                          "of the resonance from Q); needed to resume a log made before sweeps alternated")
+    campaign.add_argument("--alternate", action="store_true",
+                          help="odd sweeps downward in frequency (default: every sweep upward): separates a drift of the "
+                          "resonance from Q and narrows the fit's bands, which the laws' shape error then exceeds "
+                          "(docs/damping.md); a log made with it resumes only with it")
 
     sweep = procedures.add_parser("voltage-sweep", parents=[common], help="deflection versus voltage at resonance",
                                   description="Velocity and deflection at one frequency for several voltages. Without "
@@ -382,7 +383,7 @@ def _measure(args, station, metadata: dict, out: Path):
         return procedures.resonance_search(station, out, plan, metadata, args.restart)
     if args.procedure == "campaign":
         centre = args.center_hz or _centre(args, station, metadata, out, "center_frequency")
-        plan = procedures.CampaignPlan(centre, args.span_hz, args.points, args.voltages, not args.one_direction)
+        plan = procedures.CampaignPlan(centre, args.span_hz, args.points, args.voltages, args.alternate)
         return procedures.q_campaign(station, out, plan, metadata, args.restart)
     if args.procedure == "scan":
         return _scan(args, station, metadata, out)
