@@ -146,15 +146,15 @@ LAW_DRAWS = 1000
 """Draws of Q(v) per sampled law kept with ``--draws`` (to weigh other answer rules on the same fits) [-]."""
 
 
-def study_truth(truth: Truth, max_steps: int = 20000, draws: Path | None = None) -> dict:
+def study_truth(truth: Truth, max_steps: int = 20000, draws: Path | None = None, alternate: bool = False) -> dict:
     """Simulate the truth's campaign on the bench, fit it with the default options, and measure the band; with
     ``draws`` (a folder), keep :data:`LAW_DRAWS` draws of each sampled law's Q on the band's velocities and the
-    comparison in ``truthNN.npz``."""
+    comparison in ``truthNN.npz``; ``alternate``: the campaign's odd sweeps downward."""
     settings = default_bench_settings(law=truth.law, drift_rate=truth.drift_rate, softening=truth.softening,
                                       seed=truth.seed)
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "campaign.csv"
-        simulate_campaign(path, settings=settings)
+        simulate_campaign(path, settings=settings, alternate=alternate)
         log = drop_short_sweeps(read_logs([path]))
         noise = stated_noise([path])
     start = time.perf_counter()
@@ -183,6 +183,7 @@ def study_truth(truth: Truth, max_steps: int = 20000, draws: Path | None = None)
         "softening": truth.softening,
         "drift_rate": truth.drift_rate,
         "heating": settings.response.thermal is not None,
+        "alternate": alternate,
         "coverage": float(np.mean(inside)),
         "width": float(np.median((high - low) / mid)),
         "median_error": float(np.max(np.abs(mid / true_q - 1))),
@@ -327,6 +328,8 @@ def main(argv=None) -> dict:
     parser.add_argument("--max-steps", type=int, default=20000, help="cap on each chain (default 20000)")
     parser.add_argument("--records", type=Path, metavar="LOG",
                         help="summarise the per-truth JSON lines of an earlier run (its stderr) instead of fitting")
+    parser.add_argument("--alternate", action="store_true", help="the campaigns' odd sweeps downward (measure campaign "
+                        "--alternate)")
     parser.add_argument("--draws", type=Path, metavar="DIR",
                         help="keep each sampled law's draws of Q(v) and the comparison per truth in DIR (truthNN.npz)")
     parser.add_argument("--figure", type=Path, metavar="PNG", help="draw the study's figure from --records")
@@ -345,7 +348,8 @@ def main(argv=None) -> dict:
             args.draws.mkdir(parents=True, exist_ok=True)
         records = []
         with ProcessPoolExecutor(max_workers=args.workers) as pool:
-            futures = [pool.submit(study_truth, truth, args.max_steps, args.draws) for truth in truths(args.truths, args.seed)]
+            futures = [pool.submit(study_truth, truth, args.max_steps, args.draws, args.alternate)
+                       for truth in truths(args.truths, args.seed)]
             for future in as_completed(futures):
                 records.append(future.result())
                 print(json.dumps(records[-1]), file=sys.stderr, flush=True)

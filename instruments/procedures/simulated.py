@@ -67,6 +67,7 @@ def simulate_campaign(
     center_frequency: float | None = None,
     seed: int | None = None,
     restart: bool = True,
+    alternate: bool = CampaignPlan.alternate,
 ) -> ProcedureResult:
     """Run a Q(v) campaign on a simulated bench and write its log to ``path``.
 
@@ -89,6 +90,8 @@ def simulate_campaign(
         Replaces the measurement-noise seed of ``settings``.
     restart : bool
         Overwrite an existing log (default) rather than resume it.
+    alternate : bool
+        Odd sweeps downward (:class:`CampaignPlan`).
 
     Returns
     -------
@@ -99,7 +102,7 @@ def simulate_campaign(
     if seed is not None:
         settings = replace(settings, seed=seed)
     centre = round(settings.response.resonance_frequency) if center_frequency is None else center_frequency
-    plan = CampaignPlan(centre, span, points_per_sweep, tuple(float(v) for v in voltages))
+    plan = CampaignPlan(centre, span, points_per_sweep, tuple(float(v) for v in voltages), alternate)
     station, _ = simulated_station(settings, settle_time=0.0)
     return q_campaign(station, path, plan, metadata=simulation_metadata(settings), restart=restart, fsync=False)
 

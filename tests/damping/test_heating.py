@@ -22,12 +22,16 @@ TRUE_Q0 = 150.0
 
 
 def test_the_energy_counted_is_what_each_row_dissipated_since_its_sweep_began():
-    log = synthetic_campaign(seed=0, voltages=(5.0, 10.0), points_per_sweep=7)
+    """In measuring order (a downward sweep too), over uneven steps, the first row of a sweep over its median step."""
+    log = synthetic_campaign(seed=0, voltages=(5.0, 10.0), points_per_sweep=7, alternate=True)
+    rng = np.random.default_rng(1)
+    log = type(log)(**{**vars(log), "timestamp": np.cumsum(rng.uniform(0.3, 1.5, len(log.velocity)))})
     heat = HeatData.of(log)
     q = np.array([[50.0], [100.0]])
     energy = heat.energy(np.broadcast_to(q, (2, len(log.velocity))))
+    assert np.all(np.diff(log.frequency[log.sweep == 1]) < 0)  # the second sweep runs downward
     for k in range(log.n_sweeps):
-        rows = np.nonzero(log.sweep == k)[0]
+        rows = np.nonzero(log.sweep == k)[0]  # the log's order is the measuring order
         time = log.timestamp[rows]
         dt = np.r_[np.median(np.diff(time)), np.diff(time)]
         u = log.velocity[rows] / log.measurement_factor()[rows]
@@ -67,6 +71,7 @@ def test_the_fit_recovers_the_simulated_plates_heating_and_its_q0_no_longer_read
 
 
 def test_a_plate_that_does_not_heat_gets_no_heating(tmp_path):
+    """Seeds 1-4 of a plate without heating: h 0 at the MAP, Q0 within 1.5 %."""
     cold, _ = heated_campaign(tmp_path, 0.0)
     _, heated_truth = heated_campaign(tmp_path, 1.0)
     q0, h = q0_and_heating(cold, heating=True)

@@ -73,6 +73,10 @@ def test_alternating_sweeps_run_odd_sweeps_downward_and_a_log_resumes_only_with_
         q_campaign(station, path, default, fsync=False)
     assert path.read_bytes() == before
     assert missing > 0 and q_campaign(station, path, alternating, fsync=False).measured == missing
+    one_way = tmp_path / "one_way.csv"
+    q_campaign(station, one_way, default, fsync=False)
+    with pytest.raises(InputFileError, match="resumes with the --alternate setting it was made with"):
+        q_campaign(station, one_way, alternating, fsync=False)
 
 
 def test_simulate_campaign_is_deterministic(tmp_path):

@@ -721,7 +721,11 @@ def effects_summary(fit: DampingFit, parameters: dict) -> dict:
 
 def _left_out(log: CampaignLog, effect: str) -> str:
     """Why a fit did not model the timed ``effect`` ("drift" or "heating") of the sweeps (:func:`default_forward_model`)."""
-    return "the logs have no timestamp_s" if log.timestamp is None else f"left out by the caller (--no-{effect})"
+    if not log.n_sweeps:
+        return "the logs have no sweeps"
+    if log.timestamp is None:
+        return "the logs have no timestamp_s"
+    return f"left out by the caller (fit-damping --no-{effect}, or [damping] {effect} = false in tactile run)"
 
 
 def band_contents(fit: DampingFit) -> dict:

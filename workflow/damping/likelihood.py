@@ -233,7 +233,7 @@ class HeatData:
     velocity : numpy.ndarray
         Measured antinode velocity of each sweep row [m/s].
     weight : numpy.ndarray
-        pi f u^2 dt of each row [m^2/s]: the energy per modal mass its drive dissipated until its reading, times Q
+        pi f u^2 dt of each row [m^2/s^2]: the energy per modal mass its drive dissipated until its reading, times Q
         (dt from the previous reading of its sweep, the sweep's median step for the first).
     grid : SweepGrid
         The rows of each sweep in measuring order.

@@ -49,24 +49,30 @@ class DampingPosterior:
     def n_samples(self) -> int:
         return len(next(iter(self.parameters.values())))
 
+    def component_shares(self) -> Dict[str, float]:
+        """A stacked posterior's law name -> share of its samples, largest first (ties in
+        :data:`~workflow.damping.laws.STACKED_COMPONENTS` order); one law: {its name: 1}."""
+        if self.law_name != StackedLaws.name:
+            return {self.law_name: 1.0}
+        counts = np.bincount(self.parameters["component"].astype(int), minlength=len(STACKED_COMPONENTS))
+        order = sorted((i for i, c in enumerate(counts) if c), key=lambda i: (-counts[i], i))
+        return {STACKED_COMPONENTS[i]: float(counts[i] / counts.sum()) for i in order}
+
     @property
     def description(self) -> str:
         """The law for people: its name, or for a stacked posterior "mixture of <law> <share> %, ..." (shares of the
         samples, largest first)."""
         if self.law_name != StackedLaws.name:
             return self.law_name
-        counts = np.bincount(self.parameters["component"].astype(int), minlength=len(STACKED_COMPONENTS))
-        shares = sorted(((c / counts.sum(), STACKED_COMPONENTS[i]) for i, c in enumerate(counts) if c), reverse=True)
-        return "mixture of " + ", ".join(f"{name} {100 * share:.0f} %" for share, name in shares)
+        return "mixture of " + ", ".join(f"{name} {100 * share:.0f} %" for name, share in self.component_shares().items())
 
     def median_law(self):
         """The law at the marginal posterior medians of its parameters; for a stacked posterior, the
-        median law of its most frequent component."""
+        median law of its most frequent component (the first of :meth:`component_shares`)."""
         if self.law_name != StackedLaws.name:
             return LAWS[self.law_name](**{name: float(np.median(v)) for name, v in self.parameters.items()})
-        component = self.parameters["component"]
-        index = int(np.argmax(np.bincount(component.astype(int), minlength=len(STACKED_COMPONENTS))))
-        name, mine = STACKED_COMPONENTS[index], component == index
+        name = next(iter(self.component_shares()))
+        mine = self.parameters["component"] == STACKED_COMPONENTS.index(name)
         return LAWS[name](**{p: float(np.median(self.parameters[f"{name}_{p}"][mine])) for p in parameter_names(LAWS[name])})
 
     def draws(self, n: int, seed: int = 0):

@@ -398,7 +398,8 @@ def design_summary(design: DampedDesign) -> dict:
             }
         )
     return {
-        "law": design.posterior.law_name,
+        "law": design.posterior.description,
+        "median_law_name": design.median_law.name,
         "median_law": law_parameters(design.median_law),
         "target_um": design.target / UM,
         "draws": int(len(design.original_deflection)),

@@ -574,7 +574,7 @@ def _damped_design(context: RunContext, result) -> str:
     original = summary["original_plate"]
     return (
         "## Design with Q(v)\n\n"
-        f"The constant Q is replaced by the fitted {summary['law']} law and the deflection is solved "
+        f"The constant Q is replaced by the fitted Q(v) ({summary['law']}) and the deflection is solved "
         f"self-consistently, w = w(Q(2 pi f_r w)). Intervals are 5-95 % over {summary['draws']} posterior draws, "
         "each optimised again.\n\n"
         + table(

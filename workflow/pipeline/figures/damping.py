@@ -29,7 +29,8 @@ from workflow.units import KHZ, MM, PM_PER_V, UM  # noqa: E402
 
 PERCENT = 1e-2
 """One per cent [-] (axis unit)."""
-DISPLAY_UNITS = {"gain": ("pm/V", PM_PER_V), "sigma_rel": ("%", PERCENT), "sigma_abs": ("µm/s", UM)}
+DISPLAY_UNITS = {"gain": ("pm/V", PM_PER_V), "sigma_rel": ("%", PERCENT), "sigma_abs": ("µm/s", UM),
+                 "heating": ("1e-7 kg/J", 1e-7)}
 """Parameter -> (unit on the axis, its size in SI) where the SI value would need an exponent."""
 LOG_AXES = ("sigma_abs",)
 """Parameters drawn on a logarithmic axis: their posterior spans decades (down to the prior's floor)."""
@@ -110,7 +111,7 @@ def q_of_v_figure(fit: DampingFit, draws: int = 200, seed: int = 0):
         for name, (line, band, relative) in lines.items()
     ] + top.get_legend_handles_labels()[0]
     return _finish_band_figure(
-        figure, handles, 1, f"Q(v): preferred law {fit.preferred} (PSIS-LOO); the design uses: {fit.selection} ({fit.answer.law_name})",
+        figure, handles, 1, f"Q(v): preferred law {fit.preferred} (PSIS-LOO); the design uses: {fit.selection} ({fit.answer.description})",
         ("quality factor Q [-]", "90 % band\n/ median - 1 [%]"), "peak velocity v [m/s]",
     )
 
