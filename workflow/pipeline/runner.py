@@ -10,6 +10,7 @@ import hashlib
 import sys
 import time
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional
 
@@ -104,18 +105,35 @@ class Step:
     cacheable: bool = True
 
 
+@lru_cache(maxsize=256)
+def _file_digest(path: str, modified_ns: int, size: int) -> str:
+    """SHA-256 of a log's bytes, read once per (path, modification time, size): every step's key holds it."""
+    return hashlib.sha256(read_input(Path(path), path, MAX_LOG_BYTES)).hexdigest()
+
+
+def _digests(paths) -> list:
+    """The SHA-256 of each log of ``paths`` (:func:`_file_digest`; a file that cannot be read says so as
+    :func:`~workflow.inputfiles.read_input` does)."""
+    digests = []
+    for path in paths:
+        try:
+            stat = Path(path).stat()
+        except OSError:
+            digests.append(hashlib.sha256(read_input(path, str(path), MAX_LOG_BYTES)).hexdigest())
+            continue
+        digests.append(_file_digest(str(path), stat.st_mtime_ns, stat.st_size))
+    return digests
+
+
 def _step_key(context: RunContext, step: Step) -> str:
     """Content key of a step's result: step, configuration, the bytes of the logs it reads (the campaign's and the
     built plates'), code."""
-    def digests(paths) -> list:
-        return [hashlib.sha256(read_input(path, str(path), MAX_LOG_BYTES)).hexdigest() for path in paths]
-
     return content_key(
         {
             "step": step.key,
             "config": context.config,
-            "logs": digests(context.results.get("logs", [])),
-            "built_plates": digests(context.config.get("recommendation", {}).get("built_plates", [])),
+            "logs": _digests(context.results.get("logs", [])),
+            "built_plates": _digests(context.config.get("recommendation", {}).get("built_plates", [])),
             "code": [source_version(package_directory(workflow)), source_version(package_directory(instruments))],
         }
     )
