@@ -68,7 +68,7 @@ def _finish_band_figure(figure, handles, columns: int, title: str, ylabels, xlab
     """Legend under the panels, title and labels, a zero line on the lower panel, grids."""
     top, bottom = figure.axes[:2]
     figure.legend(handles=handles, fontsize=8, ncol=columns, loc="outside lower center", frameon=False)
-    top.set_title(title)
+    top.set_title("\n".join(textwrap.wrap(title, 80)))
     for ax, label in zip((top, bottom), ylabels):
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
@@ -111,7 +111,8 @@ def q_of_v_figure(fit: DampingFit, draws: int = 200, seed: int = 0):
         for name, (line, band, relative) in lines.items()
     ] + top.get_legend_handles_labels()[0]
     return _finish_band_figure(
-        figure, handles, 1, f"Q(v): preferred law {fit.preferred} (PSIS-LOO); the design uses: {fit.selection} ({fit.answer.description})",
+        figure, handles, 1, f"Q(v): preferred law {fit.preferred} (PSIS-LOO); the design uses: "
+        + (fit.answer.description if fit.selection == "mixture" else f"{fit.selection} ({fit.answer.description})"),
         ("quality factor Q [-]", "90 % band\n/ median - 1 [%]"), "peak velocity v [m/s]",
     )
 
