@@ -142,7 +142,7 @@ def study(n: int, seed: int, fem_settings, sim_settings, settings: CalibrationSe
     drawn = campaigns(n, seed)
     started = time.perf_counter()
     used = sorted({plate.design for plates in drawn for plate in plates})
-    surrogates = dict(zip(used, prior_surrogates([design(name) for name in used], settings, model.evaluate_plates)))
+    surrogates = dict(zip(used, prior_surrogates([design(name) for name in used], settings, model.design_fem())))
     surrogate_seconds = time.perf_counter() - started
     tasks = [(plate.design, plate.deviations, sim_settings) for plates in drawn for plate in plates]
     simulated = map_evaluations(simulated_plate, tasks, scheduler=scheduler, progress=False)
@@ -152,7 +152,7 @@ def study(n: int, seed: int, fem_settings, sim_settings, settings: CalibrationSe
             built = simulated[3 * index: 3 * index + 3]
             measured = [measure(m, Path(folder), f"c{index}-{k}-{p.design}", seed + 3 * index + k)
                         for k, (m, p) in enumerate(zip(built, plates))]
-            calibration = calibrate(measured[:2], settings, model.evaluate_plates, fem)
+            calibration = calibrate(measured[:2], settings, model.design_fem(), fem)
             target = measured[2]
             low, mid, high = predict(calibration, target.plate, None, surrogates[plates[2].design])["frequency"]
             record = {

@@ -8,7 +8,7 @@ import numpy as np
 
 from workflow.calibration.calibration import Calibration, MeasuredPlate
 from workflow.calibration.parameters import default_settings
-from workflow.calibration.plate_surrogate import build_plate_surrogate
+from workflow.calibration.plate_surrogate import DesignFem, build_plate_surrogate
 from workflow.models import analytical
 from workflow.models.fem import FemSettings
 from workflow.models.plate import Plate
@@ -43,11 +43,15 @@ class BeamResult:
         self.probe_model = SimpleNamespace(response=lambda f, q: np.full(44, self.deflection))
 
 
+BEAM_FEM = DesignFem(lambda plates: [BeamResult(p) for p in plates])
+"""Surrogate designs evaluated with the beam stand-in, every point alike."""
+
+
 def beam_calibration(n_samples: int) -> Calibration:
     """A calibration on P1 with the beam model as 'FEM' and a made-up posterior of ``n_samples`` samples."""
     settings = default_settings()
     rng = np.random.default_rng(0)
     samples = np.column_stack([rng.normal(0.95, 0.02, n_samples), rng.normal(0.97, 0.02, n_samples),
                                rng.uniform(20e-6, 40e-6, n_samples), rng.normal(-10e-6, 5e-6, n_samples)])
-    surrogate = build_plate_surrogate(P1, settings.names, settings.bounds, lambda ps: [BeamResult(p) for p in ps], 20, 2, 1)
+    surrogate = build_plate_surrogate(P1, settings.names, settings.bounds, BEAM_FEM, 20, 2, 1)
     return Calibration(settings, samples, (MeasuredPlate("P1", P1, 23.2e3),), (surrogate,), None, {})

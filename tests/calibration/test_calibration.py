@@ -7,14 +7,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from calibration_setup import FAST, FEM_RECORD, P1, P2, SHORT, SHORT_CONFIG, TRUTH, BeamResult, beam_calibration
+from calibration_setup import BEAM_FEM, FAST, FEM_RECORD, P1, P2, SHORT, SHORT_CONFIG, TRUTH, BeamResult, beam_calibration
 
 from workflow.calibration.calibration import Calibration, MeasuredPlate, calibrate, nominal_theta, predict
 from workflow.calibration.case_study import cross_predictions
 from workflow.calibration.logs import read_built_plate
 from workflow.resonance import log_parabolic_peak_frequency
 from workflow.calibration.parameters import default_settings, deviated_plate, load_settings
-from workflow.calibration.plate_surrogate import build_plate_surrogate
+from workflow.calibration.plate_surrogate import DesignFem, build_plate_surrogate
 from workflow.calibration.surrogate import fit_response_surface, latin_hypercube
 from workflow.cli import main
 from workflow.errors import InputFileError
@@ -63,7 +63,7 @@ def test_peak_of_a_sweep_is_located_between_its_points():
 
 def test_surrogate_error_against_fresh_fem_evaluations(coarse_model):
     settings = FAST
-    surrogate = build_plate_surrogate(P1, settings.names, settings.bounds, coarse_model.evaluate_plates,
+    surrogate = build_plate_surrogate(P1, settings.names, settings.bounds, coarse_model.design_fem(),
                                       settings.surrogate_points, 2, seed=settings.surrogate_seed)
     fresh = latin_hypercube(6, settings.bounds, seed=11)[1:]
     results = coarse_model.evaluate_plates([deviated_plate(P1, settings.names, theta) for theta in fresh])
@@ -78,7 +78,7 @@ def test_known_deviations_are_recovered_along_the_constrained_directions(coarse_
     """Two built plates simulated with hidden deviations: the truth lies within the posterior along the combinations
     the data constrain, and each plate's measured frequency within its posterior predictive interval."""
     plates = [MeasuredPlate(name, plate, built_plate_frequency(coarse_model, plate)) for name, plate in (("P1", P1), ("P2", P2))]
-    calibration = calibrate(plates, FAST, coarse_model.evaluate_plates, {})
+    calibration = calibrate(plates, FAST, coarse_model.design_fem(), {})
     assert calibration.diagnostics.converged
     identified = calibration.identifiability()
     constrained = [d for d in identified["directions"] if d["constrained"]]
@@ -158,7 +158,7 @@ def test_calibrate_refuses_a_bad_settings_file_and_a_missing_calibration(tmp_pat
 
 def test_calibration_file_round_trips(coarse_model):
     plate = MeasuredPlate("P1", P1, built_plate_frequency(coarse_model, P1))
-    calibration = calibrate([plate], replace(FAST, steps=300, kept_samples=200), coarse_model.evaluate_plates, FEM_RECORD)
+    calibration = calibrate([plate], replace(FAST, steps=300, kept_samples=200), coarse_model.design_fem(), FEM_RECORD)
     again = Calibration.from_dict(json.loads(json.dumps(calibration.to_dict())))
     assert np.array_equal(again.samples, calibration.samples)
     assert again.surrogates[0].log_frequency(TRUTH) == pytest.approx(calibration.surrogates[0].log_frequency(TRUTH))
@@ -169,7 +169,7 @@ def test_case_study_predicts_one_built_plate_from_the_other(coarse_model):
     """Built plates sharing the hidden deviations: each calibrated alone predicts the other inside its interval."""
     first = MeasuredPlate("P1", P1, built_plate_frequency(coarse_model, P1))
     second = MeasuredPlate("P2", P2, built_plate_frequency(coarse_model, P2))
-    directions = cross_predictions(first, second, SHORT, coarse_model.evaluate_plates, {})
+    directions = cross_predictions(first, second, SHORT, coarse_model.design_fem(), {})
     assert [d["predicted"] for d in directions] == ["P2", "P1"]
     for d in directions:
         assert d["inside"], d
@@ -241,7 +241,7 @@ def test_robust_candidate_meets_the_reliability_on_a_known_model():
     from workflow.optimise.robust import RobustSettings, robust_candidate
 
     calibration = beam_calibration(3000)
-    candidate = robust_candidate(calibration, P1, RobustSettings(), lambda ps: [BeamResult(p) for p in ps], 54.0)
+    candidate = robust_candidate(calibration, P1, RobustSettings(), BEAM_FEM, 54.0)
     assert candidate.frequency[0] == pytest.approx(25e3, rel=2e-3)
     assert candidate.probability >= 0.95 - candidate.probability_error, "the solve is conservative by its own MC error"
     assert candidate.probability < 0.95 + 6 * candidate.probability_error, "but not wastefully so"
@@ -277,13 +277,14 @@ def test_prior_surrogates_evaluate_all_plates_in_one_batch_per_kind_each_surroga
         return [BeamResult(p) for p in plates], [_CosineSurface(p) for p in plates]
 
     plates, scans = (P1, P2, P1.with_(width=40 * MM)), (None, scan, None)
-    surrogates = prior_surrogates(plates, settings, evaluate, evaluate_surfaces, scans)
+    surrogates = prior_surrogates(plates, settings, DesignFem(evaluate, evaluate_surfaces), scans)
     assert calls == [("fem", 36), ("surfaces", 18)]
     for plate, found, shape in zip(plates, surrogates, scans):
         points = None if shape is None else (np.array(shape.x), np.array(shape.y))
-        alone = build_plate_surrogate(plate, settings.names, settings.bounds, lambda ps: [BeamResult(p) for p in ps],
-                                      18, settings.surrogate_degree, settings.surrogate_seed,
-                                      lambda ps: ([BeamResult(p) for p in ps], [_CosineSurface(p) for p in ps]), points)
+        stand_in = DesignFem(lambda ps: [BeamResult(p) for p in ps],
+                             lambda ps: ([BeamResult(p) for p in ps], [_CosineSurface(p) for p in ps]))
+        alone = build_plate_surrogate(plate, settings.names, settings.bounds, stand_in, 18, settings.surrogate_degree,
+                                      settings.surrogate_seed, points)
         assert found == alone and (found.shape is None) == (shape is None)
 
 
@@ -300,12 +301,12 @@ def test_robust_design_evaluates_every_stock_in_two_batches_with_the_candidates_
         return [BeamResult(p) for p in plates]
 
     stock = (0.5e-3, 0.75e-3, 1e-3)
-    design = robust_design(calibration, P1, stock, RobustSettings(separation=0.01), evaluate, 54.0)
+    design = robust_design(calibration, P1, stock, RobustSettings(separation=0.01), DesignFem(evaluate), 54.0)
     per_stock = design.candidates[0].evaluations - 1
     assert batches == [3 * per_stock, 3]
     for h, candidate in zip(stock, design.candidates):
         alone = robust_candidate(calibration, P1.with_(resonator_thickness=h), RobustSettings(separation=0.01),
-                                 lambda ps: [BeamResult(p) for p in ps], 54.0)
+                                 BEAM_FEM, 54.0)
         assert candidate == alone
 
 
@@ -319,7 +320,7 @@ def test_run_step_predicts_the_recommended_designs_with_the_calibration(tmp_path
     from workflow.pipeline.steps import calibrated_designs
 
     plate = MeasuredPlate("P1", P1, built_plate_frequency(coarse_model, P1))
-    calibration = calibrate([plate], SHORT, coarse_model.evaluate_plates, {**FEM_RECORD, "accuracy": 0.05})
+    calibration = calibrate([plate], SHORT, coarse_model.design_fem(), {**FEM_RECORD, "accuracy": 0.05})
     files = write_calibration(calibration, tmp_path, figures=False)
     designs = {1e-3: SimpleNamespace(plate=P1, frequency=25.1e3)}
     context = SimpleNamespace(calibration=Path(files["calibration"]), config=default_config(), cache=None, scheduler=None,

@@ -82,8 +82,8 @@ def test_scan_pattern_noise_from_mirror_images_and_sign_free_misfit():
 def test_new_surrogates_against_fresh_fem_evaluations(coarse_model):
     """ln g at the centre and the pattern at the scan points, fitted on the 18-point design, against 5 fresh points."""
     scan_points = (GRID[:, 0], GRID[:, 1])
-    surrogate = build_plate_surrogate(P1, FAST.names, FAST.bounds, coarse_model.evaluate_plates, FAST.surrogate_points, 2,
-                                      FAST.surrogate_seed, coarse_model.results_with_surfaces, scan_points)
+    surrogate = build_plate_surrogate(P1, FAST.names, FAST.bounds, coarse_model.design_fem(), FAST.surrogate_points, 2,
+                                      FAST.surrogate_seed, scan_points)
     fresh = latin_hypercube(6, FAST.bounds, seed=11)[1:]
     plates = [deviated_plate(P1, FAST.names, theta) for theta in fresh]
     results, surfaces = coarse_model.results_with_surfaces(plates)
@@ -106,7 +106,7 @@ def test_known_deviations_recovered_with_and_without_the_extra_terms(coarse_mode
         "frequency": MeasuredPlate("P1", P1, built["frequency"]),
         "all": MeasuredPlate("P1", P1, built["frequency"], built["g"], scan),
     }
-    calibrations = {label: calibrate([plate], FAST, coarse_model.evaluate_plates, FEM_RECORD, coarse_model.results_with_surfaces)
+    calibrations = {label: calibrate([plate], FAST, coarse_model.design_fem(), FEM_RECORD)
                     for label, plate in runs.items()}
     mean, sd = FAST.prior_scale()
     for calibration in calibrations.values():

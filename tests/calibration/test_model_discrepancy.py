@@ -30,11 +30,11 @@ def inconsistent(coarse_model):
 
 
 def test_plates_the_parameters_cannot_represent_fail_the_check_and_raise_the_discrepancy(coarse_model, inconsistent):
-    without = calibrate(inconsistent, replace(SHORT, frequency_discrepancy=0.0), coarse_model.evaluate_plates, FEM_RECORD)
+    without = calibrate(inconsistent, replace(SHORT, frequency_discrepancy=0.0), coarse_model.design_fem(), FEM_RECORD)
     check = without.check()
     assert not check["passed"] and check["worst"]["p"] < 0.01
     assert "cannot represent" in check["statement"] and "frequency" not in check["discrepancy"]
-    with_term = calibrate(inconsistent, SHORT, coarse_model.evaluate_plates, FEM_RECORD)
+    with_term = calibrate(inconsistent, SHORT, coarse_model.design_fem(), FEM_RECORD)
     term = with_term.check()["discrepancy"]["frequency"]
     assert term["median"] > 3 * term["prior_median"]  # the plates push it well above its prior
     bands = [predict(c, P1, None, c.surrogates[0])["frequency"] for c in (without, with_term)]
@@ -45,7 +45,7 @@ def test_plates_the_parameters_cannot_represent_fail_the_check_and_raise_the_dis
 
 def test_consistent_plates_pass_the_check_and_keep_the_discrepancy_near_its_prior(coarse_model):
     plates = [measured(coarse_model, P1, "P1"), measured(coarse_model, P2, "P2")]
-    check = calibrate(plates, SHORT, coarse_model.evaluate_plates, FEM_RECORD).check()
+    check = calibrate(plates, SHORT, coarse_model.design_fem(), FEM_RECORD).check()
     assert check["passed"], check
     term = check["discrepancy"]["frequency"]
     assert term["median"] < 2 * term["prior_median"]
@@ -53,7 +53,7 @@ def test_consistent_plates_pass_the_check_and_keep_the_discrepancy_near_its_prio
 
 def test_calibration_files_carry_the_terms_and_what_intervals_contain_and_version_1_still_reads(coarse_model):
     calibration = calibrate([measured(coarse_model, P1, "P1")], replace(SHORT, steps=300, kept_samples=200),
-                            coarse_model.evaluate_plates, FEM_RECORD)
+                            coarse_model.design_fem(), FEM_RECORD)
     data = json.loads(json.dumps(calibration.to_dict()))
     assert data["version"] == 2 and data["discrepancy"]["names"] == ["frequency", "deflection"]
     assert any("model discrepancy" in item for item in data["intervals"]["contains"])

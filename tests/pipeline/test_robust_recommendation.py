@@ -18,6 +18,7 @@ from calibration_setup import P1, SHORT, BeamResult, beam_calibration
 from user_facing import run_cli
 
 from workflow.calibration import parameters
+from workflow.calibration.plate_surrogate import DesignFem
 from workflow.execution.cache import EvaluationCache
 from workflow.models.response import ScaledResponse
 from workflow.optimise.problem import DesignProblem
@@ -41,11 +42,11 @@ SEPARATED = RobustSettings(separation=0.01)
 """The stand-in's transverse mode sits 2 % above the working one: separated at 1 %, not at the default 3 %."""
 
 
-def beam_evaluate(batches: list):
+def beam_evaluate(batches: list) -> DesignFem:
     def evaluate(plates):
         batches.append(len(plates))
         return [BeamResult(p) for p in plates]
-    return evaluate
+    return DesignFem(evaluate)
 
 
 def test_the_stocks_tried_are_those_nearest_the_nominal_thickness():
@@ -96,7 +97,8 @@ def beam_run(tmp_path, monkeypatch):
     with resources.as_file(resources.files("workflow.calibration.published") / "paper_P1.csv") as path:
         shutil.copy(path, own)
     batches = []
-    model = types.SimpleNamespace(evaluate_plates=beam_evaluate(batches), results_with_surfaces=None)
+    fem = beam_evaluate(batches)
+    model = types.SimpleNamespace(design_fem=lambda: fem)
     monkeypatch.setattr(loop, "calibration_model", lambda context: (model, {}))
     monkeypatch.setattr(parameters, "load_settings", lambda *args: SHORT)
     config = default_config()
@@ -210,7 +212,7 @@ def test_the_q_of_v_columns_come_from_the_fem_at_each_rows_posterior_median_plat
     run.config["damping"]["posterior_draws"] = 8
     with_damping = robust.damped_evaluation(run)
     choices = robust.robust_choices(beam_calibration(300), {1 * MM: NOMINAL}, [0.75 * MM], 1,
-                                    RobustSettings(separation=0.0), coarse_model.evaluate_plates, 54.0, with_damping)
+                                    RobustSettings(separation=0.0), coarse_model.design_fem(), 54.0, with_damping)
     choice = choices[1 * MM]
     draws = posterior.draws(8, run.config["damping"]["seed"])
     for candidate, damped in ((choice.best, choice.best_damped), (choice.nominal, choice.nominal_damped)):

@@ -1,12 +1,11 @@
 """A calibration: surrogates of the built plates, the posterior, and predictions for other plates.
 
-Pure given an ``evaluate`` callable (plates -> FemResults; the caller binds Q, voltage, FEM
-accuracy and the cache).  :class:`Calibration` converts to and from plain data (the
+Pure given a :class:`~workflow.calibration.plate_surrogate.DesignFem` (how a surrogate's design is evaluated; the
+caller binds Q, voltage, FEM accuracy and the cache).  :class:`Calibration` converts to and from plain data (the
 ``calibration.json`` that ``--calibration`` reads: no code, no pickle).
 """
 
 from dataclasses import asdict, dataclass, replace
-from functools import partial
 from typing import Sequence
 
 import numpy as np
@@ -15,11 +14,9 @@ from workflow.calibration.logs import BuiltPlateLog
 from workflow.calibration.measurements import ScanShape
 from workflow.calibration.parameters import DISCREPANCIES, CalibrationSettings, Parameter, checked_settings
 from workflow.calibration.plate_surrogate import (
-    Evaluate,
-    EvaluateSurfaces,
+    DesignFem,
     PlateSurrogate,
     build_plate_surrogate,
-    evaluate_together,
     fit_plate_surrogate,
     surrogate_design,
 )
@@ -338,31 +335,17 @@ def nominal_theta(names: Sequence[str], plate: Plate) -> np.ndarray:
                      for name in names])
 
 
-def prior_surrogates(plates: Sequence[Plate], settings: CalibrationSettings, evaluate: Evaluate,
-                     evaluate_surfaces: EvaluateSurfaces | None = None, scans: Sequence = ()) -> tuple:
+def prior_surrogates(plates: Sequence[Plate], settings: CalibrationSettings, fem: DesignFem, scans: Sequence = ()) -> tuple:
     """A surrogate of each plate over the prior's box (the settings' design size, degree and seed), with the
-    mode pattern at its scan's points where ``scans`` (one ScanShape or None per plate) has one.
-
-    The designs of the plates without a scan go to ``evaluate`` in one batch, those with one to
-    ``evaluate_surfaces`` in another, so that the workers of a pool stay busy across the plates.
-    """
+    mode pattern at its scan's points where ``scans`` (one ScanShape or None per plate) has one; the designs of
+    all plates are evaluated together (:meth:`DesignFem.values`), so that the workers of a pool stay busy across
+    the plates."""
     scans = tuple(scans) or (None,) * len(plates)
-    designs = [surrogate_design(plate, settings.names, settings.bounds, settings.surrogate_points,
-                                settings.surrogate_seed) for plate in plates]
-    plain = [k for k, scan in enumerate(scans) if scan is None]
-    scanned = [k for k, scan in enumerate(scans) if scan is not None]
-    evaluated = dict(zip(plain, evaluate_together(evaluate, [designs[k][1] for k in plain])))
-    with_surfaces = evaluate_together(lambda batch: list(zip(*evaluate_surfaces(batch))), [designs[k][1] for k in scanned])
-    evaluated.update(zip(scanned, with_surfaces))
-    surrogates = []
-    for k, ((points, _), scan) in enumerate(zip(designs, scans)):
-        fit = partial(fit_plate_surrogate, settings.names, settings.bounds, settings.surrogate_degree, points)
-        if scan is None:
-            surrogates.append(fit(evaluated[k]))
-        else:
-            results, surfaces = map(list, zip(*evaluated[k]))
-            surrogates.append(fit(results, surfaces, (np.array(scan.x), np.array(scan.y))))
-    return tuple(surrogates)
+    designs = [surrogate_design(plate, settings.names, settings.bounds, settings.surrogate_points, settings.surrogate_seed,
+                                None if scan is None else (np.array(scan.x), np.array(scan.y)))
+               for plate, scan in zip(plates, scans)]
+    return tuple(fit_plate_surrogate(settings.names, design, settings.surrogate_degree, values)
+                 for design, values in zip(designs, fem.values(designs)))
 
 
 def posterior_from(plates: Sequence[MeasuredPlate], surrogates: Sequence[PlateSurrogate], settings: CalibrationSettings,
@@ -374,36 +357,33 @@ def posterior_from(plates: Sequence[MeasuredPlate], surrogates: Sequence[PlateSu
     return Calibration(settings, samples, tuple(plates), tuple(surrogates), diagnostics, dict(fem), discrepancy)
 
 
-def calibrate(plates: Sequence[MeasuredPlate], settings: CalibrationSettings, evaluate: Evaluate, fem: dict,
-              evaluate_surfaces: EvaluateSurfaces | None = None) -> Calibration:
+def calibrate(plates: Sequence[MeasuredPlate], settings: CalibrationSettings, design_fem: DesignFem, fem: dict) -> Calibration:
     """Surrogates of the measured plates, then the posterior of the parameters.
 
     Parameters
     ----------
     plates : sequence of MeasuredPlate
     settings : CalibrationSettings
-    evaluate : callable
-        Plates -> FemResults.
+    design_fem : DesignFem
+        How the surrogates' designs are evaluated (with the top-face modes where a plate has a scan).
     fem : dict
-        The FEM conditions ``evaluate`` binds (recorded with the calibration).
-    evaluate_surfaces : callable, optional
-        Plates -> (FemResults, SurfaceModes); needed when a plate has a scan.
+        The FEM conditions ``design_fem`` binds (recorded with the calibration).
     """
-    surrogates = prior_surrogates([p.plate for p in plates], settings, evaluate, evaluate_surfaces, [p.scan for p in plates])
+    surrogates = prior_surrogates([p.plate for p in plates], settings, design_fem, [p.scan for p in plates])
     return posterior_from(plates, surrogates, settings, fem)
 
 
-def prediction_surrogate(calibration: Calibration, plate: Plate, evaluate: Evaluate) -> PlateSurrogate:
+def prediction_surrogate(calibration: Calibration, plate: Plate, fem: DesignFem) -> PlateSurrogate:
     """A linear surrogate of ``plate`` over the posterior's central 99 % range of each parameter."""
     names = calibration.settings.names
     low, high = np.percentile(calibration.samples, POSTERIOR_RANGE, axis=0)
     span = np.maximum(high - low, 1e-3 * (calibration.settings.bounds[:, 1] - calibration.settings.bounds[:, 0]))
     bounds = np.stack([low, low + span], axis=1)
-    return build_plate_surrogate(plate, names, bounds, evaluate, prediction_points(len(names)), PREDICTION_DEGREE,
+    return build_plate_surrogate(plate, names, bounds, fem, prediction_points(len(names)), PREDICTION_DEGREE,
                                  calibration.settings.surrogate_seed)
 
 
-def predict(calibration: Calibration, plate: Plate, evaluate: Evaluate, surrogate: PlateSurrogate | None = None) -> dict:
+def predict(calibration: Calibration, plate: Plate, fem: DesignFem | None, surrogate: PlateSurrogate | None = None) -> dict:
     """Posterior predictive f_r and w of a plate.
 
     Returns
@@ -412,5 +392,5 @@ def predict(calibration: Calibration, plate: Plate, evaluate: Evaluate, surrogat
         ``frequency`` and ``deflection``: arrays (p05, p50, p95) [Hz], [m]; ``surrogate``: the
         surrogate used (a new one over the posterior's range unless given).
     """
-    surrogate = surrogate or prediction_surrogate(calibration, plate, evaluate)
+    surrogate = surrogate or prediction_surrogate(calibration, plate, fem)
     return {**predictive_quantiles(surrogate, calibration.samples, calibration.discrepancy), "surrogate": surrogate}

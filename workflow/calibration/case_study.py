@@ -2,12 +2,12 @@
 
 from workflow.calibration.calibration import MeasuredPlate, posterior_from, prior_surrogates
 from workflow.calibration.parameters import CalibrationSettings
-from workflow.calibration.plate_surrogate import Evaluate
+from workflow.calibration.plate_surrogate import DesignFem
 from workflow.calibration.posterior import predictive_quantiles
 
 
-def cross_predictions(first: MeasuredPlate, second: MeasuredPlate, settings: CalibrationSettings, evaluate: Evaluate,
-                      fem: dict, surrogates: tuple | None = None) -> list[dict]:
+def cross_predictions(first: MeasuredPlate, second: MeasuredPlate, settings: CalibrationSettings,
+                      design_fem: DesignFem | None, fem: dict, surrogates: tuple | None = None) -> list[dict]:
     """Calibrate on each plate alone and predict the other's resonance, with 90 % intervals.
 
     Parameters
@@ -15,10 +15,10 @@ def cross_predictions(first: MeasuredPlate, second: MeasuredPlate, settings: Cal
     first, second : MeasuredPlate
         The plates and their measured frequencies [Hz] (data, e.g. read from logs).
     settings : CalibrationSettings
-    evaluate : callable
-        Plates -> FemResults.
+    design_fem : DesignFem or None
+        How the surrogates' designs are evaluated (None with ``surrogates``).
     fem : dict
-        The FEM conditions ``evaluate`` binds.
+        The FEM conditions ``design_fem`` binds.
     surrogates : tuple of PlateSurrogate, optional
         The two plates' prior surrogates when already built with these settings and FEM (no evaluation then).
 
@@ -30,7 +30,7 @@ def cross_predictions(first: MeasuredPlate, second: MeasuredPlate, settings: Cal
         ``error`` (median over measured - 1) [-], ``source_fit_hz`` (the calibrated plate's own
         posterior median) [Hz], ``parameters`` (posterior summary), ``evaluations`` (FEM, both surrogates).
     """
-    surrogates = surrogates or prior_surrogates([first.plate, second.plate], settings, evaluate)
+    surrogates = surrogates or prior_surrogates([first.plate, second.plate], settings, design_fem)
     directions = []
     for (source, source_surrogate), (target, target_surrogate) in (
         ((first, surrogates[0]), (second, surrogates[1])),

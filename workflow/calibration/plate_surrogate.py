@@ -8,6 +8,10 @@ point of the FEM's mode pattern there (:func:`~workflow.calibration.measurements
 of the response at resonance, signs aligned to the design's centre point).  Their errors,
 used as extra variances in the likelihood, are the leave-one-out residuals of the fits (and,
 for f_r, the FEM's own discretisation-error estimate).
+
+A design is evaluated to the FEM accuracy at every point or, in a two-level design (:class:`DesignFem`), on one
+coarse mesh level at every point and to the accuracy at two anchors that set the outputs' level: a third to a fifth
+of the time for the same accuracy (docs/calibration.md, "Two-level designs").
 """
 
 from dataclasses import dataclass
@@ -94,6 +98,9 @@ class PlateSurrogate:
         ln(g / (m/V)), g the centre's quasi-static deflection per volt (None in older files).
     shape : ShapeSurrogate or None
         The mode pattern at a scan's points (built only for a plate with a scan).
+    coarse_level : int or None
+        The level of a two-level design's points (:class:`DesignFem`), None when every point was evaluated to the
+        accuracy.
     """
 
     names: tuple
@@ -103,6 +110,7 @@ class PlateSurrogate:
     evaluations: int
     log_point_deflection: ResponseSurface | None = None
     shape: ShapeSurrogate | None = None
+    coarse_level: int | None = None
 
     def __post_init__(self):
         surfaces = [self.log_frequency, self.log_deflection, self.log_point_deflection]
@@ -134,6 +142,7 @@ class PlateSurrogate:
             "evaluations": self.evaluations,
             "log_point_deflection": None if self.log_point_deflection is None else self.log_point_deflection.to_dict(),
             "shape": None if self.shape is None else self.shape.to_dict(),
+            "coarse_level": self.coarse_level,
         }
 
     @classmethod
@@ -147,6 +156,7 @@ class PlateSurrogate:
             evaluations=int(data["evaluations"]),
             log_point_deflection=None if point is None else ResponseSurface.from_dict(point),
             shape=None if shape is None else ShapeSurrogate.from_dict(shape),
+            coarse_level=None if data.get("coarse_level") is None else int(data["coarse_level"]),
         )
 
 
@@ -160,20 +170,12 @@ def fem_pattern(result, surface, x, y) -> np.ndarray:
     return real_pattern(surface.deflection(np.asarray(x), np.asarray(y), result.frequency, result.q))
 
 
-def design_results(results: list) -> tuple:
-    """What the design's FemResults give: (log f, log w, log g, relative f errors)."""
-    log_f = np.log([r.frequency for r in results])
-    log_w = np.log([r.deflection for r in results])
-    log_g = np.log([point_deflection_per_volt(r) for r in results])
-    errors = np.array([0.0 if r.error is None else r.error.frequency for r in results])
-    return log_f, log_w, log_g, errors
-
-
-def design_patterns(results: list, surfaces: list, scan_points: tuple) -> np.ndarray:
+def design_patterns(results: list, surfaces: list, scan_points: tuple, reference: np.ndarray | None = None) -> np.ndarray:
     """(n_design, n_scan) FEM patterns at ``scan_points`` (x, y) [m] of the design's FemResults and SurfaceModes, each
-    signed to agree with the first (the box centre)."""
+    signed to agree with ``reference`` (default the first pattern: the box centre's)."""
     patterns = np.array([fem_pattern(r, s, *scan_points) for r, s in zip(results, surfaces)])
-    return patterns * np.where(patterns @ patterns[0] < 0, -1.0, 1.0)[:, None]
+    reference = patterns[0] if reference is None else reference
+    return patterns * np.where(patterns @ reference < 0, -1.0, 1.0)[:, None]
 
 
 def evaluate_together(evaluate: Callable[[list], list], groups: Sequence[list]) -> list:
@@ -184,39 +186,195 @@ def evaluate_together(evaluate: Callable[[list], list], groups: Sequence[list]) 
     return [[next(results) for _ in group] for group in groups]
 
 
-def surrogate_design(plate: Plate, names: Sequence[str], bounds: np.ndarray, n_points: int, seed: int) -> tuple:
-    """(points, plates): the Latin hypercube of ``n_points`` in ``bounds`` (n, 2) [SI] and the nominal ``plate``
-    deviated to each point (:func:`~workflow.calibration.parameters.deviated_plate`)."""
+@dataclass(frozen=True)
+class SurrogateDesign:
+    """The FEM design of one surrogate.
+
+    Attributes
+    ----------
+    points : numpy.ndarray
+        (n, k) Latin hypercube in ``bounds``, the box centre first [SI].
+    bounds : numpy.ndarray
+        (k, 2) box [SI].
+    plates : tuple of Plate
+        The plate at each point [m].
+    scan_points : tuple or None
+        (x, y) arrays [m] where a mode pattern is wanted (a plate with a scan), else None.
+    """
+
+    points: np.ndarray
+    bounds: np.ndarray
+    plates: tuple
+    scan_points: tuple | None = None
+
+
+def surrogate_design(plate: Plate, names: Sequence[str], bounds: np.ndarray, n_points: int, seed: int,
+                     scan_points: tuple | None = None) -> SurrogateDesign:
+    """The Latin hypercube of ``n_points`` in ``bounds`` (n, 2) [SI] and the nominal ``plate`` deviated to each point
+    (:func:`~workflow.calibration.parameters.deviated_plate`)."""
     points = latin_hypercube(n_points, bounds, seed)
-    return points, [deviated_plate(plate, names, theta) for theta in points]
+    return SurrogateDesign(points, np.asarray(bounds, dtype=float), tuple(deviated_plate(plate, names, theta) for theta in points),
+                           scan_points)
 
 
-def fit_plate_surrogate(names: Sequence[str], bounds: np.ndarray, degree: int, points: np.ndarray, results: list,
-                        surfaces: list | None = None, scan_points: tuple | None = None) -> PlateSurrogate:
-    """The response surfaces of degree ``degree`` through the FemResults of the design ``points`` (and, with the
-    SurfaceModes ``surfaces`` and ``scan_points`` ((x, y) arrays [m]), a :class:`ShapeSurrogate`)."""
-    log_f, log_w, log_g, errors = design_results(results)
-    shape = None
+@dataclass(frozen=True)
+class DesignValues:
+    """What a design's FEM evaluations give at its points.
+
+    Attributes
+    ----------
+    log_frequency, log_deflection, log_point_deflection : numpy.ndarray
+        (n,) ln f_r, ln w and ln g (:func:`point_deflection_per_volt`) [-].
+    patterns : numpy.ndarray or None
+        (n, n_scan) mode patterns at the scan points (signs aligned to the centre's) [-].
+    fem_error : float
+        Relative frequency error of the values [-]: the root mean square of the accurate evaluations' error estimates,
+        in a two-level design in quadrature with the spread of the anchors' corrections.
+    evaluations : int
+        FEM evaluations of the design, both levels [-].
+    coarse_level : int or None
+        The level every point was evaluated on in a two-level design, else None.
+    """
+
+    log_frequency: np.ndarray
+    log_deflection: np.ndarray
+    log_point_deflection: np.ndarray
+    patterns: np.ndarray | None
+    fem_error: float
+    evaluations: int
+    coarse_level: int | None = None
+
+
+def _columns(results: list, surfaces: list | None, scan_points: tuple | None, reference=None) -> tuple:
+    """(outputs (n, 3 [+ n_scan]): ln f, ln w, ln g [, pattern], the relative frequency-error estimates (n,))."""
+    columns = [np.log([r.frequency for r in results]), np.log([r.deflection for r in results]),
+               np.log([point_deflection_per_volt(r) for r in results])]
+    outputs = np.column_stack(columns)
     if scan_points is not None:
-        patterns = design_patterns(results, surfaces, scan_points)
-        shape = ShapeSurrogate(tuple(float(v) for v in scan_points[0]), tuple(float(v) for v in scan_points[1]),
-                               tuple(fit_response_surface(points, column, bounds, degree) for column in patterns.T))
+        outputs = np.hstack([outputs, design_patterns(results, surfaces, scan_points, reference)])
+    errors = np.array([0.0 if r.error is None else r.error.frequency for r in results])
+    return outputs, errors
+
+
+def _design_values(outputs: np.ndarray, scanned: bool, fem_error: float, evaluations: int,
+                   coarse_level: int | None = None) -> DesignValues:
+    return DesignValues(outputs[:, 0], outputs[:, 1], outputs[:, 2], outputs[:, 3:] if scanned else None,
+                        float(fem_error), evaluations, coarse_level)
+
+
+def anchor_indices(points: np.ndarray, bounds: np.ndarray, count: int) -> list:
+    """The anchors of a design: its first point (a Latin hypercube's box centre), then the points farthest from it in
+    the box's unit coordinates, ``count`` in all."""
+    unit = (np.asarray(points) - bounds[:, 0]) / (bounds[:, 1] - bounds[:, 0])
+    distance = np.sum((unit - unit[0]) ** 2, axis=1)
+    farthest = [int(k) for k in np.argsort(-distance, kind="stable") if k != 0]
+    return [0, *farthest][:min(count, len(points))]
+
+
+TWO_LEVEL_COARSE = 3
+"""Level (polynomial degree) every point of a two-level design is evaluated on [-]; docs/calibration.md, "Two-level
+designs", gives its measured error and how little that error varies over a surrogate's box."""
+ANCHORS = 2
+"""Points of a two-level design also evaluated to the accuracy: the box centre and the point farthest from it [-]."""
+
+
+@dataclass(frozen=True)
+class DesignFem:
+    """How surrogate designs are evaluated (docs/calibration.md, "Two-level designs").
+
+    With ``coarse`` (a two-level design) every point is evaluated on one fixed low level of the geometry-following
+    mesh and :data:`ANCHORS` of them (the centre and the point farthest from it) also to the accuracy; each output is
+    the coarse value plus the anchors' mean difference.  A surrogate needs the outputs' variation over its box, which
+    the coarse level gives to a small fraction of its own error (that error varies little over a box), and their level,
+    which the anchors give; the differences' spread enters the design's error.  Without ``coarse`` every point is
+    evaluated to the accuracy.
+
+    Attributes
+    ----------
+    accurate : Evaluate
+        Plates -> FemResults to the accuracy wanted.
+    accurate_surfaces : EvaluateSurfaces or None
+        The same with the top-face modes (needed for a design with scan points).
+    coarse, coarse_surfaces : Evaluate, EvaluateSurfaces or None
+        The same on the coarse level.
+    coarse_level : int or None
+        That level [-].
+    """
+
+    accurate: Evaluate
+    accurate_surfaces: EvaluateSurfaces | None = None
+    coarse: Evaluate | None = None
+    coarse_surfaces: EvaluateSurfaces | None = None
+    coarse_level: int | None = None
+
+    def values(self, designs: Sequence[SurrogateDesign]) -> list:
+        """The :class:`DesignValues` of each design, every level's evaluations of all designs in one batch."""
+        designs = list(designs)
+        everything = [None] * len(designs)
+        if self.coarse is None:
+            found = _evaluate(self.accurate, self.accurate_surfaces, designs, everything)
+            return [_design_values(*_summed(d, *pair), len(d.plates)) for d, pair in zip(designs, found)]
+        anchors = [anchor_indices(d.points, d.bounds, ANCHORS) for d in designs]
+        rough = _evaluate(self.coarse, self.coarse_surfaces, designs, everything)
+        fine = _evaluate(self.accurate, self.accurate_surfaces, designs, anchors)
+        return [self._two_level(d, k, r, f) for d, k, r, f in zip(designs, anchors, rough, fine)]
+
+    def _two_level(self, design: SurrogateDesign, anchors: list, rough: tuple, fine: tuple) -> DesignValues:
+        coarse, _ = _columns(*rough, design.scan_points)
+        reference = None if design.scan_points is None else coarse[anchors[0], 3:]
+        accurate, errors = _columns(*fine, design.scan_points, reference)
+        corrections = accurate - coarse[anchors]
+        spread = float(np.std(corrections[:, 0], ddof=1)) if len(anchors) > 1 else 0.0
+        fem_error = np.hypot(np.sqrt(np.mean(errors**2)), spread)
+        return _design_values(coarse + corrections.mean(axis=0), design.scan_points is not None, fem_error,
+                              len(design.plates) + len(anchors), self.coarse_level)
+
+
+def _summed(design: SurrogateDesign, results: list, surfaces: list | None) -> tuple:
+    """(outputs, scanned, fem error) of a design evaluated to the accuracy at every point."""
+    outputs, errors = _columns(results, surfaces, design.scan_points)
+    return outputs, design.scan_points is not None, np.sqrt(np.mean(errors**2))
+
+
+def _evaluate(evaluate: Evaluate, evaluate_surfaces: EvaluateSurfaces | None, designs: list, subsets: list) -> list:
+    """(results, surfaces or None) of each design's plates (those at the indices ``subsets[k]``, all where None): the
+    designs without scan points in one batch of ``evaluate``, those with in one of ``evaluate_surfaces``."""
+    groups = [list(d.plates) if keep is None else [d.plates[i] for i in keep] for d, keep in zip(designs, subsets)]
+    plain = [k for k, d in enumerate(designs) if d.scan_points is None]
+    scanned = [k for k, d in enumerate(designs) if d.scan_points is not None]
+    found = {k: (results, None) for k, results in zip(plain, evaluate_together(evaluate, [groups[k] for k in plain]))}
+    if scanned:
+        if evaluate_surfaces is None:
+            raise ValueError("a design with scan points needs an evaluation with the top-face modes")
+        pairs = evaluate_together(lambda batch: list(zip(*evaluate_surfaces(batch))), [groups[k] for k in scanned])
+        found.update((k, tuple(map(list, zip(*pair)))) for k, pair in zip(scanned, pairs))
+    return [found[k] for k in range(len(designs))]
+
+
+def fit_plate_surrogate(names: Sequence[str], design: SurrogateDesign, degree: int, values: DesignValues) -> PlateSurrogate:
+    """The response surfaces of degree ``degree`` through a design's values (and, where it has scan points, a
+    :class:`ShapeSurrogate`)."""
+    points, bounds = design.points, design.bounds
+    shape = None
+    if values.patterns is not None:
+        x, y = design.scan_points
+        shape = ShapeSurrogate(tuple(float(v) for v in x), tuple(float(v) for v in y),
+                               tuple(fit_response_surface(points, column, bounds, degree) for column in values.patterns.T))
     return PlateSurrogate(
         names=tuple(names),
-        log_frequency=fit_response_surface(points, log_f, bounds, degree),
-        log_deflection=fit_response_surface(points, log_w, bounds, degree),
-        fem_error=float(np.sqrt(np.mean(errors**2))),
-        evaluations=len(points),
-        log_point_deflection=fit_response_surface(points, log_g, bounds, degree),
+        log_frequency=fit_response_surface(points, values.log_frequency, bounds, degree),
+        log_deflection=fit_response_surface(points, values.log_deflection, bounds, degree),
+        fem_error=values.fem_error,
+        evaluations=values.evaluations,
+        log_point_deflection=fit_response_surface(points, values.log_point_deflection, bounds, degree),
         shape=shape,
+        coarse_level=values.coarse_level,
     )
 
 
-def build_plate_surrogate(
-    plate: Plate, names: Sequence[str], bounds: np.ndarray, evaluate: Evaluate, n_points: int, degree: int, seed: int,
-    evaluate_surfaces: EvaluateSurfaces | None = None, scan_points: tuple | None = None,
-) -> PlateSurrogate:
-    """Response surfaces of the nominal ``plate`` over ``bounds`` from ``n_points`` FEM evaluations.
+def build_plate_surrogate(plate: Plate, names: Sequence[str], bounds: np.ndarray, fem: DesignFem, n_points: int,
+                          degree: int, seed: int, scan_points: tuple | None = None) -> PlateSurrogate:
+    """Response surfaces of the nominal ``plate`` over ``bounds`` from a design of ``n_points``.
 
     Parameters
     ----------
@@ -226,14 +384,13 @@ def build_plate_surrogate(
         Calibration parameters (:func:`~workflow.calibration.parameters.deviated_plate`).
     bounds : array (n, 2)
         Box of the design [SI].
-    evaluate : callable
-        Plates -> FemResults.
+    fem : DesignFem
+        How the design is evaluated.
     n_points, degree, seed : int
         Design size, polynomial degree (1 or 2), Latin hypercube seed.
-    evaluate_surfaces : callable, optional
-        Plates -> (FemResults, SurfaceModes); with ``scan_points`` ((x, y) arrays [m]) the design is evaluated with
-        it instead of ``evaluate`` and a :class:`ShapeSurrogate` is built too.
+    scan_points : tuple, optional
+        (x, y) arrays [m]: a :class:`ShapeSurrogate` of the mode pattern there is built too.
     """
-    points, plates = surrogate_design(plate, names, bounds, n_points, seed)
-    results, surfaces = (evaluate(plates), None) if scan_points is None else evaluate_surfaces(plates)
-    return fit_plate_surrogate(names, bounds, degree, points, results, surfaces, scan_points)
+    design = surrogate_design(plate, names, bounds, n_points, seed, scan_points)
+    (values,) = fem.values([design])
+    return fit_plate_surrogate(names, design, degree, values)

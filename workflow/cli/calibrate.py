@@ -57,7 +57,7 @@ def run(args) -> dict:
     input_paths = {Path(p).resolve() for p in args.logs}
     with output_folder(args.out, CALIBRATION_OUTPUTS, force=args.force) as out:
         nominal = [r.frequency for r in model.evaluate_plates([plate.plate for plate in plates])]
-        calibration = calibrate(plates, settings, model.evaluate_plates, fem, model.results_with_surfaces)
+        calibration = calibrate(plates, settings, model.design_fem(), fem)
         files = write_calibration(calibration, out, figures=not args.no_figures, protect=input_paths)
         summary = calibration_summary(calibration, nominal, files, time.perf_counter() - started)
     if not summary["diagnostics"]["converged"]:

@@ -66,7 +66,7 @@ def run(args) -> dict:
     if calibration is not None:
         result["nominal_f_r_khz"], result["nominal_w_dyn_um"] = result["f_r_khz"], result["w_dyn_um"]
         fem = calibration_fem_model(calibration, args.q, args.voltage)
-        result.update(calibrated_record(calibration, plate, fem.evaluate_plates, args.calibration))
+        result.update(calibrated_record(calibration, plate, fem.design_fem(), args.calibration))
     if not args.json:
         _print_human(result, args.model, evaluation.working_mode)
     return result

@@ -174,7 +174,7 @@ def calibrated_map(args, result, optimum):
     from workflow.pipeline.calibration_files import calibrated_record
 
     model = calibration_fem_model(args.loaded_calibration, args.q, args.voltage)
-    record = calibrated_record(args.loaded_calibration, optimum.plate, model.evaluate_plates, args.calibration)
+    record = calibrated_record(args.loaded_calibration, optimum.plate, model.design_fem(), args.calibration)
     f_factor = record["f_r_khz"] * KHZ / optimum.frequency
     w_factor = record["w_dyn_um"] * UM / optimum.deflection
     result = dataclasses.replace(result, frequency=result.frequency * f_factor, deflection=result.deflection * w_factor)

@@ -156,7 +156,7 @@ def _robust(args, calibration) -> dict:
         nominal = check_design_space(problem.build.with_(ceramic_thickness=ceramic_thickness, width=problem.width,
                                                           resonator_thickness=stock[0]))
         started = time.perf_counter()
-        design = robust_design(calibration, nominal, stock, settings, model.evaluate_plates, args.q)
+        design = robust_design(calibration, nominal, stock, settings, model.design_fem(), args.q)
         records.append({**robust_record(design, args.reliability, time.perf_counter() - started), "calibration": args.calibration})
     if not args.json:
         for record in records:

@@ -16,10 +16,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from workflow.calibration.plate_surrogate import TWO_LEVEL_COARSE, DesignFem
 from workflow.execution.cache import EvaluationCache, cached_map, package_directory, source_version
 from workflow.models import fem, materials
 from workflow.models.fem import FemResult, FemSettings, evaluate_fem
-from workflow.models.fem.accuracy import FemAccuracy
+from workflow.models.fem.accuracy import FemAccuracy, FemLevel
 from workflow.models.fem.sensitivity import DESIGN_PARAMETERS, best_mode_gradients, evaluate_fem_with_tangents
 from workflow.models.fem.surface import SurfaceModes, evaluate_surface
 from workflow.models.plate import Plate
@@ -110,7 +111,7 @@ class FemModel:
 
     q: float = materials.PLATE_Q
     voltage: float = materials.DESIGN_VOLTAGE
-    settings: FemAccuracy | FemSettings = field(default_factory=FemAccuracy)
+    settings: FemAccuracy | FemSettings | FemLevel = field(default_factory=FemAccuracy)
     cache: EvaluationCache | None = None
     scheduler: object = None
     progress: bool = False
@@ -119,6 +120,21 @@ class FemModel:
     def on_mesh(self, mesh: FemSettings) -> "FemModel":
         """The same model on a fixed mesh (same cache and scheduler), its evaluation count at zero."""
         return replace(self, settings=mesh, evaluations=0)
+
+    def at_level(self, level: int) -> "FemModel":
+        """The same model on each plate's mesh of one fixed level (:class:`~workflow.models.fem.accuracy.FemLevel`,
+        its modes and piezo model this model's), same cache and scheduler, its evaluation count at zero."""
+        return replace(self, settings=FemLevel(level, self.settings.n_modes, self.settings.piezo), evaluations=0)
+
+    def design_fem(self) -> DesignFem:
+        """How this model evaluates a surrogate's design: two-level (every point on the level
+        :data:`~workflow.calibration.plate_surrogate.TWO_LEVEL_COARSE`, the anchors to this model's accuracy) when
+        the accuracy starts above that level, else every point with this model."""
+        if not (self.settings.refines and self.settings.start_level > TWO_LEVEL_COARSE):
+            return DesignFem(self.evaluate_plates, self.results_with_surfaces)
+        coarse = self.at_level(TWO_LEVEL_COARSE)
+        return DesignFem(self.evaluate_plates, self.results_with_surfaces, coarse.evaluate_plates,
+                         coarse.results_with_surfaces, TWO_LEVEL_COARSE)
 
     def results(self, plate: Plate, with_tangents: bool = False) -> list[FemResult]:
         """The full FEM result of every plate of the batch.

@@ -27,7 +27,7 @@ from scipy.optimize import brentq
 
 from workflow.calibration.calibration import POSTERIOR_RANGE, Calibration, nominal_theta, prediction_points
 from workflow.calibration.parameters import deviated_plate
-from workflow.calibration.plate_surrogate import Evaluate, evaluate_together
+from workflow.calibration.plate_surrogate import DesignFem, DesignValues, SurrogateDesign
 from workflow.calibration.surrogate import ResponseSurface, fit_response_surface, latin_hypercube
 from workflow.errors import InfeasibleError
 from workflow.models import analytical, materials
@@ -246,9 +246,9 @@ def start_problem(calibration: Calibration, plate: Plate, settings: RobustSettin
     return None
 
 
-def robust_design_points(calibration: Calibration, plate: Plate, settings: RobustSettings, solve: bool = True) -> tuple:
-    """(bounds, points, plates) of the FEM design of a nominal plate's robust surrogate (the module's step 1): lambda
-    around the beam model's estimate of the robust lambda when ``solve``, around the plate's own otherwise."""
+def robust_design_points(calibration: Calibration, plate: Plate, settings: RobustSettings, solve: bool = True) -> SurrogateDesign:
+    """The FEM design of a nominal plate's robust surrogate (the module's step 1): lambda around the beam model's
+    estimate of the robust lambda when ``solve``, around the plate's own otherwise."""
     names = robust_inputs(calibration)
     tol = settings.tolerances
     guess = beam_wavelength(plate, settings.min_frequency / calibration_ratio(calibration)) if solve else float(plate.wavelength)
@@ -260,15 +260,14 @@ def robust_design_points(calibration: Calibration, plate: Plate, settings: Robus
     half_hp = max(3 * tol.ceramic_thickness, 1e-6)
     bounds = np.vstack([np.log(np.array(LAMBDA_BOX) * guess), np.column_stack([low, high]), [-half_hp, half_hp]])
     points = latin_hypercube(prediction_points(len(bounds) - 1), bounds, settings.seed)
-    return bounds, points, [_robust_plate(plate, names, point) for point in points]
+    return SurrogateDesign(points, bounds, tuple(_robust_plate(plate, names, point) for point in points))
 
 
-def fit_robust_surrogate(bounds: np.ndarray, points: np.ndarray, results: Sequence) -> RobustSurrogate:
-    """The linear surrogate from the FemResults of the design ``points`` in ``bounds``."""
-    errors = np.array([0.0 if r.error is None else r.error.frequency for r in results])
-    log_f = fit_response_surface(points, np.log([r.frequency for r in results]), bounds, 1)
-    log_w = fit_response_surface(points, np.log([r.deflection for r in results]), bounds, 1)
-    return RobustSurrogate(bounds, log_f, log_w, float(np.hypot(log_f.loo_rms, np.sqrt(np.mean(errors**2)))), len(points))
+def fit_robust_surrogate(design: SurrogateDesign, values: DesignValues) -> RobustSurrogate:
+    """The linear surrogate through a design's values."""
+    log_f = fit_response_surface(design.points, values.log_frequency, design.bounds, 1)
+    log_w = fit_response_surface(design.points, values.log_deflection, design.bounds, 1)
+    return RobustSurrogate(design.bounds, log_f, log_w, float(np.hypot(log_f.loo_rms, values.fem_error)), values.evaluations)
 
 
 def conservative_level(reliability: float, draws: int) -> float:
@@ -338,27 +337,27 @@ def _candidate(solved: _Solved, result, settings: RobustSettings, q: float) -> R
     )
 
 
-def robust_candidates(calibration: Calibration, plates: Sequence[Plate], settings: RobustSettings, evaluate: Evaluate,
+def robust_candidates(calibration: Calibration, plates: Sequence[Plate], settings: RobustSettings, fem: DesignFem,
                       q: float, solve: Sequence[bool] | None = None) -> tuple:
     """The robust design of each nominal plate (its h_i and h_p fixed, lambda solved; see the module), or, where
     ``solve`` says False, the check of the plate as given (its own lambda).
 
-    The FEM evaluations of every plate's surrogate go in one batch, and those at the solved designs' posterior
-    medians in a second, so that the workers of a pool stay busy across the plates.
+    The FEM evaluations of every plate's surrogate go in one batch per level (:meth:`DesignFem.values`), and those at
+    the solved designs' posterior medians (to the accuracy) in a last one, so that the workers of a pool stay busy
+    across the plates.
     """
     solve = [True] * len(plates) if solve is None else list(solve)
     designs = [robust_design_points(calibration, plate, settings, s) for plate, s in zip(plates, solve)]
-    results = evaluate_together(evaluate, [batch for _, _, batch in designs])
-    surrogates = [fit_robust_surrogate(bounds, points, found) for (bounds, points, _), found in zip(designs, results)]
+    surrogates = [fit_robust_surrogate(design, values) for design, values in zip(designs, fem.values(designs))]
     solved = [_solve(calibration, plate, settings, surrogate, s) for plate, surrogate, s in zip(plates, surrogates, solve)]
-    medians = evaluate([s.median for s in solved])
+    medians = fem.accurate([s.median for s in solved])
     return tuple(_candidate(s, result, settings, q) for s, result in zip(solved, medians))
 
 
-def robust_candidate(calibration: Calibration, plate: Plate, settings: RobustSettings, evaluate: Evaluate,
+def robust_candidate(calibration: Calibration, plate: Plate, settings: RobustSettings, fem: DesignFem,
                      q: float) -> RobustCandidate:
     """The robust design of one nominal plate (its h_i and h_p fixed, lambda solved); see the module."""
-    (candidate,) = robust_candidates(calibration, [plate], settings, evaluate, q)
+    (candidate,) = robust_candidates(calibration, [plate], settings, fem, q)
     return candidate
 
 
@@ -376,7 +375,7 @@ def mode_separation(result, settings: RobustSettings) -> tuple[dict | None, bool
 
 
 def robust_design(calibration: Calibration, plate: Plate, stock: Sequence[float], settings: RobustSettings,
-                  evaluate: Evaluate, q: float) -> RobustDesign:
+                  fem: DesignFem, q: float) -> RobustDesign:
     """Robust candidates for each stock h_i [m] of the nominal ``plate`` (h_p, b, materials) and the optimum.
 
     Raises
@@ -384,7 +383,7 @@ def robust_design(calibration: Calibration, plate: Plate, stock: Sequence[float]
     InfeasibleError
         When no candidate has its modes separated and its lambda inside the design range.
     """
-    candidates = robust_candidates(calibration, [plate.with_(resonator_thickness=h) for h in stock], settings, evaluate, q)
+    candidates = robust_candidates(calibration, [plate.with_(resonator_thickness=h) for h in stock], settings, fem, q)
     return select_robust(candidates)
 
 

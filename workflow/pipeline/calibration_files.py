@@ -171,9 +171,10 @@ def measured_terms(calibration: Calibration, plate: MeasuredPlate, surrogate) ->
     return record
 
 
-def calibrated_record(calibration: Calibration, plate, evaluate, source: str) -> dict:
-    """Posterior-predictive keys of one plate: ``f_r_khz`` (median), ``f_r_khz_p05``/``_p95``, ``w_dyn_um`` likewise."""
-    prediction = predict(calibration, plate, evaluate)
+def calibrated_record(calibration: Calibration, plate, fem, source: str) -> dict:
+    """Posterior-predictive keys of one plate: ``f_r_khz`` (median), ``f_r_khz_p05``/``_p95``, ``w_dyn_um`` likewise
+    (``fem``: the :class:`~workflow.calibration.plate_surrogate.DesignFem` of its prediction surrogate)."""
+    prediction = predict(calibration, plate, fem)
     f, w, surrogate = prediction["frequency"], prediction["deflection"], prediction["surrogate"]
     return {
         "f_r_khz": f[1] / KHZ, "f_r_khz_p05": f[0] / KHZ, "f_r_khz_p95": f[2] / KHZ,

@@ -96,14 +96,15 @@ def build_and_measure(context: RunContext, plate: Plate, name: str, scan: bool) 
 
 
 def calibration_model(context: RunContext):
-    """(FEM model, its conditions) of the loop's calibration: the run's Q and voltage, the survey accuracy
-    (:data:`~workflow.models.fem.accuracy.SURVEY_ACCURACY` when [fem] survey_accuracy is 0: a fixed mesh)."""
-    from workflow.models.fem.accuracy import SURVEY_ACCURACY
+    """(FEM model, its conditions) of the run's calibrations and robust designs: the run's Q and voltage, the designs'
+    accuracy ([fem] accuracy; :data:`~workflow.models.fem.accuracy.DEFAULT_ACCURACY` when it is 0: a fixed mesh), whose
+    surrogates are two-level designs (:meth:`~workflow.optimise.fem_model.FemModel.design_fem`)."""
+    from workflow.models.fem.accuracy import DEFAULT_ACCURACY
     from workflow.pipeline.calibration_files import calibration_accuracy
     from workflow.pipeline.domain import fem_model
 
     design = context.config["design"]
-    accuracy = context.config["fem"]["survey_accuracy"] or SURVEY_ACCURACY
+    accuracy = context.config["fem"]["accuracy"] or DEFAULT_ACCURACY
     fem = {"q": design["q"], "voltage_v": design["voltage_v"], "accuracy": accuracy,
            "piezo": context.config["fem"]["piezo"]}
     return fem_model(context, settings=calibration_accuracy(fem)), fem
@@ -152,7 +153,7 @@ def loop_calibration(context: RunContext):
     settings = load_settings()
     logs = [path for path in (measured.resonance_log, measured.scan_log) if path is not None]
     (plate,) = measured_plates(logs, settings)
-    calibration = calibrate([plate], settings, model.evaluate_plates, fem, model.results_with_surfaces)
+    calibration = calibrate([plate], settings, model.design_fem(), fem)
     prediction = predict(calibration, plate.plate, None, calibration.surrogates[0])
     return calibration, tuple(float(f) for f in prediction["frequency"])
 
@@ -182,7 +183,7 @@ def redesign(context: RunContext):
     stock = [t * MM for t in loop["stock_hi_mm"]]
     settings = RobustSettings(reliability=loop["reliability"], min_frequency=design["min_frequency_khz"] * KHZ)
     return robust_design(calibration, first.with_(resonator_thickness=stock[0]), stock, settings,
-                         model.evaluate_plates, design["q"])
+                         model.design_fem(), design["q"])
 
 
 def second_plate(context: RunContext) -> BuiltMeasurement | None:
@@ -205,4 +206,4 @@ def case_study(context: RunContext):
     surrogates = None if built is None else built.surrogates_of(tuple(PUBLISHED_PLATES))
     first, second = published_plates() if surrogates is None else built.plates_of(tuple(PUBLISHED_PLATES))
     model, fem = calibration_model(context)
-    return cross_predictions(first, second, settings, model.evaluate_plates, fem, surrogates)
+    return cross_predictions(first, second, settings, None if surrogates else model.design_fem(), fem, surrogates)

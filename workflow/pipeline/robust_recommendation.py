@@ -150,7 +150,7 @@ def built_calibration(context: RunContext) -> Optional[BuiltCalibration]:
     if not plates:
         return None
     model, fem = calibration_model(context)
-    return BuiltCalibration(calibrate(plates, load_settings(), model.evaluate_plates, fem, model.results_with_surfaces))
+    return BuiltCalibration(calibrate(plates, load_settings(), model.design_fem(), fem))
 
 
 CALIBRATION_CAPTION = "Posterior of the calibration on the built plates"
@@ -176,7 +176,7 @@ def nearest_stocks(thickness: float, stock: Sequence[float], count: int) -> list
 
 
 def robust_choices(calibration: Calibration, nominals: Dict[float, Plate], stock: Sequence[float], count: int,
-                   settings, evaluate, q: float, with_damping=None, wavelength_range: tuple = WAVELENGTH_RANGE,
+                   settings, fem, q: float, with_damping=None, wavelength_range: tuple = WAVELENGTH_RANGE,
                    sources: Dict[float, str] | None = None) -> Dict[float, RobustChoice]:
     """Per h_p: the robust design from the ``count`` stocks nearest the nominal optimum's h_i, and the nominal
     optimum checked under the calibration; all surrogates in one batch (:func:`~workflow.optimise.robust.robust_candidates`).
@@ -190,8 +190,8 @@ def robust_choices(calibration: Calibration, nominals: Dict[float, Plate], stock
         Stock resonator thicknesses [m].
     count : int
     settings : RobustSettings
-    evaluate : callable
-        Plates -> FemResults.
+    fem : DesignFem
+        How the surrogates' designs (and the designs' posterior medians) are evaluated.
     q : float
         Constant Q of the deflections [-].
     with_damping : callable, optional
@@ -217,7 +217,7 @@ def robust_choices(calibration: Calibration, nominals: Dict[float, Plate], stock
         plates.append(nominal)
         solve.append(False)
         owner.append(hp)
-    candidates = robust_candidates(calibration, plates, settings, evaluate, q, solve)
+    candidates = robust_candidates(calibration, plates, settings, fem, q, solve)
     choices = {}
     for hp in nominals:
         mine = [c for c, s, o in zip(candidates, solve, owner) if o == hp and s]
@@ -264,5 +264,5 @@ def robust_recommendation(context: RunContext) -> Optional[RobustRecommendation]
     wavelengths = (design["wavelength_min_mm"] * MM, design["wavelength_max_mm"] * MM)
     sources = {hp: "FEM" if d.model == "FEM" else "beam model" for hp, d in designs.items()}
     choices = robust_choices(built.calibration, nominals, stock, section["stocks_per_design"], settings,
-                             model.evaluate_plates, design["q"], damped_evaluation(context), wavelengths, sources)
+                             model.design_fem(), design["q"], damped_evaluation(context), wavelengths, sources)
     return RobustRecommendation(choices, built.names, settings, design["q"])

@@ -341,7 +341,7 @@ def calibrated_designs(context: RunContext) -> dict:
                     progress=False)
     designs = context.results["recommended_design"].designs
     return {hp: {"nominal_f_r_khz": d.frequency / KHZ,
-                 **calibrated_record(calibration, d.plate, model.evaluate_plates, str(context.calibration))}
+                 **calibrated_record(calibration, d.plate, model.design_fem(), str(context.calibration))}
             for hp, d in designs.items()}
 
 

@@ -116,6 +116,56 @@ class FemAccuracy:
 
 
 @dataclass(frozen=True)
+class FemLevel:
+    """One level of the geometry-following mesh (:func:`mesh_for_level`) for every plate, without an error estimate.
+
+    What the points of a two-level surrogate design are evaluated on
+    (:class:`~workflow.calibration.plate_surrogate.DesignFem`): the mesh follows each plate as an accuracy's does,
+    but its degree is fixed, so neighbouring plates share a discretisation and their differences are accurate
+    beyond their values.
+
+    Attributes
+    ----------
+    level : int
+        Polynomial degree, one of :data:`LEVELS` [-].
+    n_modes : int
+        Eigenmodes computed nearest the analytical resonance [-].
+    piezo : str
+        Piezo model, one of :data:`~workflow.models.fem.settings.PIEZO_MODELS`.
+    """
+
+    level: int = 3
+    n_modes: int = 6
+    piezo: str = "eigenstrain"
+
+    def __post_init__(self):
+        if self.level not in LEVELS:
+            raise TactileError(f"an FEM level must be one of {', '.join(map(str, LEVELS))}, got {self.level!r}")
+        if self.piezo not in PIEZO_MODELS:
+            raise TactileError(f"unknown piezo model {self.piezo!r}; choose one of {', '.join(PIEZO_MODELS)}")
+
+    refines = False
+    """One mesh per plate, not refined (as :class:`~workflow.models.fem.settings.FemSettings`)."""
+
+    def as_dict(self) -> dict:
+        """Plain dict (content hashing and JSON)."""
+        return {"kind": "level", **asdict(self)}
+
+    def mesh(self, plate: Plate) -> FemSettings:
+        """The fixed mesh of ``plate`` at this level."""
+        return mesh_for_level(plate, self.level, self.n_modes, self.piezo)
+
+    def resolved(self, plate: Plate, evaluate: Callable) -> tuple:
+        """(the mesh of ``plate`` at this level, no estimate); ``evaluate`` is not called."""
+        return self.mesh(plate), None
+
+    def evaluated(self, plate: Plate, evaluate_mesh: Callable, start=None, keep_solution: bool = False):
+        """The FEM result of ``plate`` on its mesh at this level: ``evaluate_mesh(mesh, start)`` (its solution kept;
+        ``keep_solution`` unused, as for a fixed mesh)."""
+        return evaluate_mesh(self.mesh(plate), start)
+
+
+@dataclass(frozen=True)
 class ErrorEstimate:
     """Estimated discretisation error of an FEM result's best mode.
 

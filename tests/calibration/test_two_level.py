@@ -1,0 +1,133 @@
+"""Two-level surrogate designs (issue 27, item 3): every design point on one coarse mesh level, two anchors to the
+accuracy, the coarse values moved by the anchors' mean difference.
+
+The machinery is checked on stand-ins whose coarse level has a known error; the physics (the two-level surrogate
+against fresh accurate FEM evaluations, beside the surrogate whose every point is accurate) in a slow test and in
+``bench/bench_two_level.py`` (docs/calibration.md, "Two-level designs")."""
+
+import time
+
+import numpy as np
+import pytest
+from calibration_setup import P1, P2, BeamResult
+
+from workflow.calibration.calibration import prediction_points
+from workflow.calibration.parameters import default_settings, deviated_plate
+from workflow.calibration.plate_surrogate import (
+    ANCHORS,
+    DesignFem,
+    anchor_indices,
+    build_plate_surrogate,
+    surrogate_design,
+)
+from workflow.calibration.surrogate import latin_hypercube
+from workflow.errors import TactileError
+from workflow.models.fem import FemSettings, evaluate_fem
+from workflow.models.fem.accuracy import FemAccuracy, FemLevel, mesh_for_level
+from workflow.optimise.fem_model import FemModel
+
+SETTINGS = default_settings()
+
+
+class CoarseResult(BeamResult):
+    """The beam stand-in with a coarse level's error: f_r and w relatively ``1e-3 + 1e-3 glue/60 um`` high."""
+
+    def __init__(self, plate):
+        super().__init__(plate)
+        excess = 1e-3 + 1e-3 * float(plate.glue_thickness) / 60e-6
+        self.frequency *= 1 + excess
+        self.deflection *= 1 + excess
+
+
+def counting(results, calls, label):
+    def evaluate(plates):
+        calls.append((label, len(plates)))
+        return [results(p) for p in plates]
+    return evaluate
+
+
+def test_a_level_is_each_plates_own_mesh_of_that_degree():
+    level = FemLevel(2, n_modes=3)
+    mesh = mesh_for_level(P2, 2, 3)
+    assert level.resolved(P2, None) == (mesh, None) and not level.refines
+    assert evaluate_fem(P2, 54.0, 15.0, level).frequency == evaluate_fem(P2, 54.0, 15.0, mesh).frequency
+    assert level.as_dict() == {"kind": "level", "level": 2, "n_modes": 3, "piezo": "eigenstrain"}
+    with pytest.raises(TactileError, match="level must be one of"):
+        FemLevel(7)
+    with pytest.raises(TactileError, match="piezo"):
+        FemLevel(3, piezo="quantum")
+
+
+def test_an_fem_model_designs_on_two_levels_only_below_the_coarse_levels_accuracy():
+    assert FemModel(settings=FemAccuracy(2e-3)).design_fem().coarse_level == 3
+    assert FemModel(settings=FemAccuracy(2e-3, piezo="coupled")).design_fem().coarse is not None
+    assert FemModel(settings=FemAccuracy(1e-2)).design_fem().coarse is None, "its own evaluations end on level 3"
+    assert FemModel(settings=FemSettings()).design_fem().coarse is None
+
+
+def test_the_anchors_are_the_centre_and_the_point_farthest_from_it():
+    points = latin_hypercube(12, SETTINGS.bounds, 3)
+    unit = (points - SETTINGS.bounds[:, 0]) / np.ptp(SETTINGS.bounds, axis=1)
+    anchors = anchor_indices(points, SETTINGS.bounds, 2)
+    assert anchors[0] == 0 and anchors[1] == int(np.argmax(np.sum((unit - 0.5) ** 2, axis=1)))
+    assert anchor_indices(points[:1], SETTINGS.bounds, 2) == [0]
+
+
+def test_two_level_values_are_the_coarse_ones_moved_by_the_anchors_and_their_spread_is_an_error():
+    """The stand-in's coarse level is 0.1-0.2 % high, varying with the glue: the corrected values sit within the
+    variation over the box of the accurate ones, the spread of the two anchors' corrections enters the error, and
+    the designs of two plates go to each level in one batch."""
+    calls = []
+    fem = DesignFem(counting(BeamResult, calls, "accurate"), None, counting(CoarseResult, calls, "coarse"), None, 3)
+    n = 14
+    designs = [surrogate_design(plate, SETTINGS.names, SETTINGS.bounds, n, 5) for plate in (P1, P2)]
+    values = fem.values(designs)
+    assert calls == [("coarse", 2 * n), ("accurate", 2 * ANCHORS)]
+    for design, found in zip(designs, values):
+        exact = np.log([BeamResult(p).frequency for p in design.plates])
+        anchors = anchor_indices(design.points, design.bounds, ANCHORS)
+        corrections = [np.log(BeamResult(design.plates[k]).frequency / CoarseResult(design.plates[k]).frequency) for k in anchors]
+        coarse_error = np.log([CoarseResult(p).frequency / BeamResult(p).frequency for p in design.plates])
+        assert np.allclose(found.log_frequency - exact, coarse_error + np.mean(corrections), atol=1e-12)
+        assert np.max(np.abs(found.log_frequency - exact)) <= 1e-3, "within the coarse error's variation over the box"
+        assert found.fem_error == pytest.approx(np.std(corrections, ddof=1), rel=1e-9) and found.fem_error > 1e-4
+        assert found.evaluations == n + ANCHORS and found.coarse_level == 3
+        assert np.allclose(found.log_deflection - np.log([BeamResult(p).deflection for p in design.plates]),
+                           found.log_frequency - exact, atol=1e-9), "every output is corrected alike"
+
+
+def test_without_a_coarse_level_every_point_is_accurate():
+    calls = []
+    fem = DesignFem(counting(BeamResult, calls, "accurate"))
+    design = surrogate_design(P1, SETTINGS.names, SETTINGS.bounds, 12, 5)
+    (found,) = fem.values([design])
+    assert calls == [("accurate", 12)] and found.coarse_level is None and found.evaluations == 12
+    assert np.allclose(found.log_frequency, np.log([BeamResult(p).frequency for p in design.plates]))
+
+
+def test_a_scan_design_needs_the_top_face_modes():
+    from workflow.calibration.plate_surrogate import SurrogateDesign
+
+    design = surrogate_design(P1, SETTINGS.names, SETTINGS.bounds, 12, 5)
+    scanned = SurrogateDesign(design.points, design.bounds, design.plates, (np.zeros(2), np.zeros(2)))
+    with pytest.raises(ValueError, match="top-face modes"):
+        DesignFem(lambda plates: [BeamResult(p) for p in plates]).values([scanned])
+
+
+@pytest.mark.slow
+def test_two_level_prediction_surrogate_matches_the_all_accurate_one_on_fresh_fem_points(tmp_path):
+    """P2's linear prediction surrogate over the prior box at 0.2 %: the two-level design's error at 4 fresh accurate
+    points is within 0.05 % of the all-accurate design's, and it takes under half the time (measured: see
+    docs/calibration.md)."""
+    accurate = FemModel(settings=FemAccuracy(2e-3, n_modes=4), scheduler="synchronous")
+    names, bounds, n = SETTINGS.names, SETTINGS.bounds, prediction_points(len(SETTINGS.names))
+    times, errors = {}, {}
+    fresh = latin_hypercube(5, bounds, 23)[1:]
+    truth = np.log([r.frequency for r in accurate.evaluate_plates([deviated_plate(P2, names, t) for t in fresh])])
+    for label, fem in (("all", DesignFem(accurate.evaluate_plates)), ("two", accurate.design_fem())):
+        started = time.perf_counter()
+        surrogate = build_plate_surrogate(P2, names, bounds, fem, n, 1, 0)
+        times[label] = time.perf_counter() - started
+        errors[label] = float(np.sqrt(np.mean((surrogate.log_frequency(fresh) - truth) ** 2)))
+    assert errors["two"] <= errors["all"] + 5e-4 and errors["two"] < 3e-3, errors
+    assert times["two"] < 0.5 * times["all"], times
