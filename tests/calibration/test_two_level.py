@@ -114,20 +114,25 @@ def test_a_scan_design_needs_the_top_face_modes():
         DesignFem(lambda plates: [BeamResult(p) for p in plates]).values([scanned])
 
 
+POSTERIOR_BOX = np.array([[0.93, 0.99], [0.94, 1.0], [20e-6, 40e-6], [-40e-6, -10e-6]])
+"""A prediction surrogate's box: the posterior's central range of the four parameters (moduli factors, bond [m],
+h_i offset [m]), about what the published plates give."""
+
+
 @pytest.mark.slow
-def test_two_level_prediction_surrogate_matches_the_all_accurate_one_on_fresh_fem_points(tmp_path):
-    """P2's linear prediction surrogate over the prior box at 0.2 %: the two-level design's error at 4 fresh accurate
-    points is within 0.05 % of the all-accurate design's, and it takes under half the time (measured: see
-    docs/calibration.md)."""
+def test_two_level_prediction_surrogate_matches_the_all_accurate_one_on_fresh_fem_points():
+    """P2's linear prediction surrogate over a posterior's box at 0.2 %: the two-level design's error at 4 fresh
+    accurate points is within 0.05 % of the all-accurate design's and under 0.3 %, and it takes under 60 % of the time
+    (evaluated first, so that the other design finds level 3's set-up done; measured: docs/calibration.md)."""
     accurate = FemModel(settings=FemAccuracy(2e-3, n_modes=4), scheduler="synchronous")
-    names, bounds, n = SETTINGS.names, SETTINGS.bounds, prediction_points(len(SETTINGS.names))
-    times, errors = {}, {}
-    fresh = latin_hypercube(5, bounds, 23)[1:]
-    truth = np.log([r.frequency for r in accurate.evaluate_plates([deviated_plate(P2, names, t) for t in fresh])])
-    for label, fem in (("all", DesignFem(accurate.evaluate_plates)), ("two", accurate.design_fem())):
+    names, n = SETTINGS.names, prediction_points(len(SETTINGS.names))
+    times, surrogates = {}, {}
+    for label, fem in (("two", accurate.design_fem()), ("all", DesignFem(accurate.evaluate_plates))):
         started = time.perf_counter()
-        surrogate = build_plate_surrogate(P2, names, bounds, fem, n, 1, 0)
+        surrogates[label] = build_plate_surrogate(P2, names, POSTERIOR_BOX, fem, n, 1, 0)
         times[label] = time.perf_counter() - started
-        errors[label] = float(np.sqrt(np.mean((surrogate.log_frequency(fresh) - truth) ** 2)))
+    fresh = latin_hypercube(5, POSTERIOR_BOX, 23)[1:]
+    truth = np.log([r.frequency for r in accurate.evaluate_plates([deviated_plate(P2, names, t) for t in fresh])])
+    errors = {label: float(np.sqrt(np.mean((s.log_frequency(fresh) - truth) ** 2))) for label, s in surrogates.items()}
     assert errors["two"] <= errors["all"] + 5e-4 and errors["two"] < 3e-3, errors
-    assert times["two"] < 0.5 * times["all"], times
+    assert times["two"] < 0.6 * times["all"], times
