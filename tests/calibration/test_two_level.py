@@ -5,7 +5,9 @@ The machinery is checked on stand-ins whose coarse level has a known error; the 
 against fresh accurate FEM evaluations, beside the surrogate whose every point is accurate) in a slow test and in
 ``bench/bench_two_level.py`` (docs/calibration.md, "Two-level designs")."""
 
+import json
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -16,8 +18,10 @@ from workflow.calibration.parameters import default_settings, deviated_plate
 from workflow.calibration.plate_surrogate import (
     ANCHORS,
     DesignFem,
+    PlateSurrogate,
     anchor_indices,
     build_plate_surrogate,
+    point_deflection_per_volt,
     surrogate_design,
 )
 from workflow.calibration.surrogate import latin_hypercube
@@ -30,13 +34,30 @@ SETTINGS = default_settings()
 
 
 class CoarseResult(BeamResult):
-    """The beam stand-in with a coarse level's error: f_r and w relatively ``1e-3 + 1e-3 glue/60 um`` high."""
+    """The beam stand-in with a coarse level's errors that differ between the outputs and vary with the bond: f_r
+    ``e`` high, w ``3 e + 0.2 %`` high and the centre's deflection g ``0.5 %`` low, e = 0.1 % + 0.1 % bond/60 um."""
 
     def __init__(self, plate):
         super().__init__(plate)
         excess = 1e-3 + 1e-3 * float(plate.glue_thickness) / 60e-6
         self.frequency *= 1 + excess
-        self.deflection *= 1 + excess
+        self.deflection *= 1 + 3 * excess + 2e-3
+        g = BeamResult(plate).deflection * (1 - 5e-3)
+        self.probe_model = SimpleNamespace(response=lambda f, q: np.full(44, g))
+
+
+class FlippingSurface:
+    """Top-face modes whose pattern is a cosine along x, varying across the width with the bond, of the sign ``sign``
+    (an eigenvector's is arbitrary), distorted by ``distortion`` (a coarse level's error) along x."""
+
+    def __init__(self, plate, sign, distortion=0.0):
+        self.wavelength, self.bond = float(plate.wavelength), float(plate.glue_thickness)
+        self.sign, self.distortion = sign, distortion
+
+    def deflection(self, x, y, frequency, q):
+        across = 1 + (0.1 + 0.5 * self.bond / 60e-6) * y / 0.02
+        shape = np.cos(2 * np.pi * x / self.wavelength) * across * (1 + self.distortion * x / 0.01)
+        return self.sign * shape + 0j
 
 
 def counting(results, calls, label):
@@ -74,26 +95,61 @@ def test_the_anchors_are_the_centre_and_the_point_farthest_from_it():
 
 
 def test_two_level_values_are_the_coarse_ones_moved_by_the_anchors_and_their_spread_is_an_error():
-    """The stand-in's coarse level is 0.1-0.2 % high, varying with the glue: the corrected values sit within the
-    variation over the box of the accurate ones, the spread of the two anchors' corrections enters the error, and
-    the designs of two plates go to each level in one batch."""
+    """The stand-in's coarse level errs differently on f_r, w and g, varying with the bond: each output is moved by its
+    own anchors' mean difference, so that the corrected values sit within the variation of the coarse error over the
+    box; the spread of the two anchors' frequency corrections enters the error; the designs of two plates go to each
+    level in one batch."""
     calls = []
     fem = DesignFem(counting(BeamResult, calls, "accurate"), None, counting(CoarseResult, calls, "coarse"), None, 3)
     n = 14
     designs = [surrogate_design(plate, SETTINGS.names, SETTINGS.bounds, n, 5) for plate in (P1, P2)]
     values = fem.values(designs)
     assert calls == [("coarse", 2 * n), ("accurate", 2 * ANCHORS)]
+    outputs = {"log_frequency": lambda r: r.frequency, "log_deflection": lambda r: r.deflection,
+               "log_point_deflection": point_deflection_per_volt}
     for design, found in zip(designs, values):
-        exact = np.log([BeamResult(p).frequency for p in design.plates])
         anchors = anchor_indices(design.points, design.bounds, ANCHORS)
-        corrections = [np.log(BeamResult(design.plates[k]).frequency / CoarseResult(design.plates[k]).frequency) for k in anchors]
-        coarse_error = np.log([CoarseResult(p).frequency / BeamResult(p).frequency for p in design.plates])
-        assert np.allclose(found.log_frequency - exact, coarse_error + np.mean(corrections), atol=1e-12)
-        assert np.max(np.abs(found.log_frequency - exact)) <= 1e-3, "within the coarse error's variation over the box"
-        assert found.fem_error == pytest.approx(np.std(corrections, ddof=1), rel=1e-9) and found.fem_error > 1e-4
-        assert found.evaluations == n + ANCHORS and found.coarse_level == 3
-        assert np.allclose(found.log_deflection - np.log([BeamResult(p).deflection for p in design.plates]),
-                           found.log_frequency - exact, atol=1e-9), "every output is corrected alike"
+        for name, output in outputs.items():
+            exact = np.log([output(BeamResult(p)) for p in design.plates])
+            coarse = np.log([output(CoarseResult(p)) for p in design.plates])
+            correction = np.mean((exact - coarse)[anchors])
+            assert np.allclose(getattr(found, name), coarse + correction, atol=1e-12), name
+            assert np.max(np.abs(getattr(found, name) - exact)) <= np.ptp(exact - coarse) + 1e-12, name
+        corrections = np.log([BeamResult(design.plates[k]).frequency / CoarseResult(design.plates[k]).frequency
+                              for k in anchors])
+        assert found.fem_error == pytest.approx(np.std(corrections, ddof=1) * np.sqrt(1.5), rel=1e-9)
+        assert found.fem_error > 1e-4 and found.evaluations == n + ANCHORS and found.coarse_level == 3
+
+
+def test_two_level_patterns_follow_the_accurate_ones_whatever_the_signs_of_the_modes():
+    """A scanned design whose coarse modes come with random signs and whose accurate ones all with one sign (each way
+    round), the coarse level distorting the pattern by 3 % along x: the corrected patterns are the accurate ones up to
+    one sign, to the distortion's variation over the box, far closer than the coarse patterns are."""
+    rng = np.random.default_rng(4)
+    results = lambda plates: [BeamResult(p) for p in plates]  # noqa: E731
+    scan = (np.array([0.0, 0.003, 0.006, 0.009, 0.004]), np.array([0.0, 0.0, 0.01, 0.0, 0.02]))
+    design = surrogate_design(P1, SETTINGS.names, SETTINGS.bounds, 16, 5, scan)
+    every = DesignFem(results, lambda plates: (results(plates), [FlippingSurface(p, 1.0) for p in plates]))
+    (reference,) = every.values([design])
+    for accurate_sign in (1.0, -1.0):
+        two = DesignFem(results, lambda plates: (results(plates), [FlippingSurface(p, accurate_sign) for p in plates]),
+                        results, lambda plates: (results(plates), [FlippingSurface(p, rng.choice([-1.0, 1.0]), 0.03)
+                                                                   for p in plates]), 3)
+        (found,) = two.values([design])
+        assert found.patterns.shape == reference.patterns.shape == (16, 5)
+        sign = np.sign(np.sum(found.patterns[0] * reference.patterns[0]))
+        coarse_miss = 0.03 * 0.009 / 0.01  # the distortion at the last scan point, before normalisation
+        assert np.max(np.abs(sign * found.patterns - reference.patterns)) < 0.1 * coarse_miss, accurate_sign
+
+
+def test_a_two_level_surrogate_keeps_its_coarse_level_through_json():
+    fem = DesignFem(lambda plates: [BeamResult(p) for p in plates], None,
+                    lambda plates: [CoarseResult(p) for p in plates], None, 3)
+    surrogate = build_plate_surrogate(P1, SETTINGS.names, SETTINGS.bounds, fem, 18, 2, 1)
+    assert surrogate.coarse_level == 3 and surrogate.evaluations == 18 + ANCHORS
+    assert PlateSurrogate.from_dict(json.loads(json.dumps(surrogate.to_dict()))) == surrogate
+    older = {key: value for key, value in surrogate.to_dict().items() if key != "coarse_level"}
+    assert PlateSurrogate.from_dict(older).coarse_level is None
 
 
 def test_without_a_coarse_level_every_point_is_accurate():
@@ -122,7 +178,7 @@ h_i offset [m]), about what the published plates give."""
 @pytest.mark.slow
 def test_two_level_prediction_surrogate_matches_the_all_accurate_one_on_fresh_fem_points():
     """P2's linear prediction surrogate over a posterior's box at 0.2 %: the two-level design's error at 4 fresh
-    accurate points is within 0.05 % of the all-accurate design's and under 0.3 %, and it takes under 60 % of the time
+    accurate points is within 0.05 % of the all-accurate design's and under 0.3 %, and it takes under 70 % of the time
     (evaluated first, so that the other design finds level 3's set-up done; measured: docs/calibration.md)."""
     accurate = FemModel(settings=FemAccuracy(2e-3, n_modes=4), scheduler="synchronous")
     names, n = SETTINGS.names, prediction_points(len(SETTINGS.names))
@@ -135,4 +191,4 @@ def test_two_level_prediction_surrogate_matches_the_all_accurate_one_on_fresh_fe
     truth = np.log([r.frequency for r in accurate.evaluate_plates([deviated_plate(P2, names, t) for t in fresh])])
     errors = {label: float(np.sqrt(np.mean((s.log_frequency(fresh) - truth) ** 2))) for label, s in surrogates.items()}
     assert errors["two"] <= errors["all"] + 5e-4 and errors["two"] < 3e-3, errors
-    assert times["two"] < 0.6 * times["all"], times
+    assert times["two"] < 0.7 * times["all"], times

@@ -170,12 +170,13 @@ def fem_pattern(result, surface, x, y) -> np.ndarray:
     return real_pattern(surface.deflection(np.asarray(x), np.asarray(y), result.frequency, result.q))
 
 
-def design_patterns(results: list, surfaces: list, scan_points: tuple, reference: np.ndarray | None = None) -> np.ndarray:
+def design_patterns(results: list, surfaces: list, scan_points: tuple, references: np.ndarray | None = None) -> np.ndarray:
     """(n_design, n_scan) FEM patterns at ``scan_points`` (x, y) [m] of the design's FemResults and SurfaceModes, each
-    signed to agree with ``reference`` (default the first pattern: the box centre's)."""
+    signed to agree with its row of ``references`` (n_design, n_scan) (default: every one with the first pattern, the
+    box centre's)."""
     patterns = np.array([fem_pattern(r, s, *scan_points) for r, s in zip(results, surfaces)])
-    reference = patterns[0] if reference is None else reference
-    return patterns * np.where(patterns @ reference < 0, -1.0, 1.0)[:, None]
+    references = patterns[:1] if references is None else references
+    return patterns * np.where(np.sum(patterns * references, axis=1) < 0, -1.0, 1.0)[:, None]
 
 
 def evaluate_together(evaluate: Callable[[list], list], groups: Sequence[list]) -> list:
@@ -229,7 +230,7 @@ class DesignValues:
         (n, n_scan) mode patterns at the scan points (signs aligned to the centre's) [-].
     fem_error : float
         Relative frequency error of the values [-]: the root mean square of the accurate evaluations' error estimates,
-        in a two-level design in quadrature with the spread of the anchors' corrections.
+        in a two-level design in quadrature with the spread of the anchors' corrections (:class:`DesignFem`).
     evaluations : int
         FEM evaluations of the design, both levels [-].
     coarse_level : int or None
@@ -245,13 +246,14 @@ class DesignValues:
     coarse_level: int | None = None
 
 
-def _columns(results: list, surfaces: list | None, scan_points: tuple | None, reference=None) -> tuple:
-    """(outputs (n, 3 [+ n_scan]): ln f, ln w, ln g [, pattern], the relative frequency-error estimates (n,))."""
+def _columns(results: list, surfaces: list | None, scan_points: tuple | None, references=None) -> tuple:
+    """(outputs (n, 3 [+ n_scan]): ln f, ln w, ln g [, pattern signed as :func:`design_patterns` with ``references``],
+    the relative frequency-error estimates (n,))."""
     columns = [np.log([r.frequency for r in results]), np.log([r.deflection for r in results]),
                np.log([point_deflection_per_volt(r) for r in results])]
     outputs = np.column_stack(columns)
     if scan_points is not None:
-        outputs = np.hstack([outputs, design_patterns(results, surfaces, scan_points, reference)])
+        outputs = np.hstack([outputs, design_patterns(results, surfaces, scan_points, references)])
     errors = np.array([0.0 if r.error is None else r.error.frequency for r in results])
     return outputs, errors
 
@@ -284,9 +286,10 @@ class DesignFem:
 
     With ``coarse`` (a two-level design) every point is evaluated on one fixed low level of the geometry-following
     mesh and :data:`ANCHORS` of them (the centre and the point farthest from it) also to the accuracy; each output is
-    the coarse value plus the anchors' mean difference.  A surrogate needs the outputs' variation over its box, which
-    the coarse level gives to a small fraction of its own error (that error varies little over a box), and their level,
-    which the anchors give; the differences' spread enters the design's error.  Without ``coarse`` every point is
+    the coarse value plus the anchors' mean difference (an anchor's pattern signed to agree with its own coarse one).
+    A surrogate needs the outputs' variation over its box, which the coarse level gives to a small fraction of its own
+    error (that error varies little over a box), and their level, which the anchors give; the frequency differences'
+    standard deviation s enters the design's error as s sqrt(1 + 1/m) (a point's error about the mean of m anchors).  Without ``coarse`` every point is
     evaluated to the accuracy.
 
     Attributes
@@ -321,11 +324,11 @@ class DesignFem:
 
     def _two_level(self, design: SurrogateDesign, anchors: list, rough: tuple, fine: tuple) -> DesignValues:
         coarse, _ = _columns(*rough, design.scan_points)
-        reference = None if design.scan_points is None else coarse[anchors[0], 3:]
-        accurate, errors = _columns(*fine, design.scan_points, reference)
+        references = None if design.scan_points is None else coarse[anchors, 3:]
+        accurate, errors = _columns(*fine, design.scan_points, references)
         corrections = accurate - coarse[anchors]
         spread = float(np.std(corrections[:, 0], ddof=1)) if len(anchors) > 1 else 0.0
-        fem_error = np.hypot(np.sqrt(np.mean(errors**2)), spread)
+        fem_error = np.hypot(np.sqrt(np.mean(errors**2)), spread * np.sqrt(1 + 1 / len(anchors)))
         return _design_values(coarse + corrections.mean(axis=0), design.scan_points is not None, fem_error,
                               len(design.plates) + len(anchors), self.coarse_level)
 

@@ -40,7 +40,7 @@ class FemTask:
     plate: Plate
     q: float
     voltage: float
-    settings: FemAccuracy | FemSettings
+    settings: FemAccuracy | FemSettings | FemLevel
     tangents: bool = False
 
 
@@ -129,7 +129,8 @@ class FemModel:
     def design_fem(self) -> DesignFem:
         """How this model evaluates a surrogate's design: two-level (every point on the level
         :data:`~workflow.calibration.plate_surrogate.TWO_LEVEL_COARSE`, the anchors to this model's accuracy) when
-        the accuracy starts above that level, else every point with this model."""
+        the accuracy starts above that level, else every point with this model.  The coarse evaluations go through a
+        model of their own: :attr:`evaluations` counts only this model's (a design's values count both)."""
         if not (self.settings.refines and self.settings.start_level > TWO_LEVEL_COARSE):
             return DesignFem(self.evaluate_plates, self.results_with_surfaces)
         coarse = self.at_level(TWO_LEVEL_COARSE)
