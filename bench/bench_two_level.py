@@ -35,7 +35,13 @@ from workflow.models import materials
 from workflow.models.fem.accuracy import DEFAULT_ACCURACY, SURVEY_ACCURACY, FemAccuracy
 from workflow.models.plate import Plate
 from workflow.optimise.fem_model import FemModel
-from workflow.optimise.robust import RobustSettings, _robust_plate, fit_robust_surrogate, robust_design_points, robust_inputs
+from workflow.optimise.robust import (
+    RobustSettings,
+    _robust_plate,
+    fit_robust_surrogate,
+    robust_design_points,
+    robust_inputs,
+)
 
 NOMINAL_HP1 = Plate(21.577e-3, 0.930e-3, 1.0e-3, 49e-3)
 """The run's nominal FEM optimum at h_p = 1 mm (docs/calibration.md, "The recommended design in tactile run") [m]."""
@@ -118,7 +124,8 @@ def main() -> dict:
         design = robust_design_points(calibration, nominal, RobustSettings(), True)
         fresh = latin_hypercube(args.fresh + 1, design.bounds, 101)[1:]
         boxes[f"robust h_p 1 mm, h_i {stock * 1e3:g} mm"] = compare(
-            work, f"robust{stock * 1e3:g}", design, [_robust_plate(nominal, names, t) for t in fresh], fresh, robust_fit)
+            work, f"robust{stock * 1e3:g}", design, [_robust_plate(nominal, names, t) for t in fresh], fresh,
+            robust_fit)
     total = {way: sum(box[way]["seconds"] for box in boxes.values()) for way in ("survey", "accurate", "two_level")}
     result = {"boxes": boxes, "total_seconds": total,
               "total_ratio_two_level_to_accurate": ratio(total["two_level"], total["accurate"]),

@@ -7,7 +7,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from calibration_setup import BEAM_FEM, FAST, FEM_RECORD, P1, P2, SHORT, SHORT_CONFIG, TRUTH, BeamResult, beam_calibration
+from calibration_setup import (
+    BEAM_FEM,
+    FAST,
+    FEM_RECORD,
+    P1,
+    P2,
+    SHORT,
+    SHORT_CONFIG,
+    TRUTH,
+    BeamResult,
+    beam_calibration,
+)
 
 from workflow.calibration.calibration import Calibration, MeasuredPlate, calibrate, nominal_theta, predict
 from workflow.calibration.case_study import cross_predictions

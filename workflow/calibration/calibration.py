@@ -335,14 +335,15 @@ def nominal_theta(names: Sequence[str], plate: Plate) -> np.ndarray:
                      for name in names])
 
 
-def prior_surrogates(plates: Sequence[Plate], settings: CalibrationSettings, fem: DesignFem, scans: Sequence = ()) -> tuple:
+def prior_surrogates(plates: Sequence[Plate], settings: CalibrationSettings, fem: DesignFem,
+                     scans: Sequence = ()) -> tuple:
     """A surrogate of each plate over the prior's box (the settings' design size, degree and seed), with the
     mode pattern at its scan's points where ``scans`` (one ScanShape or None per plate) has one; the designs of
     all plates are evaluated together (:meth:`DesignFem.values`), so that the workers of a pool stay busy across
     the plates."""
     scans = tuple(scans) or (None,) * len(plates)
-    designs = [surrogate_design(plate, settings.names, settings.bounds, settings.surrogate_points, settings.surrogate_seed,
-                                None if scan is None else (np.array(scan.x), np.array(scan.y)))
+    designs = [surrogate_design(plate, settings.names, settings.bounds, settings.surrogate_points,
+                                settings.surrogate_seed, None if scan is None else (np.array(scan.x), np.array(scan.y)))
                for plate, scan in zip(plates, scans)]
     return tuple(fit_plate_surrogate(settings.names, design, settings.surrogate_degree, values)
                  for design, values in zip(designs, fem.values(designs)))
@@ -357,7 +358,8 @@ def posterior_from(plates: Sequence[MeasuredPlate], surrogates: Sequence[PlateSu
     return Calibration(settings, samples, tuple(plates), tuple(surrogates), diagnostics, dict(fem), discrepancy)
 
 
-def calibrate(plates: Sequence[MeasuredPlate], settings: CalibrationSettings, design_fem: DesignFem, fem: dict) -> Calibration:
+def calibrate(plates: Sequence[MeasuredPlate], settings: CalibrationSettings, design_fem: DesignFem,
+              fem: dict) -> Calibration:
     """Surrogates of the measured plates, then the posterior of the parameters.
 
     Parameters
@@ -383,7 +385,8 @@ def prediction_surrogate(calibration: Calibration, plate: Plate, fem: DesignFem)
                                  calibration.settings.surrogate_seed)
 
 
-def predict(calibration: Calibration, plate: Plate, fem: DesignFem | None, surrogate: PlateSurrogate | None = None) -> dict:
+def predict(calibration: Calibration, plate: Plate, fem: DesignFem | None,
+            surrogate: PlateSurrogate | None = None) -> dict:
     """Posterior predictive f_r and w of a plate.
 
     Returns

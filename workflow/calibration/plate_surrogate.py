@@ -170,7 +170,8 @@ def fem_pattern(result, surface, x, y) -> np.ndarray:
     return real_pattern(surface.deflection(np.asarray(x), np.asarray(y), result.frequency, result.q))
 
 
-def design_patterns(results: list, surfaces: list, scan_points: tuple, references: np.ndarray | None = None) -> np.ndarray:
+def design_patterns(results: list, surfaces: list, scan_points: tuple,
+                    references: np.ndarray | None = None) -> np.ndarray:
     """(n_design, n_scan) FEM patterns at ``scan_points`` (x, y) [m] of the design's FemResults and SurfaceModes, each
     signed to agree with its row of ``references`` (n_design, n_scan) (default: every one with the first pattern, the
     box centre's)."""
@@ -214,8 +215,8 @@ def surrogate_design(plate: Plate, names: Sequence[str], bounds: np.ndarray, n_p
     """The Latin hypercube of ``n_points`` in ``bounds`` (n, 2) [SI] and the nominal ``plate`` deviated to each point
     (:func:`~workflow.calibration.parameters.deviated_plate`)."""
     points = latin_hypercube(n_points, bounds, seed)
-    return SurrogateDesign(points, np.asarray(bounds, dtype=float), tuple(deviated_plate(plate, names, theta) for theta in points),
-                           scan_points)
+    plates = tuple(deviated_plate(plate, names, theta) for theta in points)
+    return SurrogateDesign(points, np.asarray(bounds, dtype=float), plates, scan_points)
 
 
 @dataclass(frozen=True)
@@ -289,8 +290,8 @@ class DesignFem:
     the coarse value plus the anchors' mean difference (an anchor's pattern signed to agree with its own coarse one).
     A surrogate needs the outputs' variation over its box, which the coarse level gives to a small fraction of its own
     error (that error varies little over a box), and their level, which the anchors give; the frequency differences'
-    standard deviation s enters the design's error as s sqrt(1 + 1/m) (a point's error about the mean of m anchors).  Without ``coarse`` every point is
-    evaluated to the accuracy.
+    standard deviation s enters the design's error as s sqrt(1 + 1/m) (a point's error about the mean of m anchors).
+    Without ``coarse`` every point is evaluated to the accuracy.
 
     Attributes
     ----------
@@ -354,7 +355,8 @@ def _evaluate(evaluate: Evaluate, evaluate_surfaces: EvaluateSurfaces | None, de
     return [found[k] for k in range(len(designs))]
 
 
-def fit_plate_surrogate(names: Sequence[str], design: SurrogateDesign, degree: int, values: DesignValues) -> PlateSurrogate:
+def fit_plate_surrogate(names: Sequence[str], design: SurrogateDesign, degree: int,
+                        values: DesignValues) -> PlateSurrogate:
     """The response surfaces of degree ``degree`` through a design's values (and, where it has scan points, a
     :class:`ShapeSurrogate`)."""
     points, bounds = design.points, design.bounds
@@ -362,7 +364,8 @@ def fit_plate_surrogate(names: Sequence[str], design: SurrogateDesign, degree: i
     if values.patterns is not None:
         x, y = design.scan_points
         shape = ShapeSurrogate(tuple(float(v) for v in x), tuple(float(v) for v in y),
-                               tuple(fit_response_surface(points, column, bounds, degree) for column in values.patterns.T))
+                               tuple(fit_response_surface(points, column, bounds, degree)
+                                     for column in values.patterns.T))
     return PlateSurrogate(
         names=tuple(names),
         log_frequency=fit_response_surface(points, values.log_frequency, bounds, degree),

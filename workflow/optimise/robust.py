@@ -3,7 +3,8 @@
 For each stock resonator thickness h_i (docs/calibration.md, "Robust design"):
 
 1. a linear surrogate of ln f_r and ln w over ln lambda, the calibration parameters and a
-   ceramic-thickness offset, from FEM evaluations at a Latin hypercube of a box spanning the
+   ceramic-thickness offset, from FEM evaluations (a two-level design where the accuracy allows,
+   :class:`~workflow.calibration.plate_surrogate.DesignFem`) at a Latin hypercube of a box spanning the
    posterior's central 99 % and three manufacturing standard deviations, lambda around the
    beam model's estimate;
 2. Monte Carlo draws: posterior samples plus manufacturing scatter (normal, standard deviations
@@ -246,7 +247,8 @@ def start_problem(calibration: Calibration, plate: Plate, settings: RobustSettin
     return None
 
 
-def robust_design_points(calibration: Calibration, plate: Plate, settings: RobustSettings, solve: bool = True) -> SurrogateDesign:
+def robust_design_points(calibration: Calibration, plate: Plate, settings: RobustSettings,
+                         solve: bool = True) -> SurrogateDesign:
     """The FEM design of a nominal plate's robust surrogate (the module's step 1): lambda around the beam model's
     estimate of the robust lambda when ``solve``, around the plate's own otherwise."""
     names = robust_inputs(calibration)
@@ -267,7 +269,8 @@ def fit_robust_surrogate(design: SurrogateDesign, values: DesignValues) -> Robus
     """The linear surrogate through a design's values."""
     log_f = fit_response_surface(design.points, values.log_frequency, design.bounds, 1)
     log_w = fit_response_surface(design.points, values.log_deflection, design.bounds, 1)
-    return RobustSurrogate(design.bounds, log_f, log_w, float(np.hypot(log_f.loo_rms, values.fem_error)), values.evaluations)
+    sigma = float(np.hypot(log_f.loo_rms, values.fem_error))
+    return RobustSurrogate(design.bounds, log_f, log_w, sigma, values.evaluations)
 
 
 def conservative_level(reliability: float, draws: int) -> float:
