@@ -259,9 +259,10 @@ def _columns(results: list, surfaces: list | None, scan_points: tuple | None, re
     return outputs, errors
 
 
-def _design_values(outputs: np.ndarray, scanned: bool, fem_error: float, evaluations: int,
-                   coarse_level: int | None = None) -> DesignValues:
-    return DesignValues(outputs[:, 0], outputs[:, 1], outputs[:, 2], outputs[:, 3:] if scanned else None,
+def _design_values(outputs: np.ndarray, fem_error: float, evaluations: int, coarse_level: int | None = None
+                   ) -> DesignValues:
+    """:class:`DesignValues` from the columns of :func:`_columns` (patterns where there are more than three)."""
+    return DesignValues(outputs[:, 0], outputs[:, 1], outputs[:, 2], outputs[:, 3:] if outputs.shape[1] > 3 else None,
                         float(fem_error), evaluations, coarse_level)
 
 
@@ -317,7 +318,7 @@ class DesignFem:
         everything = [None] * len(designs)
         if self.coarse is None:
             found = _evaluate(self.accurate, self.accurate_surfaces, designs, everything)
-            return [_design_values(*_summed(d, *pair), len(d.plates)) for d, pair in zip(designs, found)]
+            return [_one_level(d, *pair) for d, pair in zip(designs, found)]
         anchors = [anchor_indices(d.points, d.bounds, ANCHORS) for d in designs]
         rough = _evaluate(self.coarse, self.coarse_surfaces, designs, everything)
         fine = _evaluate(self.accurate, self.accurate_surfaces, designs, anchors)
@@ -330,14 +331,14 @@ class DesignFem:
         corrections = accurate - coarse[anchors]
         spread = float(np.std(corrections[:, 0], ddof=1)) if len(anchors) > 1 else 0.0
         fem_error = np.hypot(np.sqrt(np.mean(errors**2)), spread * np.sqrt(1 + 1 / len(anchors)))
-        return _design_values(coarse + corrections.mean(axis=0), design.scan_points is not None, fem_error,
-                              len(design.plates) + len(anchors), self.coarse_level)
+        return _design_values(coarse + corrections.mean(axis=0), fem_error, len(design.plates) + len(anchors),
+                              self.coarse_level)
 
 
-def _summed(design: SurrogateDesign, results: list, surfaces: list | None) -> tuple:
-    """(outputs, scanned, fem error) of a design evaluated to the accuracy at every point."""
+def _one_level(design: SurrogateDesign, results: list, surfaces: list | None) -> DesignValues:
+    """The values of a design evaluated to the accuracy at every point."""
     outputs, errors = _columns(results, surfaces, design.scan_points)
-    return outputs, design.scan_points is not None, np.sqrt(np.mean(errors**2))
+    return _design_values(outputs, np.sqrt(np.mean(errors**2)), len(design.plates))
 
 
 def _evaluate(evaluate: Evaluate, evaluate_surfaces: EvaluateSurfaces | None, designs: list, subsets: list) -> list:

@@ -72,8 +72,9 @@ def _nominal_verdict(candidate: RobustCandidate, damped, settings) -> str:
     if not candidate.separated:
         reasons.append(f"a transverse mode {100 * candidate.nearest_transverse['relative_distance']:.1f} % away "
                        f"(< {100 * settings.separation:g} %)")
-    reasons.append(_deflection_shortfall(damped))
-    reasons = [reason for reason in reasons if reason]
+    shortfall = _deflection_shortfall(damped)
+    if shortfall:
+        reasons.append(shortfall)
     return "**" + "; ".join(reasons) + "**" if reasons else "robust as it is"
 
 

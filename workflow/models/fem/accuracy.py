@@ -27,7 +27,7 @@ from scipy.optimize import brentq
 
 from workflow.errors import TactileError
 from workflow.models.fem.mesh import MeshTooLargeError, check_memory
-from workflow.models.fem.settings import PIEZO_MODELS, FemSettings
+from workflow.models.fem.settings import FemSettings, check_piezo
 from workflow.models.limits import LIMITS
 from workflow.models.plate import Plate
 
@@ -83,8 +83,7 @@ class FemAccuracy:
         low, high = ACCURACY_RANGE
         if not (isinstance(self.target, (int, float)) and math.isfinite(self.target) and low <= self.target <= high):
             raise TactileError(f"FEM accuracy must be a relative error from {low:g} to {high:g}, got {self.target!r}")
-        if self.piezo not in PIEZO_MODELS:
-            raise TactileError(f"unknown piezo model {self.piezo!r}; choose one of {', '.join(PIEZO_MODELS)}")
+        check_piezo(self.piezo)
         if self.max_level not in LEVELS[1:]:
             raise TactileError(f"max_level must be one of {', '.join(map(str, LEVELS[1:]))}, got {self.max_level!r}")
 
@@ -141,8 +140,7 @@ class FemLevel:
     def __post_init__(self):
         if self.level not in LEVELS:
             raise TactileError(f"an FEM level must be one of {', '.join(map(str, LEVELS))}, got {self.level!r}")
-        if self.piezo not in PIEZO_MODELS:
-            raise TactileError(f"unknown piezo model {self.piezo!r}; choose one of {', '.join(PIEZO_MODELS)}")
+        check_piezo(self.piezo)
 
     refines = False
     """One mesh per plate, not refined (as :class:`~workflow.models.fem.settings.FemSettings`)."""

@@ -10,6 +10,12 @@ PIEZO_MODELS = ("eigenstrain", "coupled")
 """The piezo models of the FEM (docs/fem.md)."""
 
 
+def check_piezo(piezo: str) -> None:
+    """Raise a TactileError naming the choices unless ``piezo`` is one of :data:`PIEZO_MODELS`."""
+    if piezo not in PIEZO_MODELS:
+        raise TactileError(f"unknown piezo model {piezo!r}; choose one of {', '.join(PIEZO_MODELS)}")
+
+
 @dataclass(frozen=True)
 class FemSettings:
     """Resolution of the structured triquadratic brick mesh of the quarter plate.
@@ -54,8 +60,7 @@ class FemSettings:
         except KeyError:
             raise TactileError(f"unknown FEM element {self.element!r}; choose one of {', '.join(BRICKS)} or "
                                "lagrange-PX-PY-PZ (degrees 1 to 6 along x, y, z)") from None
-        if self.piezo not in PIEZO_MODELS:
-            raise TactileError(f"unknown piezo model {self.piezo!r}; choose one of {', '.join(PIEZO_MODELS)}")
+        check_piezo(self.piezo)
         counts = {name: value for name, value in asdict(self).items() if name not in ("element", "grading", "piezo")}
         bad = {name: value for name, value in counts.items() if not isinstance(value, int) or value < 1}
         if bad:
