@@ -45,8 +45,7 @@ def test_the_run_time_files_are_read_through_the_installed_package():
     published = resources.files("workflow.calibration.published")
     for name in PUBLISHED_PLATES.values():
         assert (published / name).read_text(encoding="utf-8").startswith("# Published built plate")
-    for package, name in (("workflow.pipeline", "defaults.toml"), ("workflow.models", "materials.toml"),
-                          ("workflow.calibration", "calibration.toml")):
+    for package, name in (("workflow.models", "materials.toml"), ("workflow.calibration", "calibration.toml")):
         assert resources.files(package).joinpath(name).is_file(), f"{package}/{name}"
 
 

@@ -173,8 +173,8 @@ def test_cli_refuses_oversized_plans_up_front(tmp_path, capsys, argv, message):
 @pytest.mark.parametrize(
     "campaign, message",
     [
-        ({"points_per_sweep": 1000000000}, "campaign.points_per_sweep 1000000000 exceeds the limit of 10000"),
-        ({"points_per_sweep": 2}, "campaign.points_per_sweep must be at least 3"),
+        ({"points_per_sweep": 1000000000}, "'campaign.points_per_sweep' = 1000000000 is outside the accepted range 3 to 10000"),
+        ({"points_per_sweep": 2}, "'campaign.points_per_sweep' = 2 is outside the accepted range 3 to 10000"),
         ({"points_per_sweep": 9000, "voltages_v": [5.0] * 30}, "270000 points exceed the limit of 100000"),
     ],
 )

@@ -39,7 +39,7 @@ def register(subparsers) -> None:
                         "is then robust under that calibration (default: the configuration's [recommendation] "
                         "built_plates, none)")
     parser.add_argument("--scheduler", help="tcp://host:port of a Dask scheduler (default: local cores)")
-    parser.add_argument("--print-config", action="store_true", help="print the effective configuration and exit")
+    parser.add_argument("--print-config", action="store_true", help="print the effective configuration (each key with its unit and what it sets) and exit")
     add_fem_options(parser, overrides=True)
     add_mixed_plates_option(parser, default=None)
     add_calibration_option(parser)
@@ -55,7 +55,7 @@ def run(args):
             print("tactile run: warning: --built-plates is not used: the configuration's [recommendation] robust is "
                   "false", file=sys.stderr)
     if args.print_config:
-        print(to_toml(config), end="")
+        print(to_toml(config, comments=True), end="")
         return None
     load_calibration_option(args)  # a bad file fails before any step
     warnings = []

@@ -1,44 +1,19 @@
-"""The run configuration: embedded defaults, overridden by a user TOML file.
+"""The run configuration: the embedded defaults, overridden by a user TOML file.
 
-The embedded ``defaults.toml`` is the schema: a user file may only use its sections and
-keys, with values of the same type (an int is accepted where a float is expected).
+The sections and keys, their types, defaults, units, ranges and choices are declared once, as the frozen dataclasses
+of :mod:`workflow.pipeline.sections`; a user file may only use those sections and keys, with values of the declared
+type (an int is accepted where a float is expected) inside the declared range.
 """
 
 import copy
 import math
-import sys
-from dataclasses import MISSING, fields
-from importlib import resources
 
-from workflow.damping.laws import SAMPLED_LAWS
-from workflow.damping.logs import MIXED_PLATES
 from workflow.errors import InputFileError
 from workflow.inputfiles import load_toml
 from workflow.models import materials
-from workflow.models.limits import LIMITS, mm_range
+from workflow.models.limits import LIMITS
 from workflow.models.plate import ORIGINAL_PLATE
-from workflow.units import KHZ, MM, UM
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
-
-CHOICES = {
-    "damping.laws": SAMPLED_LAWS,
-    "damping.mixed_plates": MIXED_PLATES,
-    "design.ceramic_thicknesses_mm": mm_range(materials.CERAMIC_THICKNESSES),
-    "maps.fem_ceramic_thicknesses_mm": mm_range(materials.CERAMIC_THICKNESSES),
-    "loop.hp_mm": mm_range(materials.CERAMIC_THICKNESSES),
-}
-"""Accepted values of the items of list keys."""
-
-LIST_ITEMS = {"campaign.logs": "", "recommendation.built_plates": ""}
-"""An item of each list key whose default is empty, for its type (the logs' paths are strings)."""
-
-NOT_EMPTY = ("damping.laws", "design.ceramic_thicknesses_mm", "campaign.voltages_v", "loop.stock_hi_mm",
-             "recommendation.stock_hi_mm")
-"""List keys that need at least one item."""
+from workflow.pipeline.sections import SECTIONS, Key, keys, section_defaults
 
 ORDERED = (
     ("design.wavelength_min_mm", "design.wavelength_max_mm"),
@@ -51,120 +26,8 @@ ORDERED = (
 
 
 def default_config() -> dict:
-    """The embedded defaults, as nested dicts: Table 1 for [design], ``defaults.toml`` for the rest."""
-    embedded = tomllib.loads(resources.files(__package__).joinpath("defaults.toml").read_text(encoding="utf-8"))
-    embedded["fem"] = {**fem_defaults(), **embedded["fem"]}
-    return {"design": design_defaults(), **embedded, "campaign": campaign_defaults(), "simulator": simulator_defaults(),
-            "loop": loop_defaults(), "recommendation": recommendation_defaults()}
-
-
-def fem_defaults() -> dict:
-    """The accuracy and mesh keys of [fem] (:mod:`workflow.models.fem.accuracy`, :class:`workflow.models.fem.FemSettings`)."""
-    from workflow.models.fem import FemSettings
-    from workflow.models.fem.accuracy import DEFAULT_ACCURACY, SURVEY_ACCURACY
-
-    return {"accuracy": DEFAULT_ACCURACY, "survey_accuracy": SURVEY_ACCURACY, **FemSettings().as_dict()}
-
-
-def campaign_defaults() -> dict:
-    """The [campaign] section from the Q(v) campaign procedure's defaults."""
-    from instruments.procedures.sweeps import CampaignPlan
-
-    from instruments.procedures.ringdown import RingdownPlan
-
-    return {
-        "logs": [],
-        "voltages_v": list(CampaignPlan.voltages),
-        "points_per_sweep": CampaignPlan.points_per_sweep,
-        "span_hz": CampaignPlan.span,
-        "seed": 0,
-        "ringdown_voltages_v": list(RingdownPlan.voltages),
-        "ringdown_samples": RingdownPlan.samples,
-        "ringdown_interval_us": round(RingdownPlan.interval * 1e6),
-    }
-
-
-def simulator_defaults() -> dict:
-    """The [simulator] section from the bench simulator's defaults."""
-    from instruments.simulator.bench import DEFAULT_DRIFT_RATE, BenchSettings
-    from instruments.simulator.physics import DEFAULT_LOW_VELOCITY_Q
-    from workflow.models.builtplate import DEMONSTRATION_DEVIATIONS as built
-    from workflow.models.builtplate import SIMULATED_DEVIATIONS
-
-    bench = {f.name: f.default for f in fields(BenchSettings) if f.default is not MISSING}
-    return {
-        "low_velocity_q": DEFAULT_LOW_VELOCITY_Q,
-        "working_q": materials.PLATE_Q,
-        "drift_hz_per_s": DEFAULT_DRIFT_RATE,
-        "softening_s2_m2": RUN_SOFTENING,
-        "amplifier_gain": float(bench["amplifier_gain"]),
-        "ceramic_voltage_limit_v": float(bench["ceramic_voltage_limit"]),
-        "relative_noise": bench["relative_noise"],
-        "floor_fraction": bench["floor_fraction"],
-        "phase_noise_deg": bench["phase_noise"],
-        **{setting.config_key: setting.value(built) for setting in SIMULATED_DEVIATIONS},
-    }
-
-
-RUN_SOFTENING = 0.08
-"""Amplitude softening of the run's simulated plate, kappa in f_r0 (1 - kappa v^2) [s^2/m^2]: 0.4 % at the
-working point's 0.23 m/s, small, yet resolved by the fit (the bench simulator's own default is none)."""
-
-
-LOOP_STOCK_MM = (0.75, 0.8, 1.0)
-"""Stock h_i of the run's demonstration re-design [mm]: the thicker half of ``tactile optimize``'s default list
-(the thinner stocks put a transverse mode within 1-2 % of the working frequency at h_p = 1 mm and are rejected;
-leaving them out halves the loop's FEM evaluations)."""
-
-
-def loop_defaults() -> dict:
-    """The [loop] section (docs/calibration.md, "The loop in tactile run"): the robust design's defaults."""
-    from workflow.optimise.robust import RobustSettings
-
-    return {
-        "enabled": True,
-        "hp_mm": 1.0,
-        "scan_grid": [7, 3],
-        "reliability": RobustSettings().reliability,
-        "stock_hi_mm": list(LOOP_STOCK_MM),
-        "search_start_khz": 15.0,
-        "case_study": True,
-    }
-
-
-def recommendation_defaults() -> dict:
-    """The [recommendation] section (docs/calibration.md, "The recommended design in tactile run"): the robust design
-    per h_p under the calibration on the measured built plates."""
-    from workflow.optimise.robust import RobustSettings
-    from workflow.pipeline.robust_recommendation import STOCK_HI_MM, STOCKS_PER_DESIGN
-
-    return {
-        "robust": True,
-        "published_plates": True,
-        "built_plates": [],
-        "reliability": RobustSettings().reliability,
-        "stock_hi_mm": list(STOCK_HI_MM),
-        "stocks_per_design": STOCKS_PER_DESIGN,
-    }
-
-
-def design_defaults() -> dict:
-    """The [design] section from Table 1 (:mod:`workflow.models.materials`), in the units of the file."""
-    mm = [t / MM for t in materials.CERAMIC_THICKNESSES]
-    section = {
-        "ceramic_thicknesses_mm": mm,
-        "wavelength_min_mm": materials.WAVELENGTH_RANGE[0] / MM,
-        "wavelength_max_mm": materials.WAVELENGTH_RANGE[1] / MM,
-        "hi_min_mm": materials.PRACTICAL_MIN_RESONATOR_THICKNESS / MM,
-        "hi_max_mm": materials.RESONATOR_THICKNESS_RANGE[1] / MM,
-        "width_mm": ORIGINAL_PLATE.width / MM,
-        "voltage_v": materials.DESIGN_VOLTAGE,
-        "min_frequency_khz": materials.MIN_FREQUENCY / KHZ,
-        "target_deflection_um": materials.TARGET_DEFLECTION / UM,
-        "q": materials.PLATE_Q,
-    }
-    section = {key: [round(v, 9) for v in value] if isinstance(value, list) else round(value, 9) for key, value in section.items()}
-    return {**section, "ceramic": materials.PAPER, "resonator": materials.PAPER, "glue_um": 0.0}
+    """The embedded defaults, as nested dicts (:func:`~workflow.pipeline.sections.section_defaults`)."""
+    return section_defaults()
 
 
 def load_config(path=None) -> dict:
@@ -187,17 +50,19 @@ def merge(defaults: dict, user: dict, source: str = "configuration") -> dict:
     """``defaults`` updated by ``user``, checking sections, keys, types and the campaign's size."""
     merged = copy.deepcopy(defaults)
     for section, values in user.items():
-        if section not in defaults:
-            raise InputFileError(f"{source}: unknown section [{section}]; known: {', '.join(defaults)}")
+        if section not in SECTIONS:
+            raise InputFileError(f"{source}: unknown section [{section}]; known: {', '.join(SECTIONS)}")
         if not isinstance(values, dict):
             raise InputFileError(f"{source}: '{section}' must be a [section] table")
-        for key, value in values.items():
-            if key not in defaults[section]:
+        declared = {key.name: key for key in keys(section)}
+        for name, value in values.items():
+            if name not in declared:
                 raise InputFileError(
-                    f"{source}: unknown key '{section}.{key}'; known keys of [{section}]: {', '.join(defaults[section])}"
+                    f"{source}: unknown key '{section}.{name}'; known keys of [{section}]: {', '.join(declared)}"
                 )
-            merged[section][key] = _checked(value, defaults[section][key], f"{section}.{key}", source)
-            _check_range(merged[section][key], f"{section}.{key}", source)
+            key = declared[name]
+            merged[section][name] = _checked(value, key.kind, key.item, key.path, source)
+            _check_range(merged[section][name], key, source)
     _check_consistency(merged, source)
     _check_campaign_size(merged["campaign"], source)
     return merged
@@ -215,26 +80,18 @@ def _check_campaign_size(campaign: dict, source: str) -> None:
         raise InputFileError(f"{source}: {error}") from None
 
 
-def _limits(name: str):
-    """(low, high) of the key ``name`` (section.key): its :data:`LIMITS`, or those of the deviation it sets."""
-    from workflow.models.builtplate import SIMULATED_DEVIATIONS
-
-    deviations = {f"simulator.{setting.config_key}": setting.quantity for setting in SIMULATED_DEVIATIONS}
-    return LIMITS.get(name) or LIMITS.get(deviations.get(name, ""))
-
-
-def _check_range(value, name: str, source: str) -> None:
-    """Refuse a non-finite number, or one outside its :data:`LIMITS`, naming the key and the range."""
-    bounds = _limits(name)
+def _check_range(value, key: Key, source: str) -> None:
+    """Refuse a non-finite number, or one outside the key's range or choices, naming the key and what is accepted."""
+    bounds, choices, name = key.limits, key.declared.choices, key.path
     for item in value if isinstance(value, list) else [value]:
         if isinstance(item, float) and not math.isfinite(item):
             raise InputFileError(f"{source}: '{name}' must be a finite number, got {item!r}")
         if bounds and not bounds[0] <= item <= bounds[1]:
             raise InputFileError(f"{source}: '{name}' = {item!r} is outside the accepted range "
                                  f"{bounds[0]} to {bounds[1]}")
-        if name in CHOICES and item not in CHOICES[name]:
-            raise InputFileError(f"{source}: '{name}' holds {item!r}; accepted: {', '.join(map(repr, CHOICES[name]))}")
-    if name in NOT_EMPTY and not value:
+        if choices is not None and item not in choices:
+            raise InputFileError(f"{source}: '{name}' holds {item!r}; accepted: {', '.join(map(repr, choices))}")
+    if key.declared.not_empty and not value:
         raise InputFileError(f"{source}: '{name}' is empty; it needs at least one value")
 
 
@@ -271,17 +128,16 @@ def _check_consistency(config: dict, source: str) -> None:
             raise InputFileError(f"{source}: [design] {kind}: {error}") from None
 
 
-def _checked(value, default, name: str, source: str):
-    expected = type(default)
-    if expected is float and isinstance(value, int) and not isinstance(value, bool):
+def _checked(value, kind: type, item: type | None, name: str, source: str):
+    """``value`` as the declared ``kind`` (a list of ``item``), an int taken for a float; else refused."""
+    if kind is float and isinstance(value, int) and not isinstance(value, bool):
         return float(value)
-    if isinstance(default, list):
+    if kind is list:
         if not isinstance(value, list):
             raise InputFileError(f"{source}: '{name}' must be a list, got {type(value).__name__} {value!r}")
-        item = default[0] if default else LIST_ITEMS[name]
-        return [_checked(entry, item, f"{name}[{i}]", source) for i, entry in enumerate(value)]
-    if type(value) is not expected:
-        raise InputFileError(f"{source}: '{name}' must be {_type_name(expected)}, got {type(value).__name__} {value!r}")
+        return [_checked(entry, item, None, f"{name}[{i}]", source) for i, entry in enumerate(value)]
+    if type(value) is not kind:
+        raise InputFileError(f"{source}: '{name}' must be {_type_name(kind)}, got {type(value).__name__} {value!r}")
     return value
 
 
@@ -289,12 +145,19 @@ def _type_name(kind) -> str:
     return {float: "a number", int: "an integer", str: "a string", bool: "true or false"}.get(kind, kind.__name__)
 
 
-def to_toml(config: dict) -> str:
-    """The configuration as TOML text (for --print-config)."""
+def to_toml(config: dict, comments: bool = False) -> str:
+    """The configuration as TOML text (for --print-config); with ``comments`` each key followed by its unit and what
+    it sets, as declared (:mod:`workflow.pipeline.sections`)."""
     lines = []
     for section, values in config.items():
         lines.append(f"[{section}]")
-        lines.extend(f"{key} = {_toml_value(value)}" for key, value in values.items())
+        declared = {key.name: key.declared for key in keys(section)} if comments and section in SECTIONS else {}
+        for key, value in values.items():
+            line = f"{key} = {_toml_value(value)}"
+            if key in declared:
+                unit = declared[key].unit
+                line = f"{line:<40} # {f'[{unit}] ' if unit and unit != '-' else ''}{declared[key].help}"
+            lines.append(line)
         lines.append("")
     return "\n".join(lines)
 
