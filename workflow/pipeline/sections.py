@@ -150,13 +150,23 @@ FEM_RUN_KEYS = [
 
 
 def _mesh_keys() -> list:
-    """The fixed-mesh keys of [fem]: the fields of :class:`~workflow.models.fem.FemSettings`, with its defaults."""
+    """The mesh keys of [fem]: the fields of :class:`~workflow.models.fem.FemSettings`, with its defaults; all but the
+    modes and the piezo model (which every evaluation uses) only where an accuracy is 0."""
     from workflow.models.fem import FemSettings
+    from workflow.models.fem.settings import PIEZO_MODELS
 
+    always = {
+        "n_modes": dict(unit="-", help="eigenmodes computed nearest the beam model's resonance"),
+        "piezo": dict(help="piezo model: eigenstrain (the drive as an eigenstress of a uniform field, fast, the "
+                           "paper's) or coupled (the electric potential as an unknown)", choices=PIEZO_MODELS),
+    }
     hints = typing.get_type_hints(FemSettings)
-    return [(f.name, hints[f.name], setting(f.default, unit="" if hints[f.name] is str else "-",
-                                            help=f"fixed mesh: FemSettings.{f.name}, used only where an accuracy is 0"))
-            for f in fields(FemSettings)]
+
+    def declared(name: str) -> dict:
+        return always.get(name) or dict(unit="" if hints[name] is str else "-",
+                                        help=f"fixed mesh: FemSettings.{name}, used only where an accuracy is 0")
+
+    return [(f.name, hints[f.name], setting(f.default, **declared(f.name))) for f in fields(FemSettings)]
 
 
 FemSection = make_dataclass("FemSection", FEM_ACCURACY_KEYS + _mesh_keys() + FEM_RUN_KEYS, frozen=True)
