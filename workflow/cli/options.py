@@ -13,7 +13,6 @@ from workflow.errors import GeometryError, TactileError
 from workflow.models import materials
 from workflow.models.analytical import resonance_frequency
 from workflow.models.fem.accuracy import ACCURACY_RANGE, DEFAULT_ACCURACY, SIMULATION_ACCURACY_TARGET, FemAccuracy
-from workflow.models.fem.settings import PIEZO_MODELS
 from workflow.pipeline.design_models import DESIGN_MODELS
 from workflow.models.limits import LIMITS, point_problem, problem, unit
 from workflow.models.plate import ORIGINAL_PLATE, Plate, check_design_space
@@ -68,7 +67,7 @@ def limit_text(key: str, unit: str = "") -> str:
 
 
 def _number(value) -> str:
-    return str(value) if isinstance(value, int) else f"{value:g}"
+    return str(value) if isinstance(value, int) and not isinstance(value, bool) else f"{value:g}"
 
 
 def seed_option(parser, default: int, help: str) -> None:
@@ -87,16 +86,9 @@ def add_force_option(parser, what: str = "files in --out") -> None:
     )
 
 
-def add_mixed_plates_option(parser: argparse.ArgumentParser, default: str | None = "refuse") -> None:
+def add_mixed_plates_option(parser: argparse.ArgumentParser, overrides: bool = False) -> None:
     """``--mixed-plates refuse|warn``: logs that are not of one plate (their metadata or their resonances)."""
-    from workflow.damping.logs import MIXED_PLATES, SAME_PLATE_TOLERANCE
-
-    kept = "the configuration's [damping] mixed_plates" if default is None else default
-    parser.add_argument(
-        "--mixed-plates", choices=MIXED_PLATES, default=default,
-        help="logs that name different plates in their metadata, or whose resonances are more than "
-        f"{SAME_PLATE_TOLERANCE * 100:g} %% apart: refuse them, or go on with a warning (default: {kept})",
-    )
+    key_option(parser, "damping.mixed_plates", overrides=overrides)
 
 
 def add_model_option(parser: argparse.ArgumentParser) -> None:
@@ -123,21 +115,38 @@ def add_width_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def key_option(parser: argparse.ArgumentParser, path: str, flag: str | None = None, overrides: bool = False,
+               metavar: str | None = None) -> None:
+    """An option declared by the configuration key ``path`` ("section.name", :mod:`workflow.pipeline.sections`): its
+    type, range, choices, default and help; ``flag`` defaults to the key's name (``--glue-um`` for ``glue_um``).
+
+    With ``overrides`` it defaults to None: the value of the run's configuration is kept (:func:`override_config`).
+    """
+    from workflow.pipeline.sections import key as declared_key
+
+    key = declared_key(path)
+    unit = "" if key.declared.unit in ("", "-") else key.declared.unit
+    if key.limits is not None:
+        kind = bounded(key.kind, *key.limits, unit)
+        accepted = f", {_number(key.limits[0])} to {_number(key.limits[1])}{f' {unit}' if unit else ''}"
+    else:
+        kind, accepted = (finite_float if key.kind is float else key.kind), f" [{unit}]" if unit else ""
+    shown = _number(key.default) if isinstance(key.default, (int, float)) else key.default
+    default = f"the configuration's [{key.section}] {key.name}, {shown}" if overrides else shown
+    parser.add_argument(
+        flag or "--" + key.name.replace("_", "-"),
+        type=kind,
+        choices=key.declared.choices,
+        default=None if overrides else key.default,
+        metavar=metavar,
+        help=f"{key.declared.help}{accepted} (default: {default})".replace("%", "%%"),
+    )
+
+
 def add_drive_options(parser: argparse.ArgumentParser) -> None:
     """--q (the plate's quality factor) and --voltage."""
-    parser.add_argument(
-        "--q",
-        type=bounded(float, *LIMITS["design.q"]),
-        default=materials.PLATE_Q,
-        help=f"plate quality factor, {limit_text('design.q')} (default: {materials.PLATE_Q:g})",
-    )
-    parser.add_argument(
-        "--voltage",
-        type=bounded(float, *LIMITS["design.voltage_v"], "V"),
-        default=materials.DESIGN_VOLTAGE,
-        help=f"drive amplitude across the ceramics [V peak], {limit_text('design.voltage_v', 'V')} "
-        f"(default: {materials.DESIGN_VOLTAGE:g})",
-    )
+    key_option(parser, "design.q")
+    key_option(parser, "design.voltage_v", "--voltage")
 
 
 def add_hi_min_option(parser: argparse.ArgumentParser) -> None:
@@ -187,29 +196,14 @@ def add_build_options(parser: argparse.ArgumentParser, overrides: bool = False) 
 
     With ``overrides`` they default to None: the value of the run's configuration is kept.
     """
-    kept = " (default: the configuration's [design] value, {})" if overrides else " (default: {})"
-    parser.add_argument(
-        "--ceramic",
-        choices=materials.ceramic_names(),
-        default=None if overrides else materials.PAPER,
-        help="piezo-ceramic material record (docs/model.md)" + kept.format("paper: Table 1 of the paper"),
-    )
-    parser.add_argument(
-        "--resonator",
-        choices=materials.resonator_names(),
-        default=None if overrides else materials.PAPER,
-        help="resonator material record" + kept.format("paper: the paper's CuBe"),
-    )
-    low, high = LIMITS["glue_um"]
-    parser.add_argument(
-        "--glue-um",
-        type=bounded(float, low, high, "um"),
-        default=None if overrides else 0.0,
-        metavar="T",
-        help=f"epoxy bond under each ceramic [um], {low:g} to {high:g}; the FEM models it as a layer "
-        f"(E {materials.EPOXY.youngs_modulus / 1e9:g} GPa, nu {materials.EPOXY.poisson_ratio:g}, "
-        f"{materials.EPOXY.density:g} kg/m^3), the beam model ignores it" + kept.format("0: no bond layer, as in the paper"),
-    )
+    for name in BUILD_KEYS:
+        key_option(parser, name, overrides=overrides, metavar="T" if name == "design.glue_um" else None)
+
+
+BUILD_KEYS = ("design.ceramic", "design.resonator", "design.glue_um")
+"""The configuration keys of the build options."""
+RUN_OVERRIDES = ("fem.accuracy", "fem.piezo", *BUILD_KEYS, "damping.mixed_plates")
+"""The configuration keys ``tactile run``'s options of the same names override."""
 
 
 def build_plate(args) -> Plate:
@@ -231,14 +225,7 @@ def add_fem_options(
     otherwise --accuracy defaults to ``accuracy``.
     """
     kept = " (default: the configuration's [fem] value, {})" if overrides else " (default: {})"
-    parser.add_argument(
-        "--piezo",
-        choices=PIEZO_MODELS,
-        default=None if overrides else PIEZO_MODELS[0],
-        help="FEM only: the piezo drive as an eigenstress of a uniform field (eigenstrain, fast, the paper's model) "
-        "or with the electric potential as an unknown (coupled: adds the antiresonance, the effective coupling "
-        "and the admittance)" + kept.format(PIEZO_MODELS[0]),
-    )
+    key_option(parser, "fem.piezo", overrides=overrides)
     if build:
         add_build_options(parser, overrides)
     low, high = ACCURACY_RANGE
@@ -254,16 +241,10 @@ def add_fem_options(
 
 def override_config(config: dict, args) -> dict:
     """The run's configuration with the FEM, build and --mixed-plates options given on the command line."""
-    for section, key, option in (
-        ("fem", "accuracy", "accuracy"),
-        ("fem", "piezo", "piezo"),
-        ("design", "ceramic", "ceramic"),
-        ("design", "resonator", "resonator"),
-        ("design", "glue_um", "glue_um"),
-        ("damping", "mixed_plates", "mixed_plates"),
-    ):
-        if getattr(args, option) is not None:
-            config[section][key] = getattr(args, option)
+    for path in RUN_OVERRIDES:
+        section, name = path.split(".")
+        if getattr(args, name) is not None:
+            config[section][name] = getattr(args, name)
     return config
 
 

@@ -10,7 +10,6 @@ import math
 
 from workflow.errors import InputFileError
 from workflow.inputfiles import load_toml
-from workflow.models import materials
 from workflow.models.limits import LIMITS
 from workflow.models.plate import ORIGINAL_PLATE
 from workflow.pipeline.sections import SECTIONS, Key, keys, section_defaults
@@ -96,8 +95,8 @@ def _check_range(value, key: Key, source: str) -> None:
 
 
 def _check_consistency(config: dict, source: str) -> None:
-    """Refuse a low bound not below its high bound (:data:`ORDERED`), FEM mesh keys the FEM refuses (or whose mesh
-    of the original plate exceeds the memory budget) and material records that do not exist."""
+    """Refuse a low bound not below its high bound (:data:`ORDERED`) and FEM mesh keys the FEM refuses (or whose mesh
+    of the original plate exceeds the memory budget)."""
     from workflow.errors import TactileError
     from workflow.models.fem import FemSettings
     from workflow.models.fem.mesh import check_memory
@@ -121,11 +120,6 @@ def _check_consistency(config: dict, source: str) -> None:
         check_memory(ORIGINAL_PLATE, FemSettings(**mesh))
     except TactileError as error:
         raise InputFileError(f"{source}: [fem] {error}") from None
-    for kind, lookup in (("ceramic", materials.ceramic), ("resonator", materials.resonator)):
-        try:
-            lookup(config["design"][kind])
-        except TactileError as error:
-            raise InputFileError(f"{source}: [design] {kind}: {error}") from None
 
 
 def _checked(value, kind: type, item: type | None, name: str, source: str):

@@ -2,8 +2,10 @@
 
 Every key is a field carrying its type, default, unit, help text and, where it has them, its accepted range and
 choices (:func:`setting`).  From these declarations come the embedded defaults (:func:`section_defaults`), the
-checks of a user's TOML file (:mod:`workflow.pipeline.config`) and the table of keys in docs/cli.md
-(:func:`markdown_table`; ``tests/pipeline/test_sections.py`` fails when the two disagree, and
+checks of a user's TOML file (:mod:`workflow.pipeline.config`), the command-line options of the same quantities
+(``--q``, ``--voltage``, ``--ceramic``, ``--resonator``, ``--glue-um``, ``--piezo``, ``--mixed-plates``:
+:func:`workflow.cli.options.key_option`, and ``tactile run``'s overrides of those keys) and the table of keys in
+docs/cli.md (:func:`markdown_table`; ``tests/pipeline/test_sections.py`` fails when the two disagree, and
 ``python -m workflow.pipeline.sections --write docs/cli.md`` writes it again).  Adding a key is one field here.
 
 Defaults that are facts of the domain (Table 1, the procedures' plans, the simulator, the robust design) are read
@@ -18,7 +20,7 @@ from dataclasses import MISSING, dataclass, field, fields, make_dataclass
 from functools import partial
 
 from workflow.damping.laws import SAMPLED_LAWS
-from workflow.damping.logs import MIXED_PLATES
+from workflow.damping.logs import MIXED_PLATES, SAME_PLATE_TOLERANCE
 from workflow.models import materials
 from workflow.models.builtplate import DEMONSTRATION_DEVIATIONS, SIMULATED_DEVIATIONS
 from workflow.models.limits import LIMITS, mm_range
@@ -92,18 +94,21 @@ class DesignSection:
                                help="thickest resonator h_i of the design box")
     width_mm: float = setting(factory=lambda: _mm(ORIGINAL_PLATE.width), unit="mm", help="plate width b")
     voltage_v: float = setting(factory=lambda: materials.DESIGN_VOLTAGE, unit="V",
-                               help="drive voltage across the ceramics (peak)")
+                               help="drive amplitude across the ceramics (peak)")
     min_frequency_khz: float = setting(factory=lambda: round(materials.MIN_FREQUENCY / KHZ, 9), unit="kHz",
                                        help="lowest resonance frequency a design may have")
     target_deflection_um: float = setting(factory=lambda: round(materials.TARGET_DEFLECTION / UM, 9), unit="µm",
                                           help="deflection the damped design's voltage is solved for")
-    q: float = setting(factory=lambda: materials.PLATE_Q, unit="-", help="constant quality factor of the plate",
+    q: float = setting(factory=lambda: materials.PLATE_Q, unit="-", help="plate quality factor (constant Q)",
                        limits="q")
-    ceramic: str = setting(factory=lambda: materials.PAPER,
-                           help="ceramic material record (paper, PZT-5H, PZT-5A, PZT-4, PZT-8)")
-    resonator: str = setting(factory=lambda: materials.PAPER, help="resonator material record (paper, C17200)")
-    glue_um: float = setting(0.0, unit="µm", help="epoxy bond under the ceramics (0: none, as in the paper)",
-                             limits="glue_um")
+    ceramic: str = setting(factory=lambda: materials.PAPER, choices=materials.ceramic_names(),
+                           help="piezo-ceramic material record (docs/model.md; paper: Table 1 of the paper)")
+    resonator: str = setting(factory=lambda: materials.PAPER, choices=materials.resonator_names(),
+                             help="resonator material record (paper: the paper's CuBe)")
+    glue_um: float = setting(0.0, unit="µm", limits="glue_um", help=(
+        f"epoxy bond under each ceramic (0: none, as in the paper); the FEM models it as a layer "
+        f"(E {materials.EPOXY.youngs_modulus / 1e9:g} GPa, nu {materials.EPOXY.poisson_ratio:g}, "
+        f"{materials.EPOXY.density:g} kg/m^3), the beam model ignores it"))
 
 
 @dataclass(frozen=True)
@@ -157,8 +162,9 @@ def _mesh_keys() -> list:
 
     always = {
         "n_modes": dict(unit="-", help="eigenmodes computed nearest the beam model's resonance"),
-        "piezo": dict(help="piezo model: eigenstrain (the drive as an eigenstress of a uniform field, fast, the "
-                           "paper's) or coupled (the electric potential as an unknown)", choices=PIEZO_MODELS),
+        "piezo": dict(help="FEM only: the piezo drive as an eigenstress of a uniform field (eigenstrain, fast, the "
+                           "paper's model) or with the electric potential as an unknown (coupled: adds the "
+                           "antiresonance, the effective coupling and the admittance)", choices=PIEZO_MODELS),
     }
     hints = typing.get_type_hints(FemSettings)
 
@@ -188,8 +194,9 @@ class DampingSection:
     heating: bool = setting(True, help="fit the plate's heating within each sweep (logs with timestamp_s)")
     seed: int = setting(7, unit="-", help="random seed of the chains")
     posterior_draws: int = setting(64, unit="-", help="Q(v) draws propagated through the design")
-    mixed_plates: str = setting("refuse", help="logs of different plates: refuse them, or warn and fit them together",
-                                choices=MIXED_PLATES)
+    mixed_plates: str = setting("refuse", choices=MIXED_PLATES, help=(
+        f"logs that name different plates in their metadata, or whose resonances are more than "
+        f"{SAME_PLATE_TOLERANCE * 100:g} % apart: refuse them, or go on with a warning"))
 
 
 @dataclass(frozen=True)
@@ -404,6 +411,12 @@ def keys(section: str) -> list[Key]:
         found.append(Key(section, f.name, list if item else kind, item, _as_file_value(getattr(defaults, f.name)),
                          f.metadata["declared"]))
     return found
+
+
+def key(path: str) -> Key:
+    """The :class:`Key` of ``path`` ("section.name")."""
+    section, name = path.split(".")
+    return next(k for k in keys(section) if k.name == name)
 
 
 def section_defaults() -> dict:

@@ -1,0 +1,62 @@
+"""Options declared by the configuration's keys (issue 28, item 1): one declaration gives a design command's option
+and the run's key its type, range, choices, default and help."""
+
+import argparse
+import sys
+
+import pytest
+
+from workflow.cli import main
+from workflow.cli.options import RUN_OVERRIDES, add_build_options, add_drive_options, add_fem_options, key_option
+from workflow.errors import InputFileError
+from workflow.pipeline.config import default_config, merge
+from workflow.pipeline.sections import key
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
+
+SHARED = [("design.q", "--q"), ("design.voltage_v", "--voltage"), ("design.glue_um", "--glue-um"),
+          ("design.ceramic", "--ceramic"), ("design.resonator", "--resonator"), ("fem.piezo", "--piezo")]
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser()
+    add_drive_options(parser)
+    add_fem_options(parser)
+    return parser
+
+
+@pytest.mark.parametrize("path, flag", SHARED)
+def test_an_option_and_its_key_share_default_range_and_help(path, flag, capsys):
+    declared = key(path)
+    args = _parser().parse_args([])
+    assert getattr(args, flag[2:].replace("-", "_")) == declared.default
+    bad = "no-such-record" if declared.kind is str else str(declared.limits[1] * 2 + 1)
+    with pytest.raises(SystemExit):
+        _parser().parse_args([flag, bad])
+    assert flag in capsys.readouterr().err
+    with pytest.raises(InputFileError, match=declared.path):
+        merge(default_config(), {declared.section: {declared.name: bad if declared.kind is str else float(bad)}})
+    helped = next(a.help for a in _parser()._actions if flag in a.option_strings)
+    assert helped.startswith(declared.declared.help.replace("%", "%%"))
+
+
+def test_the_run_overrides_its_keys_from_the_options_of_the_same_names(capsys):
+    assert main(["run", "--glue-um", "20", "--piezo", "coupled", "--ceramic", "PZT-5H", "--mixed-plates", "warn",
+                 "--accuracy", "0.01", "--print-config"]) in (0, None)
+    printed = tomllib.loads(capsys.readouterr().out)
+    assert printed["design"]["glue_um"] == 20.0 and printed["design"]["ceramic"] == "PZT-5H"
+    assert printed["fem"]["piezo"] == "coupled" and printed["fem"]["accuracy"] == 0.01
+    assert printed["damping"]["mixed_plates"] == "warn"
+    assert {path.split(".")[1] for path in RUN_OVERRIDES} == {"glue_um", "piezo", "ceramic", "resonator",
+                                                               "mixed_plates", "accuracy"}
+
+
+def test_an_override_option_keeps_the_configurations_value_when_not_given():
+    parser = argparse.ArgumentParser()
+    add_build_options(parser, overrides=True)
+    key_option(parser, "damping.mixed_plates", overrides=True)
+    args = parser.parse_args([])
+    assert args.glue_um is None and args.ceramic is None and args.mixed_plates is None
