@@ -64,7 +64,7 @@ def measure(folder: Path, name: str, seed) -> dict:
     from workflow.pipeline.steps import campaign_logs, damping_fit, damping_fit_files
 
     context = RunContext(configuration(name, seed), folder)
-    context.results["logs"] = campaign_logs(context)
+    context.results.logs = campaign_logs(context)
     cpu, wall = time.process_time(), time.perf_counter()
     fit = damping_fit(context)
     fit_cpu, fit_wall = time.process_time() - cpu, time.perf_counter() - wall

@@ -328,6 +328,7 @@ def test_run_step_predicts_the_recommended_designs_with_the_calibration(tmp_path
     from workflow.pipeline.calibration_files import write_calibration
     from workflow.pipeline.config import default_config
     from workflow.pipeline.report import _calibrated_designs
+    from workflow.pipeline.runner import RunResults
     from workflow.pipeline.steps import calibrated_designs
 
     plate = MeasuredPlate("P1", P1, built_plate_frequency(coarse_model, P1))
@@ -335,7 +336,7 @@ def test_run_step_predicts_the_recommended_designs_with_the_calibration(tmp_path
     files = write_calibration(calibration, tmp_path, figures=False)
     designs = {1e-3: SimpleNamespace(plate=P1, frequency=25.1e3)}
     context = SimpleNamespace(calibration=Path(files["calibration"]), config=default_config(), cache=None, scheduler=None,
-                              results={"recommended_design": SimpleNamespace(designs=designs)})
+                              results=RunResults(recommended_design=SimpleNamespace(designs=designs)))
     predicted = calibrated_designs(context)[1e-3]
     assert predicted["f_r_khz_p05"] <= plate.frequency / KHZ <= predicted["f_r_khz_p95"]
     section = _calibrated_designs(context, {1e-3: predicted})

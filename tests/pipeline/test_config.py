@@ -77,14 +77,14 @@ def test_too_few_walkers_for_the_logs_is_a_configuration_error_before_the_chain(
     """emcee needs twice the sampled parameters (the flexible law with softening, drift and heating: 15 + one resonance
     per sweep): the step says so, naming the key and the range, before any sampling."""
     from workflow.damping.synthetic import campaign_csv, simulate_campaign
-    from workflow.pipeline.runner import RunContext
+    from workflow.pipeline.runner import RunContext, RunResults
     from workflow.pipeline.steps import damping_fit
 
     log = tmp_path / "campaign.csv"
     log.write_text(campaign_csv(simulate_campaign(seed=1, voltages=(5.0, 10.0, 15.0), points_per_sweep=25)))
     config = default_config()
     config["damping"]["walkers"] = 15
-    context = RunContext(config=config, out=tmp_path, results={"logs": [log]})
+    context = RunContext(config=config, out=tmp_path, results=RunResults(logs=[log]))
     with pytest.raises(InputFileError, match=r"'damping.walkers' = 15 is outside the accepted range 36 to 10000 .* 3 sweeps"):
         damping_fit(context)
 

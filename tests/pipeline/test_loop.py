@@ -24,18 +24,18 @@ def context(tmp_path, plate=PLATE_1, hp=1.0 * MM, **loop_keys):
     config = default_config()
     config["loop"].update(loop_keys)
     run = RunContext(config=config, out=tmp_path / "run", cache=EvaluationCache(tmp_path / "cache"))
-    run.results["recommended_design"] = types.SimpleNamespace(designs={hp: types.SimpleNamespace(plate=plate)})
+    run.results.recommended_design = types.SimpleNamespace(designs={hp: types.SimpleNamespace(plate=plate)})
     return run
 
 
 def test_a_disabled_loop_has_no_results_and_no_report_sections(tmp_path):
     run = context(tmp_path, enabled=False)
-    run.results["loop_first_plate"] = loop.first_plate(run)
-    run.results["loop_calibration"] = loop.loop_calibration(run)
-    run.results["loop_redesign"] = loop.redesign(run)
-    run.results["loop_second_plate"] = loop.second_plate(run)
-    run.results["case_study"] = loop.case_study(run)
-    assert all(run.results[key] is None for key in ("loop_first_plate", "loop_calibration", "loop_redesign",
+    run.results.loop_first_plate = loop.first_plate(run)
+    run.results.loop_calibration = loop.loop_calibration(run)
+    run.results.loop_redesign = loop.redesign(run)
+    run.results.loop_second_plate = loop.second_plate(run)
+    run.results.case_study = loop.case_study(run)
+    assert all(getattr(run.results, key) is None for key in ("loop_first_plate", "loop_calibration", "loop_redesign",
                                                    "loop_second_plate", "case_study"))
     writers = dict(SECTIONS)
     assert writers["loop_second_plate"](run, None) == "" and writers["case_study"](run, None) == ""
@@ -67,14 +67,14 @@ def test_the_redesigned_plate_meets_25_khz_where_the_first_missed(tmp_path):
              ("loop_calibration", loop.loop_calibration, loop.loop_calibration_files),
              ("loop_redesign", loop.redesign, None), ("loop_second_plate", loop.second_plate, None)]
     for key, compute, files in steps:
-        run.results[key] = compute(run)
+        setattr(run.results, key, compute(run))
         if files:
-            files(run, run.results[key])
-    first, second = run.results["loop_first_plate"], run.results["loop_second_plate"]
+            files(run, getattr(run.results, key))
+    first, second = run.results.loop_first_plate, run.results.loop_second_plate
     assert first.measured_frequency < 25 * KHZ <= second.measured_frequency
-    _, predicted = run.results["loop_calibration"]
+    _, predicted = run.results.loop_calibration
     assert predicted[0] <= first.measured_frequency <= predicted[2]
-    assert run.results["loop_redesign"].best.probability >= 0.95 - 0.01
+    assert run.results.loop_redesign.best.probability >= 0.95 - 0.01
     writers = dict(SECTIONS)
     assert "## Closing the loop on a built plate" in writers["loop_second_plate"](run, second)
     assert (run.out / "loop" / "calibration.json").is_file() and (run.out / "loop_scan.png").is_file()
@@ -86,18 +86,18 @@ def test_the_report_tables_each_stage_and_the_case_study(tmp_path):
 
     run = context(tmp_path)
     redesigned = PLATE_1.with_(wavelength=20.93 * MM, resonator_thickness=1.0 * MM)
-    run.results["loop_first_plate"] = loop.BuiltMeasurement(PLATE_1, 25.04e3, 23.06e3, 23.057e3, Path("r.csv"), Path("s.csv"), 0.9994)
+    run.results.loop_first_plate = loop.BuiltMeasurement(PLATE_1, 25.04e3, 23.06e3, 23.057e3, Path("r.csv"), Path("s.csv"), 0.9994)
     calibration = types.SimpleNamespace(
         summary=lambda: {"glue_um": {"median": 44.0, "p05": 15.0, "p95": 58.0, "unit": "um"}},
         identifiability=lambda: {"statement": "One combination is constrained."},
         plates=(types.SimpleNamespace(data_used=["resonance frequency", "deflection per volt", "scan mode shape"]),),
         at_prior_bounds=lambda: {"glue_um": "at upper prior bound"})
-    run.results["loop_calibration"] = (calibration, (22.79e3, 23.057e3, 23.36e3))
+    run.results.loop_calibration = (calibration, (22.79e3, 23.057e3, 23.36e3))
     best = types.SimpleNamespace(plate=redesigned, frequency=(25.01e3, 25.48e3, 25.9e3), probability=0.954, probability_error=0.0015)
-    run.results["loop_redesign"] = types.SimpleNamespace(best=best)
+    run.results.loop_redesign = types.SimpleNamespace(best=best)
     second = loop.BuiltMeasurement(redesigned, 27.0e3, 25.3e3, 25.31e3, Path("r2.csv"), None, None)
     run.step = "loop_first_plate"
-    run.record_figure("loop_scan.png", loop.scan_caption(run, run.results["loop_first_plate"]))
+    run.record_figure("loop_scan.png", loop.scan_caption(run, run.results.loop_first_plate))
     run.step = "loop_calibration"
     run.record_figure("loop/calibration_pairs.png", loop.PAIRS_CAPTION)
     writers = dict(SECTIONS)

@@ -104,7 +104,7 @@ def beam_run(tmp_path, monkeypatch):
     config = default_config()
     config["recommendation"].update(built_plates=[str(own)], stock_hi_mm=[0.75, 1.0])
     run = RunContext(config=config, out=tmp_path / "run", cache=EvaluationCache(tmp_path / "cache"))
-    run.results["recommended_design"] = types.SimpleNamespace(designs={1 * MM: types.SimpleNamespace(plate=NOMINAL, model="FEM")})
+    run.results.recommended_design = types.SimpleNamespace(designs={1 * MM: types.SimpleNamespace(plate=NOMINAL, model="FEM")})
     return run, batches
 
 
@@ -113,7 +113,7 @@ def test_the_run_calibrates_on_the_published_and_the_users_plates_and_the_case_s
     built = robust.built_calibration(run)
     assert built.names == ("P1", "P2", "my_plate.csv") and len(built.calibration.plates) == 3
     assert batches == [3 * SHORT.surrogate_points], "the three plates' surrogates in one batch"
-    run.results["built_calibration"] = built
+    run.results.built_calibration = built
     run.step = "built_calibration"
     robust.built_calibration_files(run, built)
     assert (run.out / "calibration" / "calibration.json").is_file()
@@ -127,7 +127,7 @@ def test_robust_step_without_a_separated_stock_and_without_built_plates(beam_run
     run, _ = beam_run
     run.config["recommendation"].update(built_plates=[], published_plates=False)
     assert robust.built_calibration(run) is None, "no built plate: no calibration"
-    run.results["built_calibration"] = robust.BuiltCalibration(beam_calibration(300))
+    run.results.built_calibration = robust.BuiltCalibration(beam_calibration(300))
     recommendation = robust.robust_recommendation(run)
     (choice,) = recommendation.choices.values()
     assert choice.best is None, "the stand-in's transverse mode is 2 % away: not separated at the default 3 %"
@@ -208,7 +208,7 @@ def test_the_q_of_v_columns_come_from_the_fem_at_each_rows_posterior_median_plat
     run, _ = beam_run
     rng = np.random.default_rng(0)
     posterior = DampingPosterior("quadratic", {"q0": rng.normal(150, 3, 40), "alpha": rng.normal(0.25, 0.005, 40)})
-    run.results["damping_fit"] = types.SimpleNamespace(answer=posterior)
+    run.results.damping_fit = types.SimpleNamespace(answer=posterior)
     run.config["damping"]["posterior_draws"] = 8
     with_damping = robust.damped_evaluation(run)
     choices = robust.robust_choices(beam_calibration(300), {1 * MM: NOMINAL}, [0.75 * MM], 1,

@@ -222,3 +222,13 @@ def test_the_report_states_what_each_design_renders_and_what_it_draws(tiny_run):
     current, power, apparent, peak = (float(cell) for cell in rows[1].split("|")[6:10])
     assert 0 < power <= apparent and current < peak
     assert (out / "rendering_periods.png").is_file()
+
+
+def test_every_step_has_a_typed_result_field_and_an_unknown_key_is_refused():
+    from dataclasses import fields
+
+    from workflow.pipeline.runner import RunResults, Step
+
+    assert [step.key for step in STEPS] == [f.name for f in fields(RunResults)]
+    with pytest.raises(TypeError, match="not a field of RunResults"):
+        Step("a step nobody declared", "undeclared", lambda context: None)

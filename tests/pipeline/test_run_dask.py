@@ -2,11 +2,13 @@
 
 
 import numpy as np
+from dataclasses import replace
+
 import pytest
 from tiny_config import TINY as SMALL
 
 from workflow.pipeline.config import load_config
-from workflow.pipeline.runner import RunContext, run_steps
+from workflow.pipeline.runner import RunContext, RunResults, run_steps
 from workflow.pipeline.steps import STEPS
 
 # a fixed tiny mesh (accuracy 0): the distribution of FEM evaluations is what is tested, not the accuracy control
@@ -17,7 +19,7 @@ TINY = (SMALL.replace("accuracy = 0.05", "accuracy = 0.0").replace("ringdown_vol
 DISTRIBUTED_STEPS = ("damped_design", "fem_optima", "fem_maps", "width_sweep")
 
 
-def _run(context: RunContext, keys) -> dict:
+def _run(context: RunContext, keys) -> RunResults:
     return run_steps(context, [step for step in STEPS if step.key in keys]).results
 
 
@@ -51,16 +53,16 @@ def test_local_and_dask_runs_give_identical_numbers(tmp_path, monkeypatch):
     path.write_text(TINY)
     config = load_config(path)
     fitted = _run(RunContext(config=config, out=tmp_path / "fit"), ("logs", "analytical_optima", "damping_fit"))
-    local = _run(RunContext(config=config, out=tmp_path / "local", results=dict(fitted)), DISTRIBUTED_STEPS)
+    local = _run(RunContext(config=config, out=tmp_path / "local", results=replace(fitted)), DISTRIBUTED_STEPS)
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
         remote = _run(RunContext(config=config, out=tmp_path / "dask", scheduler=cluster.scheduler_address,
-                                 results=dict(fitted)), DISTRIBUTED_STEPS)
+                                 results=replace(fitted)), DISTRIBUTED_STEPS)
     hp = 1e-3
-    design_local, design_remote = local["damped_design"][0].optima[hp], remote["damped_design"][0].optima[hp]
+    design_local, design_remote = local.damped_design[0].optima[hp], remote.damped_design[0].optima[hp]
     for name in design_local.draws:
         np.testing.assert_array_equal(design_local.draws[name], design_remote.draws[name])
-    optimum_local, optimum_remote = local["fem_optima"][hp].space_mapping, remote["fem_optima"][hp].space_mapping
+    optimum_local, optimum_remote = local.fem_optima[hp].space_mapping, remote.fem_optima[hp].space_mapping
     assert optimum_local.optimum.deflection == optimum_remote.optimum.deflection
     assert optimum_local.fine_evaluations == optimum_remote.fine_evaluations
-    np.testing.assert_array_equal(local["fem_maps"][hp].deflection, remote["fem_maps"][hp].deflection)
-    np.testing.assert_array_equal(local["width_sweep"].frequency, remote["width_sweep"].frequency)
+    np.testing.assert_array_equal(local.fem_maps[hp].deflection, remote.fem_maps[hp].deflection)
+    np.testing.assert_array_equal(local.width_sweep.frequency, remote.width_sweep.frequency)

@@ -115,7 +115,7 @@ def first_plate(context: RunContext) -> BuiltMeasurement | None:
     if not context.config["loop"]["enabled"]:
         return None
     hp = context.config["loop"]["hp_mm"] * MM
-    designs = context.results["recommended_design"].designs
+    designs = context.results.recommended_design.designs
     match = [design for key, design in designs.items() if abs(key - hp) < 1e-9]
     if not match:
         raise TactileError(f"[loop] hp_mm {hp / MM:g} is not among [design] ceramic_thicknesses_mm")
@@ -146,7 +146,7 @@ def loop_calibration(context: RunContext):
     from workflow.calibration.parameters import load_settings
     from workflow.pipeline.calibration_files import measured_plates
 
-    measured = context.results["loop_first_plate"]
+    measured = context.results.loop_first_plate
     if measured is None:
         return None
     model, fem = calibration_model(context)
@@ -173,13 +173,13 @@ def redesign(context: RunContext):
     reliability, stock h_i, the h_p and width of plate #1)."""
     from workflow.optimise.robust import RobustSettings, robust_design
 
-    calibrated = context.results["loop_calibration"]
+    calibrated = context.results.loop_calibration
     if calibrated is None:
         return None
     calibration, _ = calibrated
     loop, design = context.config["loop"], context.config["design"]
     model, _ = calibration_model(context)
-    first = context.results["loop_first_plate"].plate
+    first = context.results.loop_first_plate.plate
     stock = [t * MM for t in loop["stock_hi_mm"]]
     settings = RobustSettings(reliability=loop["reliability"], min_frequency=design["min_frequency_khz"] * KHZ)
     return robust_design(calibration, first.with_(resonator_thickness=stock[0]), stock, settings,
@@ -188,7 +188,7 @@ def redesign(context: RunContext):
 
 def second_plate(context: RunContext) -> BuiltMeasurement | None:
     """The re-designed plate built with the same hidden deviations and measured (resonance search)."""
-    robust = context.results["loop_redesign"]
+    robust = context.results.loop_redesign
     return None if robust is None else build_and_measure(context, robust.best.plate, "plate2", scan=False)
 
 
@@ -202,7 +202,7 @@ def case_study(context: RunContext):
     if not (context.config["loop"]["enabled"] and context.config["loop"]["case_study"]):
         return None
     settings = load_settings()
-    built = context.results.get("built_calibration")
+    built = context.results.built_calibration
     surrogates = None if built is None else built.surrogates_of(tuple(PUBLISHED_PLATES))
     first, second = published_plates() if surrogates is None else built.plates_of(tuple(PUBLISHED_PLATES))
     model, fem = calibration_model(context)

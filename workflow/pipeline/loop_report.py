@@ -20,9 +20,9 @@ def loop_section(context: RunContext, second) -> str:
     """"Closing the loop on a built plate": each stage's f_r, the scan and the calibration's pairs."""
     if second is None:
         return ""
-    first = context.results["loop_first_plate"]
-    calibration, predicted = context.results["loop_calibration"]
-    best = context.results["loop_redesign"].best
+    first = context.results.loop_first_plate
+    calibration, predicted = context.results.loop_calibration
+    best = context.results.loop_redesign.best
     minimum = context.config["design"]["min_frequency_khz"] * KHZ
     reliability = context.config["loop"]["reliability"]
 

@@ -17,8 +17,9 @@ def write_report(context: RunContext) -> Path:
     """Write ``report.md`` into the run's output folder and return its path."""
     sections = [_title(context)]
     for key, writer in SECTIONS:
-        if key in context.results:
-            sections.append(writer(context, context.results[key]))
+        result = getattr(context.results, key)
+        if result is not None:
+            sections.append(writer(context, result))
     sections.append(_reproduction(context))
     sections.append(_timings(context))
     sections.append(_configuration(context))
@@ -43,7 +44,7 @@ def _title(context: RunContext) -> str:
 def _recommended_design(context: RunContext, recommendation) -> str:
     """The robust designs under the built plates' calibration when they ran ("What to build"), then the nominal
     optima with Q(v)."""
-    robust = context.results.get("robust_recommendation")
+    robust = context.results.robust_recommendation
     if robust is None:
         return _nominal_designs(context, recommendation, "Recommended design")
     return robust_section(context, robust) + "\n\n" + _nominal_designs(context, recommendation, NOMINAL_HEADING,
@@ -60,7 +61,7 @@ NOMINAL_PREFACE = ("The numbers of this section are the uncalibrated model's: a 
 
 def _nominal_designs(context: RunContext, recommendation, heading: str, preface: str = "") -> str:
     section = recommendation_section(recommendation, heading, preface)
-    fit = context.results.get("damping_fit")
+    fit = context.results.damping_fit
     if not section or fit is None:
         return section
     section += "\n\n" + _basis(recommendation, fit.log.velocity, simulated=not context.logs)
@@ -675,7 +676,7 @@ def _fem_optima(context: RunContext, optima) -> str:
             if result is None:
                 continue
             o = result.optimum
-            beam = context.results["analytical_optima"][hp]
+            beam = context.results.analytical_optima[hp]
             rows.append(
                 (
                     f"{hp / MM:g}",

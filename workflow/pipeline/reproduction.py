@@ -61,8 +61,8 @@ def reproduce(
 
     Parameters
     ----------
-    results : dict
-        Results of ``tactile run`` by step key.
+    results : RunResults
+        Results of ``tactile run``'s steps.
     voltage : float
         Design voltage [V peak].
     simulated_campaign : bool
@@ -83,10 +83,10 @@ def reproduce(
             VALIDATION,
         ),
     }
-    if "damping_fit" in results:
+    if results.damping_fit is not None:
         from workflow.optimise.damped import damped_deflection
 
-        law = results["damping_fit"].answer.median_law()
+        law = results.damping_fit.answer.median_law()
         deflection = float(damped_deflection(analytical.beam_response(ORIGINAL_PLATE, voltage), law))
         velocity = 2 * np.pi * float(analytical.resonance_frequency(ORIGINAL_PLATE)) * deflection
         source = "the simulated campaign (generated with Q = 54 at this point)" if simulated_campaign else "the given logs"
@@ -96,11 +96,11 @@ def reproduce(
             campaign,
         )
         ours["working_v"] = (velocity, f"calibrated beam model, 15 V, with the Q(v) fitted to {source}", campaign)
-    fem = results.get("fem_original")
+    fem = results.fem_original
     if fem is not None:
         ours["fem_f"] = (fem.frequency / KHZ, "our FEM, default mesh", VALIDATION)
         ours["fem_w"] = (fem.deflection / UM, "our FEM, default mesh", VALIDATION)
-    optima = results.get("fem_optima")
+    optima = results.fem_optima
     if optima:
         # The paper's counts are for its original ceramic (1 mm); prefer that h_p when it was designed.
         hp = min(optima, key=lambda thickness: abs(thickness - ORIGINAL_PLATE.ceramic_thickness))

@@ -237,7 +237,7 @@ def damped_evaluation(context: RunContext):
     from workflow.pipeline.domain import design_problems
     from workflow.pipeline.recommendation import fem_recommendation
 
-    fit = context.results.get("damping_fit")
+    fit = context.results.damping_fit
     if fit is None:
         return None
     damping = context.config["damping"]
@@ -252,13 +252,13 @@ def robust_recommendation(context: RunContext) -> Optional[RobustRecommendation]
     (the recommended design's geometry) checked the same way; None without a calibration."""
     from workflow.pipeline.loop import calibration_model
 
-    built = context.results["built_calibration"]
+    built = context.results.built_calibration
     if built is None:
         return None
     section, design = context.config["recommendation"], context.config["design"]
     settings = RobustSettings(reliability=section["reliability"], min_frequency=design["min_frequency_khz"] * KHZ)
     model, _ = calibration_model(context)
-    designs = context.results["recommended_design"].designs
+    designs = context.results.recommended_design.designs
     nominals = {hp: d.plate for hp, d in designs.items()}
     stock = [t * MM for t in section["stock_hi_mm"] if design["hi_min_mm"] - 1e-9 <= t <= design["hi_max_mm"] + 1e-9]
     wavelengths = (design["wavelength_min_mm"] * MM, design["wavelength_max_mm"] * MM)

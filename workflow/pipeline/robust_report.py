@@ -127,7 +127,7 @@ def robust_section(context: RunContext, robust: RobustRecommendation) -> str:
         f"posterior-median plate; a robust design needs it more than {100 * settings.separation:g} % away. "
         f"{robust.evaluations} FEM evaluations."
     )
-    built = context.results.get("built_calibration")
+    built = context.results.built_calibration
     if built is not None:
         text.append(_calibration_state(built.calibration))
     figures = step_figures(context, "built_calibration")

@@ -18,15 +18,62 @@ import numpy as np
 
 import instruments
 import workflow
+from workflow.damping.fit import DampingFit
 from workflow.errors import TactileError
 from workflow.execution.cache import EvaluationCache, content_key, package_directory, source_version
 from workflow.inputfiles import MAX_LOG_BYTES, read_input
+from workflow.models.fem import FemResult
+from workflow.optimise.maps import DesignMap, WidthSweep
+from workflow.optimise.problem import Optimum
+from workflow.optimise.robust import RobustDesign
 from workflow.pipeline.outputs import save_figure
+from workflow.pipeline.recommendation import Recommendation
 from workflow.progress import format_duration
 
 
 class StepError(TactileError):
     """A step of ``tactile run`` failed."""
+
+
+@dataclass
+class RunResults:
+    """What the run's steps returned, one field per step (its :attr:`Step.key`; None until the step ran or where it
+    was off).  Quantities in SI; units are applied where they are written (report, JSON).
+
+    Four result types are defined by modules that import this one, and are typed ``Any`` here: ``fem_optima``'s
+    ``FemOptima`` per h_p (:mod:`workflow.pipeline.steps`), ``built_calibration`` a ``BuiltCalibration`` and
+    ``robust_recommendation`` a ``RobustRecommendation`` (:mod:`workflow.pipeline.robust_recommendation`), the loop's
+    plates ``BuiltMeasurement`` (:mod:`workflow.pipeline.loop`).
+    """
+
+    logs: Optional[List[Path]] = None
+    """The interferometer logs fitted (the simulated campaign's, or --logs)."""
+    analytical_optima: Optional[Dict[float, Optimum]] = None
+    """The beam model's optimum at constant Q, per h_p [m]."""
+    damping_fit: Optional[DampingFit] = None
+    damped_design: Optional[tuple] = None
+    """(the designs with Q(v) and their posterior propagation, the damped maps)."""
+    fem_original: Optional[FemResult] = None
+    fem_responses: Optional[tuple] = None
+    """(frequency response, transient response) of the original plate."""
+    fem_optima: Optional[Dict[float, Any]] = None
+    recommended_design: Optional[Recommendation] = None
+    built_calibration: Any = None
+    robust_recommendation: Any = None
+    texture_rendering: Optional[dict] = None
+    """Per h_p: the design's texture rendering and electrical load."""
+    calibrated_designs: Optional[dict] = None
+    """Per h_p: the designs as --calibration predicts them."""
+    loop_first_plate: Any = None
+    loop_calibration: Optional[tuple] = None
+    """(the calibration on plate #1, the predicted frequency band of the re-design [Hz])."""
+    loop_redesign: Optional[RobustDesign] = None
+    loop_second_plate: Any = None
+    case_study: Optional[list] = None
+    """Each published plate calibrated on the other and predicted (a dict per direction)."""
+    analytical_maps: Optional[Dict[float, DesignMap]] = None
+    fem_maps: Optional[Dict[float, DesignMap]] = None
+    width_sweep: Optional[WidthSweep] = None
 
 
 @dataclass
@@ -56,7 +103,7 @@ class RunContext:
     out: Path
     scheduler: Optional[str] = None
     logs: List[Path] = field(default_factory=list)
-    results: Dict[str, Any] = field(default_factory=dict)
+    results: RunResults = field(default_factory=RunResults)
     timings: List[StepTiming] = field(default_factory=list)
     figures: Dict[str, FigureFile] = field(default_factory=dict)
     cache: Optional[EvaluationCache] = None
@@ -88,7 +135,7 @@ class Step:
     title : str
         Shown in the progress lines, the timings and the error message.
     key : str
-        Name of the result in ``context.results``.
+        Name of the result in ``context.results`` (a :class:`RunResults` field).
     compute : callable
         ``compute(context) -> result`` (no figures).
     figures : callable or None
@@ -103,6 +150,10 @@ class Step:
     compute: Callable[[RunContext], Any]
     figures: Optional[Callable[[RunContext, Any], None]] = None
     cacheable: bool = True
+
+    def __post_init__(self):
+        if self.key not in RunResults.__dataclass_fields__:
+            raise TypeError(f"step {self.title!r}: its key {self.key!r} is not a field of RunResults")
 
 
 @lru_cache(maxsize=256)
@@ -132,7 +183,7 @@ def _step_key(context: RunContext, step: Step) -> str:
         {
             "step": step.key,
             "config": context.config,
-            "logs": _digests(context.results.get("logs", [])),
+            "logs": _digests(context.results.logs or []),
             "built_plates": _digests(context.config.get("recommendation", {}).get("built_plates", [])),
             "code": [source_version(package_directory(workflow)), source_version(package_directory(instruments))],
         }
@@ -201,7 +252,7 @@ def run_steps(context: RunContext, steps: List[Step], stream=None) -> RunContext
         context.step = step.key
         try:
             result, cached, key = _compute(context, step)
-            context.results[step.key] = result
+            setattr(context.results, step.key, result)
             if step.figures is not None:
                 _write_files(context, step, result, key, cached)
         except StepError:

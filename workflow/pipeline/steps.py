@@ -64,7 +64,7 @@ def damping_fit(context: RunContext):
     from workflow.models.limits import LIMITS
 
     damping = context.config["damping"]
-    log = drop_short_sweeps(read_logs(context.results["logs"], damping["mixed_plates"]))
+    log = drop_short_sweeps(read_logs(context.results.logs, damping["mixed_plates"]))
     for warning in log.warnings:
         print(f"warning: {warning}", file=sys.stderr)
     forward = run_forward_model(damping, log)
@@ -84,7 +84,7 @@ def damping_fit(context: RunContext):
         n_walkers=damping["walkers"] or None,
         forward=forward,
         progress=True,
-        stated_noise=stated_noise(context.results["logs"]),
+        stated_noise=stated_noise(context.results.logs),
         mapper=partial(map_evaluations, scheduler=context.scheduler, description="laws sampled"),
     )
     if fit.warning:
@@ -112,7 +112,7 @@ def damping_fit_files(context: RunContext, fit) -> None:
     """The posterior, ``fit.json`` and the fit's figures under ``damping/``."""
     from workflow.pipeline.figures.damping import fit_figures
 
-    protect = {Path(path).resolve() for path in context.results["logs"]}
+    protect = {Path(path).resolve() for path in context.results.logs}
     files = write_fit(fit, context.out / "damping", figures=True, protect=protect)
     captions = {name: caption for name, (caption, _) in fit_figures(fit).items()}
     for path in files["figures"]:
@@ -124,7 +124,7 @@ def damped_design(context: RunContext):
     from workflow.optimise.damped import damped_maps, design_with_damping
 
     damping, design = context.config["damping"], context.config["design"]
-    posterior = context.results["damping_fit"].answer
+    posterior = context.results.damping_fit.answer
     problems = design_problems(context.config)
     target = design["target_deflection_um"] * UM
     result = design_with_damping(
@@ -185,7 +185,7 @@ def fem_responses(context: RunContext):
     """Frequency response around the working mode and the switch-on transient of the original plate."""
     from workflow.models.fem.responses import frequency_response, transient_response
 
-    result, q = context.results["fem_original"], context.config["design"]["q"]
+    result, q = context.results.fem_original, context.config["design"]["q"]
     return frequency_response(result, q), transient_response(result, q)
 
 
@@ -249,12 +249,12 @@ def recommended_design(context: RunContext):
     )
 
     damping, design = context.config["damping"], context.config["design"]
-    posterior = context.results["damping_fit"].answer
+    posterior = context.results.damping_fit.answer
     draws = posterior.draws(damping["posterior_draws"], damping["seed"])
     target = design["target_deflection_um"] * UM
-    fem_optima = context.results.get("fem_optima", {})
-    beam_optima = context.results["analytical_optima"]
-    damped, _ = context.results["damped_design"]
+    fem_optima = context.results.fem_optima or {}
+    beam_optima = context.results.analytical_optima
+    damped, _ = context.results.damped_design
     designs = {}
     for hp, problem in design_problems(context.config).items():
         if hp in fem_optima:
@@ -266,9 +266,9 @@ def recommended_design(context: RunContext):
         else:
             designs[hp] = beam_recommendation(damped.optima[hp].damped.plate, problem, draws, target)
     original = None
-    if "fem_original" in context.results:
+    if context.results.fem_original is not None:
         (problem,) = design_problems(context.config, [ORIGINAL_PLATE.ceramic_thickness / MM]).values()
-        original = fem_recommendation(context.results["fem_original"], build_plate(context.config), problem, draws, target)
+        original = fem_recommendation(context.results.fem_original, build_plate(context.config), problem, draws, target)
     return Recommendation(
         designs=designs,
         original=original,
@@ -306,12 +306,12 @@ def texture_rendering(context: RunContext) -> dict:
     from workflow.pipeline.design_rendering import design_rendering
 
     config = context.config
-    fit = context.results["damping_fit"]
+    fit = context.results.damping_fit
     law = fit.answer.median_law()
     softening = parameter_summary(fit.best).get("kappa", {}).get("median", 0.0)
     accuracy = "accuracy" if config["fem"]["piezo"] == "coupled" else "survey_accuracy"
     coupled = fem_model(context, settings=replace(fem_settings(config, accuracy), piezo="coupled"))
-    designs = context.results["recommended_design"].designs
+    designs = context.results.recommended_design.designs
     results = coupled.evaluate_plates([design.plate for design in designs.values()])
     levels = (MIN_USEFUL_DEFLECTION, config["design"]["target_deflection_um"] * UM)
     limit = config["simulator"]["ceramic_voltage_limit_v"]
@@ -339,7 +339,7 @@ def calibrated_designs(context: RunContext) -> dict:
     calibration = load_calibration(context.calibration)
     model = replace(fem_model(context, settings=calibration_accuracy(calibration.fem)), scheduler="synchronous",
                     progress=False)
-    designs = context.results["recommended_design"].designs
+    designs = context.results.recommended_design.designs
     return {hp: {"nominal_f_r_khz": d.frequency / KHZ,
                  **calibrated_record(calibration, d.plate, model.design_fem(), str(context.calibration))}
             for hp, d in designs.items()}
@@ -352,7 +352,7 @@ def analytical_maps(context: RunContext):
 
     design = context.config["design"]
     model = analytical_model(design["q"], design["voltage_v"])
-    optima = context.results["analytical_optima"]
+    optima = context.results.analytical_optima
     return {
         hp: design_map(model, problem, context.config["maps"]["grid"], "analytical", optima[hp])
         for hp, problem in design_problems(context.config).items()
@@ -364,7 +364,7 @@ def fem_maps(context: RunContext):
     from workflow.optimise.maps import design_map
 
     problems = design_problems(context.config, context.config["maps"]["fem_ceramic_thicknesses_mm"])
-    optima = context.results.get("fem_optima", {})
+    optima = context.results.fem_optima or {}
     model = fem_model(context, accuracy="survey_accuracy")
     return {
         hp: design_map(
