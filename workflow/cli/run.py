@@ -39,7 +39,8 @@ def register(subparsers) -> None:
                         "is then robust under that calibration (default: the configuration's [recommendation] "
                         "built_plates, none)")
     parser.add_argument("--scheduler", help="tcp://host:port of a Dask scheduler (default: local cores)")
-    parser.add_argument("--print-config", action="store_true", help="print the effective configuration (each key with its unit and what it sets) and exit")
+    parser.add_argument("--print-config", action="store_true",
+                        help="print the effective configuration (each key with its unit and what it sets) and exit")
     add_fem_options(parser, overrides=True)
     add_mixed_plates_option(parser, overrides=True)
     add_calibration_option(parser)
