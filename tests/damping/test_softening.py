@@ -1,6 +1,8 @@
 """Softening and drift: the branch-following solve, their recovery by the fit, and the measurement point on the mode."""
 
 import json
+from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 import pytest
@@ -11,7 +13,7 @@ from workflow.damping.fit import fit_law, map_fit, parameter_summary
 from workflow.damping.harmonic import single_valued, softened_amplitudes, softened_resonance
 from workflow.damping.laws import QuadraticLoss
 from workflow.damping.likelihood import ForwardModel, log_probability
-from workflow.damping.logs import read_logs
+from workflow.damping.logs import drop_short_sweeps, read_logs
 from workflow.damping.mode_shape import BeamMode, effective_velocity, measurement_factor, modal_law
 from workflow.damping.synthetic import TRUE_LAW, simulate_campaign
 from workflow.errors import InputFileError
@@ -153,3 +155,59 @@ def test_warm_started_solves_give_the_cold_log_probability(softening):
         cold = log_probability(walkers, data)
         assert np.all(np.isfinite(cold))
         assert np.allclose(log_probability(walkers, data, warm), cold, rtol=1e-9, atol=1e-6), spread
+
+
+def test_the_drift_rate_has_a_gaussian_prior_of_the_declared_scale():
+    from workflow.damping import likelihood
+
+    log = simulate_campaign(seed=7, softening=0.08, drift_rate=0.0)
+    data, theta, _, _ = map_fit(log, "quadratic", forward=ForwardModel(softening=True, drift=True))
+    column = data.layout.names.index("drift_rate")
+    moved = np.array(theta, dtype=float)
+    moved[column] += 1.0
+    step = likelihood.log_prior(moved, data.layout) - likelihood.log_prior(theta, data.layout)
+    expected = -0.5 * ((theta[column] + 1.0) ** 2 - theta[column] ** 2) / likelihood.DRIFT_SCALE**2
+    assert step == pytest.approx(expected, rel=1e-9) and expected < 0
+
+
+@dataclass(frozen=True)
+class _PowerLoss:
+    """1/Q = 1/Q0 + alpha |v|^p: a hidden truth none of the fit's laws contains."""
+
+    q0: float
+    alpha: float
+    p: float
+    name: ClassVar[str] = "power"
+
+    def quality_factor(self, velocity):
+        return 1.0 / (1.0 / self.q0 + self.alpha * np.abs(velocity) ** self.p)
+
+
+def test_noise_does_not_carry_the_drift_and_q_with_it_when_every_sweep_goes_up(tmp_path):
+    """Consistency check on the bench simulator (the coverage study's truth 24, seed 2029): a plate without drift,
+    its sweeps all upward.  Under the flat box prior the noise took the drift to +1.5 Hz/s and Q 2.2 % high with it
+    (the drift trades against the width); the drift's prior (DRIFT_SCALE) keeps both near the truth."""
+    truth = _PowerLoss(89.80380622853049, 0.27511537559035054, 2.3076803423304963)
+    settings = default_bench_settings(law=truth, drift_rate=0.0, softening=0.0, seed=1860608715)
+    path = tmp_path / "campaign.csv"
+    bench_campaign(path, settings=settings)
+    data, theta, _, _ = map_fit(drop_short_sweeps(read_logs([path])), "flexible", forward=ForwardModel(True, True, True))
+    velocity = np.array([0.05, 0.1, 0.15, 0.2])
+    error = data.layout.law(theta).quality_factor(velocity)[0] / truth.quality_factor(velocity) - 1
+    assert np.max(np.abs(error)) < 0.012, error
+    assert abs(data.layout.natural(theta)["drift_rate"][0]) < 0.7
+
+
+def test_the_band_says_a_drift_beyond_its_prior_is_not_in_it():
+    from types import SimpleNamespace
+
+    from workflow.damping.fit import band_contents
+
+    def fit(forward):
+        return SimpleNamespace(shares={"quadratic": 1.0}, best=SimpleNamespace(
+            data=SimpleNamespace(layout=SimpleNamespace(forward=forward))))
+
+    with_drift = band_contents(fit(ForwardModel(softening=True, drift=True, heating=True)))["does_not_contain"]
+    assert any("beyond its prior's scale (0.5 Hz/s" in item for item in with_drift)
+    without = band_contents(fit(ForwardModel(softening=True)))["does_not_contain"]
+    assert not any("prior's scale" in item for item in without)

@@ -27,6 +27,7 @@ from workflow.damping.comparison import CLOSE_DSE, CRITERION, LawComparison, ans
 from workflow.damping.inference_data import law_inference_data, loo_draws
 from workflow.damping.laws import LAWS, SAMPLED_LAWS, MonotoneSpline, ThresholdLoss, parameter_names
 from workflow.damping.likelihood import (
+    DRIFT_SCALE,
     FitData,
     ForwardModel,
     ParameterLayout,
@@ -752,6 +753,9 @@ def band_contents(fit: DampingFit) -> dict:
                 "outside the band: docs/damping.md#coverage-over-truths-the-fit-does-not-contain)"]),
             *(["the plate's cooling within a sweep (the heating term counts the energy dissipated since the sweep "
                "began; the drift rate takes up a steady cooling)"] if forward.heating else []),
+            *([f"a drift of the resonance well beyond its prior's scale ({DRIFT_SCALE:g} Hz/s, the plate's temperature "
+               "changing by about 7 K a minute): with every sweep in one direction such a drift is partly taken for Q "
+               "(campaigns with alternating sweeps tell them apart)"] if forward.drift else []),
             "a measurement point or a velocity calibration other than the logs say",
         ],
     }

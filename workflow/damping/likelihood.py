@@ -101,6 +101,13 @@ MAX_DRIFT_SHARE = 0.1
 moving by more than a tenth of the span while it is swept leaves no curve to fit, and near the sweep rate the drift
 trades against Q (a synthetic campaign without drift, its four sweeps upward, gave Q0 100 [83, 121] for a true 150
 with the bound at the full rate)."""
+DRIFT_SCALE = 0.5
+"""Scale of the drift rate's Gaussian prior, beta ~ N(0, DRIFT_SCALE^2) inside its box [Hz/s].  A drift of the
+resonance within a sweep that the plate's own heating does not explain is the bench's surroundings: CuBe's frequency
+falls by about 4 Hz/K at 25 kHz, so 0.5 Hz/s is the plate's temperature changing by 7 K a minute, far beyond a lab's
+(the heating term follows the plate's own).  With every sweep in one direction the drift trades against Q and is
+hardly identified (its 90 % interval about +-1 Hz/s on the bench's campaigns); under the flat box prior the noise
+alone could then carry it to 1-1.5 Hz/s and Q 2 % with it (docs/damping.md, "Softening and drift within a sweep")."""
 Q0_RANGE = (1.0, 1e5)
 """Prior range of Q0 [-]."""
 GAIN_RANGE = (1e-15, 1e-3)
@@ -607,15 +614,18 @@ def in_prior(theta, data: FitData) -> np.ndarray:
 
 
 def log_prior(theta, layout: ParameterLayout) -> np.ndarray:
-    """ln of the prior's non-flat part, shape (W,): the flexible law's random walk on its slopes."""
+    """ln of the prior's non-flat part, shape (W,): the drift rate's Gaussian (:data:`DRIFT_SCALE`) and the flexible
+    law's random walk on its slopes."""
     theta = np.atleast_2d(theta)
+    drift = (-0.5 * np.square(theta[:, layout.names.index("drift_rate")] / DRIFT_SCALE)
+             if "drift_rate" in layout.names and DRIFT_SCALE else np.zeros(len(theta)))
     if layout.law_name != MonotoneSpline.name:
-        return np.zeros(len(theta))
+        return drift
     increments = theta[:, [layout.names.index(name) for name in MonotoneSpline.INCREMENTS]]
     fixed = dict(layout.fixed)
     squared = np.square(MonotoneSpline.knots(fixed["v_top"], fixed["v_first"]))
     slopes = increments / np.diff(squared) * fixed["v_top"] ** 2  # of 1/Q in (v / v_top)^2
-    return -0.5 * np.sum(np.square(np.diff(slopes, axis=1) / RANDOM_WALK_SCALE), axis=1)
+    return drift - 0.5 * np.sum(np.square(np.diff(slopes, axis=1) / RANDOM_WALK_SCALE), axis=1)
 
 
 def log_probability(theta, data: FitData, warm: Optional[WarmStarts] = None) -> np.ndarray:
