@@ -39,7 +39,9 @@ def loo_draws(chain: np.ndarray, log_prob: np.ndarray, data: FitData):
     n_steps, n_walkers, _ = chain.shape
     keep = np.unique(np.linspace(0, n_steps - 1, max(1, min(n_steps, MAX_DRAWS // n_walkers))).astype(int))
     chain, log_prob = chain[keep], log_prob[keep]
-    pointwise = pointwise_log_likelihood(chain.reshape(-1, chain.shape[-1]), data).reshape(len(keep), n_walkers, -1)
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):  # as the chain's own log-probability: the
+        # softened solve's root search may overflow on its way for a draw at the edge of the posterior
+        pointwise = pointwise_log_likelihood(chain.reshape(-1, chain.shape[-1]), data).reshape(len(keep), n_walkers, -1)
     return chain, log_prob, pointwise
 
 
