@@ -39,6 +39,7 @@ from instruments.procedures.simulated import simulate_campaign
 from instruments.simulator.bench import default_bench_settings
 from workflow.damping.fit import fit_damping, fit_summary
 from workflow.damping.logs import drop_short_sweeps, read_logs
+from workflow.damping.synthetic import PowerTruth
 from workflow.pipeline.damping_files import stated_noise
 
 FAMILIES = ("power", "threshold", "spline")
@@ -48,19 +49,6 @@ SPLINE_TOP = 0.4
 """Last knot of a spline truth, above every measured velocity [m/s]."""
 CAMPAIGN_GOALS = {"mean_coverage": 0.85, "campaign_coverage": 0.70, "campaign_share": 0.9, "median_width": 0.10}
 """Issue 29's goals: mean coverage, the coverage 9 campaigns in 10 must reach, that share, the band's median width."""
-
-
-@dataclass(frozen=True)
-class PowerTruth:
-    """1/Q = 1/Q0 + alpha |v|^p."""
-
-    q0: float
-    alpha: float
-    p: float
-    name: ClassVar[str] = "power"
-
-    def quality_factor(self, velocity):
-        return 1.0 / (1.0 / self.q0 + self.alpha * np.abs(velocity) ** self.p)
 
 
 @dataclass(frozen=True)

@@ -1,8 +1,6 @@
 """Softening and drift: the branch-following solve, their recovery by the fit, and the measurement point on the mode."""
 
 import json
-from dataclasses import dataclass
-from typing import ClassVar
 
 import numpy as np
 import pytest
@@ -15,7 +13,7 @@ from workflow.damping.laws import QuadraticLoss
 from workflow.damping.likelihood import ForwardModel, log_probability
 from workflow.damping.logs import drop_short_sweeps, read_logs
 from workflow.damping.mode_shape import BeamMode, effective_velocity, measurement_factor, modal_law
-from workflow.damping.synthetic import TRUE_LAW, simulate_campaign
+from workflow.damping.synthetic import TRUE_LAW, PowerTruth, simulate_campaign
 from workflow.errors import InputFileError
 
 STATIC = 1.42e-9 * 15
@@ -170,24 +168,11 @@ def test_the_drift_rate_has_a_gaussian_prior_of_the_declared_scale():
     assert step == pytest.approx(expected, rel=1e-9) and expected < 0
 
 
-@dataclass(frozen=True)
-class _PowerLoss:
-    """1/Q = 1/Q0 + alpha |v|^p: a hidden truth none of the fit's laws contains."""
-
-    q0: float
-    alpha: float
-    p: float
-    name: ClassVar[str] = "power"
-
-    def quality_factor(self, velocity):
-        return 1.0 / (1.0 / self.q0 + self.alpha * np.abs(velocity) ** self.p)
-
-
 def test_noise_does_not_carry_the_drift_and_q_with_it_when_every_sweep_goes_up(tmp_path):
     """Consistency check on the bench simulator (the coverage study's truth 24, seed 2029): a plate without drift,
     its sweeps all upward.  Under the flat box prior the noise took the drift to +1.5 Hz/s and Q 2.2 % high with it
     (the drift trades against the width); the drift's prior (DRIFT_SCALE) keeps both near the truth."""
-    truth = _PowerLoss(89.80380622853049, 0.27511537559035054, 2.3076803423304963)
+    truth = PowerTruth(89.80380622853049, 0.27511537559035054, 2.3076803423304963)
     settings = default_bench_settings(law=truth, drift_rate=0.0, softening=0.0, seed=1860608715)
     path = tmp_path / "campaign.csv"
     bench_campaign(path, settings=settings)

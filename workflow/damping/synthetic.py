@@ -10,7 +10,8 @@ vibrometer reads the velocity times |phi| at an off-antinode point.  Seeded: the
 arguments give the same rows.
 """
 
-from typing import Sequence
+from dataclasses import dataclass
+from typing import ClassVar, Sequence
 
 import numpy as np
 
@@ -21,6 +22,19 @@ from workflow.damping.logs import CampaignLog
 
 TRUE_LAW = QuadraticLoss(q0=150.0, alpha=0.234)
 """A glued-plate-like law: Q(0) = 150, Q = 54 near 0.225 m/s."""
+
+
+@dataclass(frozen=True)
+class PowerTruth:
+    """A hidden truth none of the fit's laws contains: 1/Q = 1/Q0 + alpha |v|^p (Q0 [-], alpha [(s/m)^p], p [-])."""
+
+    q0: float
+    alpha: float
+    p: float
+    name: ClassVar[str] = "power"
+
+    def quality_factor(self, velocity):
+        return 1.0 / (1.0 / self.q0 + self.alpha * np.abs(velocity) ** self.p)
 
 
 def simulate_campaign(
