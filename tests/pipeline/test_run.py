@@ -4,7 +4,6 @@ import contextlib
 import io
 import json
 import re
-import sys
 from pathlib import Path
 
 import pytest
@@ -14,16 +13,12 @@ from user_facing import HIDDEN_REFERENCE
 from workflow import progress
 from workflow.cli import main
 from workflow.errors import TactileError
+from workflow.inputfiles import tomllib
 from workflow.pipeline.figures import damping as damping_figures
 from workflow.pipeline.config import default_config
 from workflow.pipeline.outputs import RECORD
 from workflow.pipeline.steps import STEPS, sweep_widths
 from workflow.units import MM
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover - Python 3.10
-    import tomli as tomllib
 
 
 @pytest.fixture(scope="module")

@@ -93,15 +93,10 @@ def test_a_key_declared_in_one_place_is_read_checked_and_documented(monkeypatch)
 
 
 def test_print_config_says_what_each_key_is_and_reads_back(capsys):
-    import sys
-
     from workflow.cli import main
+    from workflow.inputfiles import tomllib
     from workflow.pipeline.config import to_toml
 
-    if sys.version_info >= (3, 11):
-        import tomllib
-    else:  # pragma: no cover - Python 3.10
-        import tomli as tomllib
     config = merge(default_config(), {"campaign": {"logs": ["run #1.csv"]}})
     text = to_toml(config, comments=True)
     assert tomllib.loads(text) == config

@@ -62,12 +62,17 @@ def bounded(kind, low, high, unit: str = ""):
 
 def limit_text(key: str, unit: str = "") -> str:
     """The accepted range of a :data:`~workflow.pipeline.config.LIMITS` key for --help, e.g. ``"0.001 to 1000 V"``."""
-    low, high = LIMITS[key]
+    return range_text(LIMITS[key], unit)
+
+
+def range_text(limits: tuple, unit: str = "") -> str:
+    """``(low, high)`` for --help, e.g. ``"0.001 to 1000 V"``."""
+    low, high = limits
     return f"{_number(low)} to {_number(high)}" + (f" {unit}" if unit else "")
 
 
 def _number(value) -> str:
-    return str(value) if isinstance(value, int) and not isinstance(value, bool) else f"{value:g}"
+    return str(value) if isinstance(value, int) else f"{value:g}"
 
 
 def seed_option(parser, default: int, help: str) -> None:
@@ -127,8 +132,7 @@ def key_option(parser: argparse.ArgumentParser, path: str, flag: str | None = No
     key = declared_key(path)
     unit = "" if key.declared.unit in ("", "-") else key.declared.unit
     if key.limits is not None:
-        kind = bounded(key.kind, *key.limits, unit)
-        accepted = f", {_number(key.limits[0])} to {_number(key.limits[1])}{f' {unit}' if unit else ''}"
+        kind, accepted = bounded(key.kind, *key.limits, unit), ", " + range_text(key.limits, unit)
     else:
         kind, accepted = (finite_float if key.kind is float else key.kind), f" [{unit}]" if unit else ""
     shown = _number(key.default) if isinstance(key.default, (int, float)) else key.default
@@ -202,8 +206,9 @@ def add_build_options(parser: argparse.ArgumentParser, overrides: bool = False) 
 
 BUILD_KEYS = ("design.ceramic", "design.resonator", "design.glue_um")
 """The configuration keys of the build options."""
-RUN_OVERRIDES = ("fem.accuracy", "fem.piezo", *BUILD_KEYS, "damping.mixed_plates")
-"""The configuration keys ``tactile run``'s options of the same names override."""
+RUN_OVERRIDES = {"fem.accuracy": "accuracy", "fem.piezo": "piezo", "design.ceramic": "ceramic",
+                 "design.resonator": "resonator", "design.glue_um": "glue_um", "damping.mixed_plates": "mixed_plates"}
+"""The configuration keys ``tactile run``'s options override -> the options' names in the parsed arguments."""
 
 
 def build_plate(args) -> Plate:
@@ -241,10 +246,10 @@ def add_fem_options(
 
 def override_config(config: dict, args) -> dict:
     """The run's configuration with the FEM, build and --mixed-plates options given on the command line."""
-    for path in RUN_OVERRIDES:
+    for path, option in RUN_OVERRIDES.items():
         section, name = path.split(".")
-        if getattr(args, name) is not None:
-            config[section][name] = getattr(args, name)
+        if getattr(args, option) is not None:
+            config[section][name] = getattr(args, option)
     return config
 
 

@@ -617,8 +617,8 @@ def log_prior(theta, layout: ParameterLayout) -> np.ndarray:
     """ln of the prior's non-flat part, shape (W,): the drift rate's Gaussian (:data:`DRIFT_SCALE`) and the flexible
     law's random walk on its slopes."""
     theta = np.atleast_2d(theta)
-    drift = (-0.5 * np.square(theta[:, layout.names.index("drift_rate")] / DRIFT_SCALE)
-             if "drift_rate" in layout.names and DRIFT_SCALE else np.zeros(len(theta)))
+    drift = (-0.5 * np.square(layout.column(theta, "drift_rate")[:, 0] / DRIFT_SCALE)
+             if "drift_rate" in layout.names else np.zeros(len(theta)))
     if layout.law_name != MonotoneSpline.name:
         return drift
     increments = theta[:, [layout.names.index(name) for name in MonotoneSpline.INCREMENTS]]

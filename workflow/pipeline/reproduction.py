@@ -1,6 +1,6 @@
 """The reproduction table: each figure of the source paper (:mod:`workflow.pipeline.paper`) beside ours.
 
-:func:`reproduce` takes the results of ``tactile run`` (keyed by step) and computes our
+:func:`reproduce` takes the results of ``tactile run`` (its ``RunResults``) and computes our
 value for every paper figure it can; figures whose step did not run are left out.  Each row
 says what kind of comparison it is: a *validation* (our value is computed without the paper's
 figure) or a *consistency check* (our value is set by an input taken from the paper, so
@@ -8,7 +8,7 @@ agreement only shows that the chain returns what went in).
 """
 
 from dataclasses import dataclass
-from typing import Dict, List, Optional
+from typing import List, Optional
 
 import numpy as np
 
@@ -55,7 +55,7 @@ class Reproduction:
 
 
 def reproduce(
-    results: Dict[str, object], voltage: float = materials.DESIGN_VOLTAGE, simulated_campaign: bool = True
+    results, voltage: float = materials.DESIGN_VOLTAGE, simulated_campaign: bool = True
 ) -> List[Reproduction]:
     """Our value of every paper figure the ``results`` allow, in the order of :data:`FIGURES`.
 

@@ -1,7 +1,7 @@
 """Running ``tactile run``'s steps: context, timing, progress, caching and failures.
 
 Each :class:`Step` computes ``compute(context) -> result`` from a :class:`RunContext`;
-results are kept by key for the steps after it and for the report.  A step that fails
+results are kept in :class:`RunResults`, one field per step, for the steps after it and for the report.  A step that fails
 stops the run with a :class:`StepError` naming the step and the reason.  The steps
 themselves are in :mod:`workflow.pipeline.steps`.
 """
@@ -12,23 +12,26 @@ import time
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Optional
+from typing import TYPE_CHECKING, Any, Callable, Dict, List, Optional
 
 import numpy as np
 
 import instruments
 import workflow
-from workflow.damping.fit import DampingFit
 from workflow.errors import TactileError
 from workflow.execution.cache import EvaluationCache, content_key, package_directory, source_version
 from workflow.inputfiles import MAX_LOG_BYTES, read_input
-from workflow.models.fem import FemResult
-from workflow.optimise.maps import DesignMap, WidthSweep
-from workflow.optimise.problem import Optimum
-from workflow.optimise.robust import RobustDesign
 from workflow.pipeline.outputs import save_figure
-from workflow.pipeline.recommendation import Recommendation
 from workflow.progress import format_duration
+
+
+if TYPE_CHECKING:  # result types only: importing them here would load the fit and the FEM with the runner
+    from workflow.damping.fit import DampingFit
+    from workflow.models.fem import FemResult
+    from workflow.optimise.maps import DesignMap, WidthSweep
+    from workflow.optimise.problem import Optimum
+    from workflow.optimise.robust import RobustDesign
+    from workflow.pipeline.recommendation import Recommendation
 
 
 class StepError(TactileError):
@@ -48,16 +51,16 @@ class RunResults:
 
     logs: Optional[List[Path]] = None
     """The interferometer logs fitted (the simulated campaign's, or --logs)."""
-    analytical_optima: Optional[Dict[float, Optimum]] = None
+    analytical_optima: Optional[Dict[float, "Optimum"]] = None
     """The beam model's optimum at constant Q, per h_p [m]."""
-    damping_fit: Optional[DampingFit] = None
+    damping_fit: Optional["DampingFit"] = None
     damped_design: Optional[tuple] = None
     """(the designs with Q(v) and their posterior propagation, the damped maps)."""
-    fem_original: Optional[FemResult] = None
+    fem_original: Optional["FemResult"] = None
     fem_responses: Optional[tuple] = None
     """(frequency response, transient response) of the original plate."""
     fem_optima: Optional[Dict[float, Any]] = None
-    recommended_design: Optional[Recommendation] = None
+    recommended_design: Optional["Recommendation"] = None
     built_calibration: Any = None
     robust_recommendation: Any = None
     texture_rendering: Optional[dict] = None
@@ -67,13 +70,13 @@ class RunResults:
     loop_first_plate: Any = None
     loop_calibration: Optional[tuple] = None
     """(the calibration on plate #1, the predicted frequency band of the re-design [Hz])."""
-    loop_redesign: Optional[RobustDesign] = None
+    loop_redesign: Optional["RobustDesign"] = None
     loop_second_plate: Any = None
     case_study: Optional[list] = None
     """Each published plate calibrated on the other and predicted (a dict per direction)."""
-    analytical_maps: Optional[Dict[float, DesignMap]] = None
-    fem_maps: Optional[Dict[float, DesignMap]] = None
-    width_sweep: Optional[WidthSweep] = None
+    analytical_maps: Optional[Dict[float, "DesignMap"]] = None
+    fem_maps: Optional[Dict[float, "DesignMap"]] = None
+    width_sweep: Optional["WidthSweep"] = None
 
 
 @dataclass

@@ -82,8 +82,8 @@ class DesignSection:
     """[design]: the design problem; defaults to Table 1 (:mod:`workflow.models.materials`)."""
 
     ceramic_thicknesses_mm: tuple[float, ...] = setting(
-        factory=lambda: tuple(_mm(t) for t in materials.CERAMIC_THICKNESSES), unit="mm",
-        help="ceramic thicknesses h_p the design is optimised for", choices=CERAMIC_CHOICES, not_empty=True)
+        CERAMIC_CHOICES, unit="mm", help="ceramic thicknesses h_p the design is optimised for", choices=CERAMIC_CHOICES,
+        not_empty=True)
     wavelength_min_mm: float = setting(factory=lambda: _mm(materials.WAVELENGTH_RANGE[0]), unit="mm",
                                        help="shortest wavelength lambda of the design box")
     wavelength_max_mm: float = setting(factory=lambda: _mm(materials.WAVELENGTH_RANGE[1]), unit="mm",
@@ -99,13 +99,12 @@ class DesignSection:
                                        help="lowest resonance frequency a design may have")
     target_deflection_um: float = setting(factory=lambda: round(materials.TARGET_DEFLECTION / UM, 9), unit="µm",
                                           help="deflection the damped design's voltage is solved for")
-    q: float = setting(factory=lambda: materials.PLATE_Q, unit="-", help="plate quality factor (constant Q)",
-                       limits="q")
+    q: float = setting(factory=lambda: materials.PLATE_Q, unit="-", help="plate quality factor (constant Q)")
     ceramic: str = setting(factory=lambda: materials.PAPER, choices=materials.ceramic_names(),
                            help="piezo-ceramic material record (docs/model.md; paper: Table 1 of the paper)")
     resonator: str = setting(factory=lambda: materials.PAPER, choices=materials.resonator_names(),
                              help="resonator material record (paper: the paper's CuBe)")
-    glue_um: float = setting(0.0, unit="µm", limits="glue_um", help=(
+    glue_um: float = setting(0.0, unit="µm", help=(
         f"epoxy bond under each ceramic (0: none, as in the paper); the FEM models it as a layer "
         f"(E {materials.EPOXY.youngs_modulus / 1e9:g} GPa, nu {materials.EPOXY.poisson_ratio:g}, "
         f"{materials.EPOXY.density:g} kg/m^3), the beam model ignores it"))
@@ -272,15 +271,14 @@ def _drift_rate():
 
 @dataclass(frozen=True)
 class _SimulatorKeys:
-    low_velocity_q: float = setting(factory=_low_velocity_q, unit="-", help="simulated plate's Q at low velocity",
-                                    limits="q")
+    low_velocity_q: float = setting(factory=_low_velocity_q, unit="-", help="simulated plate's Q at low velocity")
     working_q: float = setting(factory=lambda: materials.PLATE_Q, unit="-",
-                               help="simulated plate's Q at the working velocity", limits="q")
+                               help="simulated plate's Q at the working velocity")
     drift_hz_per_s: float = setting(factory=_drift_rate, unit="Hz/s", help="drift of the simulated resonance")
     softening_s2_m2: float = setting(RUN_SOFTENING, unit="s²/m²",
-                                     help="amplitude softening kappa of the simulated plate", limits="softening_s2_m2")
+                                     help="amplitude softening kappa of the simulated plate")
     amplifier_gain: float = setting(factory=lambda: float(_bench("amplifier_gain")), unit="V/V",
-                                    help="simulated power amplifier's gain", limits="amplifier_gain")
+                                    help="simulated power amplifier's gain")
     ceramic_voltage_limit_v: float = setting(factory=lambda: float(_bench("ceramic_voltage_limit")), unit="V",
                                              help="amplifier's limit of the voltage across the ceramics")
     relative_noise: float = setting(factory=lambda: _bench("relative_noise"), unit="-",
