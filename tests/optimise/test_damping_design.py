@@ -158,3 +158,23 @@ def test_design_summary_is_json_and_in_display_units():
     assert optimum["h_p_mm"] == 1.0
     assert 15 <= optimum["q_of_v"]["lambda_mm"] <= 40 and optimum["q_of_v"]["f_r_khz"] >= 25 * (1 - 1e-6)
     assert optimum["q_of_v_intervals"]["required_voltage_v"]["p05"] <= optimum["q_of_v_intervals"]["required_voltage_v"]["p95"]
+
+
+def test_stacked_single_plate_responses_are_the_batched_response():
+    """The FEM's maps go through StackedResponse (one response per geometry); on the beam model, stacking the
+    scalar responses of a grid must give the vectorised batch's deflections and voltages, draws axis included."""
+    from workflow.models.response import StackedResponse
+    from workflow.optimise.fem_model import scalar_plates
+
+    problem = DesignProblem(ceramic_thickness=1e-3)
+    plate = problem.plate(np.linspace(20e-3, 30e-3, 3)[:, None], np.linspace(0.5e-3, 2e-3, 4)[None, :])
+    batch = beam_response(plate, 15.0)
+    stacked = StackedResponse(tuple(beam_response(p, 15.0) for p in scalar_plates(plate)), plate.batch_shape)
+    law = _posterior().median_law()
+    drawn = _posterior().draws(7)
+    on_axis = type(drawn)(**{k: np.reshape(v, (-1, 1, 1)) for k, v in vars(drawn).items()})
+    np.testing.assert_allclose(stacked.frequency, batch.frequency, rtol=1e-15)
+    np.testing.assert_allclose(damped_deflection(stacked, law), damped_deflection(batch, law), rtol=1e-11)
+    stacked_voltages = required_voltage(stacked, on_axis)
+    assert stacked_voltages.shape == (7, 3, 4)
+    np.testing.assert_allclose(stacked_voltages, required_voltage(batch, on_axis), rtol=1e-12)

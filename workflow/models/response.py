@@ -11,6 +11,8 @@ self-consistent deflection with Q(v) and the voltage for a target deflection are
 from dataclasses import dataclass
 from typing import Protocol
 
+import numpy as np
+
 
 class PlateResponse(Protocol):
     """The working mode of one plate (or a batch, as arrays) at a drive voltage.
@@ -61,3 +63,41 @@ class ScaledResponse:
 
     def deflection_at_q(self, q):
         return self.scale * self.response.deflection_at_q(q)
+
+
+@dataclass(frozen=True)
+class StackedResponse:
+    """Single-geometry responses of a batch of plates (e.g. the FEM's results, one per geometry) as one batched
+    response, so that what is written for the beam model's arrays applies to them unchanged.
+
+    Attributes
+    ----------
+    responses : tuple of PlateResponse
+        One per geometry, in C order of ``shape``, all at the same voltage.
+    shape : tuple
+        The batch's shape (the plates' ``batch_shape``).
+    """
+
+    responses: tuple
+    shape: tuple
+
+    @property
+    def frequency(self):
+        return np.reshape([r.frequency for r in self.responses], self.shape)
+
+    @property
+    def voltage(self) -> float:
+        return self.responses[0].voltage
+
+    @property
+    def error(self):
+        return None
+
+    def deflection_at_q(self, q):
+        """Each geometry's deflection at its own Q [m]: ``q`` broadcasts against the batch's shape, which takes its
+        trailing axes (leading axes, e.g. posterior draws, are passed to every response as a vector)."""
+        q = np.asarray(q, dtype=float)
+        full = np.broadcast_shapes(q.shape, self.shape)
+        per_geometry = np.broadcast_to(q, full).reshape(full[: len(full) - len(self.shape)] + (-1,))
+        return np.stack([np.asarray(r.deflection_at_q(per_geometry[..., i]), dtype=float)
+                         for i, r in enumerate(self.responses)], axis=-1).reshape(full)

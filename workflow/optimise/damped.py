@@ -19,7 +19,8 @@ V* = V_0 w* / D(Q(v*)), D the deflection at V_0 as a function of Q, linear in V)
 """
 
 from dataclasses import dataclass, replace
-from typing import Dict, Optional, Sequence
+from functools import partial
+from typing import Callable, Dict, Optional, Sequence
 
 import numpy as np
 
@@ -28,8 +29,7 @@ from workflow.damping.laws import POSTERIOR_LAWS, law_parameters
 from workflow.damping.posterior import DampingPosterior
 from workflow.models import analytical, materials
 from workflow.models.plate import ORIGINAL_PLATE, Plate
-from workflow.models.response import PlateResponse, ScaledResponse
-from workflow.optimise.fem_optimum import optimise_fem
+from workflow.models.response import PlateResponse, ScaledResponse, StackedResponse
 from workflow.optimise.maps import grid_axes
 from workflow.optimise.problem import DesignProblem, Optimum, PlateModel, maximise_deflection
 
@@ -99,13 +99,10 @@ class DampedFemModel:
 
     def responses(self, plate: Plate):
         """Deflection with Q(v) [m], frequency [Hz] and transverse indicator [-] of each plate's best mode."""
-        results = self.results(plate)
-        shape = plate.batch_shape
-        scale = self.voltage / self.fem_model.voltage
-        deflection = np.array([float(damped_deflection(ScaledResponse(r, scale), self.law)) for r in results])
-        frequency = np.array([r.frequency for r in results])
-        indicator = np.array([r.best.transverse_indicator for r in results])
-        return deflection.reshape(shape), frequency.reshape(shape), indicator.reshape(shape)
+        results = tuple(self.results(plate))
+        response = ScaledResponse(StackedResponse(results, plate.batch_shape), self.voltage / self.fem_model.voltage)
+        indicator = np.reshape([r.best.transverse_indicator for r in results], plate.batch_shape)
+        return damped_deflection(response, self.law), response.frequency, indicator
 
     def __call__(self, plate: Plate):
         return self.responses(plate)[:2]
@@ -316,44 +313,44 @@ def damped_maps(
     seed: int = 0,
     target: float = materials.TARGET_DEFLECTION,
     optimum: Optional[Optimum] = None,
+    response: Optional[Callable[[Plate], PlateResponse]] = None,
+    model_label: str = "beam model",
 ) -> DampedMaps:
-    """Deflection and required-voltage maps with Q(v) over the problem's (lambda, h_i) box.
+    """Deflection and required-voltage maps with Q(v) over the problem's (lambda, h_i) box, for any plate model.
 
-    The whole grid is one vectorised solve; the posterior draws add an axis.
+    Parameters
+    ----------
+    response : callable or None
+        Batch of plates -> its :class:`~workflow.models.response.PlateResponse` at ``problem.voltage`` (the FEM's
+        :meth:`~workflow.optimise.fem_model.FemModel.response`); None: the beam model, one vectorised solve.
+    model_label : str
+        How the figure's title names the model.
+
+    The posterior draws add a leading axis to the grid (the FEM: each point's modal response evaluated for every
+    draw's Q, without a new solve).
     """
-    from workflow.models.materials import RESONATOR_THICKNESS_RANGE
-
-    wavelength = np.linspace(*problem.wavelength_range, grid)
-    thickness = np.linspace(RESONATOR_THICKNESS_RANGE[0], problem.max_resonator_thickness, grid)
-    response = analytical.beam_response(problem.plate(wavelength[:, None], thickness[None, :]), problem.voltage)
+    if response is None:
+        response = partial(analytical.beam_response, voltage=problem.voltage)
+    wavelength, thickness = grid_axes(problem, grid)
+    at = response(problem.plate(wavelength[:, None], thickness[None, :]))
     median = posterior.median_law()
     interval = None
     if draws:
         drawn = posterior.draws(draws, seed)
         on_axis = POSTERIOR_LAWS[posterior.law_name](**{k: np.reshape(v, (-1, 1, 1)) for k, v in law_parameters(drawn).items()})
-        interval = np.quantile(required_voltage(response, on_axis, target), QUANTILES, axis=0)
-    return _damped_maps(
-        problem,
-        optimum,
-        "beam model, " + _law_label(posterior, median),
+        interval = np.quantile(required_voltage(at, on_axis, target), QUANTILES, axis=0)
+    return DampedMaps(
         wavelength=wavelength,
         resonator_thickness=thickness,
-        deflection=damped_deflection(response, median),
-        frequency=np.broadcast_to(response.frequency, (grid, grid)),
-        required_voltage=required_voltage(response, median, target),
+        deflection=damped_deflection(at, median),
+        frequency=np.broadcast_to(at.frequency, (grid, grid)),
+        required_voltage=required_voltage(at, median, target),
         required_voltage_interval=interval,
-    )
-
-
-def _damped_maps(problem: DesignProblem, optimum, law_label: str, **grids) -> "DampedMaps":
-    """:class:`DampedMaps` from its grids and the problem's limits."""
-    return DampedMaps(
-        **grids,
         ceramic_thickness=problem.ceramic_thickness,
         min_frequency=problem.min_frequency,
         min_resonator_thickness=problem.min_resonator_thickness,
         optimum=optimum,
-        law_label=law_label,
+        law_label=f"{model_label}, " + _law_label(posterior, median),
     )
 
 
@@ -414,55 +411,6 @@ def design_summary(design: DampedDesign) -> dict:
 def damped_optimum(law, problem: DesignProblem) -> Optimum:
     """The beam optimum with the Q(v) ``law`` solved self-consistently at ``problem.voltage``."""
     return maximise_deflection(damped_beam_model(law, problem.voltage), problem)
-
-
-def damped_fem_optimum(law, problem: DesignProblem, fem_model, method: str):
-    """The FEM optimum with the Q(v) ``law``, and the FEM result of its geometry.
-
-    The fine model is the FEM with Q(v) solved self-consistently on each geometry's best
-    mode; the coarse model (space mapping, and the direct run's start) is the beam model
-    with the same law.  ``fem_model`` evaluates at ``problem.voltage``.
-
-    Returns
-    -------
-    (FemOptimum, FemResult)
-    """
-    fine = DampedFemModel(law, fem_model, problem.voltage)
-    found = optimise_fem(problem, fine, method, coarse_model=damped_beam_model(law, problem.voltage))
-    (result,) = fem_model.results(found.optimum.plate)
-    return found, result
-
-
-def fem_damped_maps(posterior: DampingPosterior, problem: DesignProblem, fem_model, points: int, draws: int = 100,
-                    optimum=None) -> "DampedMaps":
-    """FEM maps with Q(v) over the Table 1 (lambda, h_i) box, like :func:`damped_maps`.
-
-    Each grid point's best mode (picked at ``fem_model.q``) gets its deflection at
-    ``fem_model.voltage`` solved self-consistently with the posterior-median Q(v), and the
-    voltage for the target deflection (median law, and p05/p50/p95 over ``draws`` posterior
-    draws), from the cached FEM results without new solves.
-    """
-    wavelength, thickness = grid_axes(points)
-    results = fem_model.results(problem.plate(*np.meshgrid(wavelength, thickness, indexing="ij")))
-    law, drawn = posterior.median_law(), posterior.draws(draws)
-    shape = (points, points)
-
-    def grid(values):
-        return np.reshape(np.array(values, dtype=float), shape + np.shape(values)[1:])
-
-    return _damped_maps(
-        problem,
-        optimum,
-        "FEM, " + _law_label(posterior, law),
-        wavelength=wavelength,
-        resonator_thickness=thickness,
-        deflection=grid([damped_deflection(r, law) for r in results]),
-        frequency=grid([r.frequency for r in results]),
-        required_voltage=grid([required_voltage(r, law) for r in results]),
-        required_voltage_interval=np.moveaxis(
-            grid([np.quantile(required_voltage(r, drawn), QUANTILES) for r in results]), -1, 0
-        ),
-    )
 
 
 def map_draws(points: int) -> int:

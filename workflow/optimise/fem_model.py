@@ -24,6 +24,7 @@ from workflow.models.fem.accuracy import FemAccuracy, FemLevel
 from workflow.models.fem.sensitivity import DESIGN_PARAMETERS, best_mode_gradients, evaluate_fem_with_tangents
 from workflow.models.fem.surface import SurfaceModes, evaluate_surface
 from workflow.models.plate import Plate
+from workflow.models.response import PlateResponse, ScaledResponse, StackedResponse
 
 FEM_SOURCE = package_directory(fem)
 """Directory whose sources version the cached FEM results."""
@@ -149,6 +150,12 @@ class FemModel:
             and h_i (``FemResult.tangents``; about 1.7 times the cost, cached separately).
         """
         return self.evaluate_plates(scalar_plates(plate), with_tangents)
+
+    def response(self, plate: Plate, voltage: float | None = None) -> PlateResponse:
+        """The working modes of a batch of plates as one batched :class:`~workflow.models.response.PlateResponse`
+        (each geometry's best mode), at ``voltage`` [V peak] (default: the model's)."""
+        batch = StackedResponse(tuple(self.results(plate)), plate.batch_shape)
+        return batch if voltage is None else ScaledResponse(batch, voltage / self.voltage)
 
     def evaluate_plates(self, plates: list[Plate], with_tangents: bool = False) -> list[FemResult]:
         """The full FEM result of each scalar plate of a list (materials and bond may differ between them)."""

@@ -56,9 +56,11 @@ class DesignMap:
     optimum: Optional[Optimum] = None
 
 
-def grid_axes(points: int) -> Tuple[np.ndarray, np.ndarray]:
-    """``points`` values of lambda and of h_i spanning Table 1's ranges [m]."""
-    return np.linspace(*materials.WAVELENGTH_RANGE, points), np.linspace(*materials.RESONATOR_THICKNESS_RANGE, points)
+def grid_axes(problem: DesignProblem, points: int) -> Tuple[np.ndarray, np.ndarray]:
+    """``points`` values of lambda and of h_i spanning the problem's box [m] (h_i from Table 1's lowest, below the
+    practical minimum, so that the map shows what the minimum excludes; by default Table 1's ranges)."""
+    return (np.linspace(*problem.wavelength_range, points),
+            np.linspace(materials.RESONATOR_THICKNESS_RANGE[0], problem.max_resonator_thickness, points))
 
 
 def design_map(
@@ -70,7 +72,7 @@ def design_map(
     ``results`` (plate -> FEM results, the FEM's :meth:`~workflow.optimise.fem_model.FemModel.results`) gives the
     values and the modes of every point instead of ``model``.
     """
-    wavelength, thickness = grid_axes(points)
+    wavelength, thickness = grid_axes(problem, points)
     grid_wavelength, grid_thickness = np.meshgrid(wavelength, thickness, indexing="ij")
     plate = problem.plate(grid_wavelength, grid_thickness)
     modes = None

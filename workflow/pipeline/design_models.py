@@ -8,28 +8,17 @@ the beam; space mapping or NLopt on the FEM); both give their working mode as a
 """
 
 from dataclasses import dataclass
+from functools import partial
 from typing import Any, Optional
 
 from workflow.models import analytical
 from workflow.models.plate import Plate
-from workflow.optimise.damped import (
-    DampedMaps,
-    damped_fem_optimum,
-    damped_maps,
-    damped_optimum,
-    fem_damped_maps,
-)
+from workflow.models.response import PlateResponse
+from workflow.optimise.damped import DampedFemModel, DampedMaps, damped_beam_model, damped_maps, damped_optimum
 from workflow.optimise.fem_optimum import optimise_fem
 from workflow.optimise.maps import DesignMap, design_map
 from workflow.optimise.problem import DesignProblem, Optimum, PlateModel, analytical_model, optimise_analytical
-from workflow.pipeline.records import (
-    damped_optimum_record,
-    damping_record,
-    fem_accuracy_record,
-    fem_coupled_record,
-    fem_damping_record,
-    optimum_record,
-)
+from workflow.pipeline.records import damping_record, fem_accuracy_record, fem_coupled_record, optimum_record
 from workflow.units import KHZ, UM
 
 
@@ -49,8 +38,48 @@ class Evaluation:
     working_mode: Optional[int] = None
 
 
+class DesignModel:
+    """What the design models share: the optimum's record and the Q(v) design written once on each model's
+    :meth:`response` (its working mode as a :class:`~workflow.models.response.PlateResponse`) and :meth:`search`
+    (its optimiser, with constant Q or with a Q(v) law)."""
+
+    name: str
+    model_label: str
+    """How a figure's title names the model."""
+
+    def response(self, plate: Plate, voltage: float) -> PlateResponse:
+        """The working mode of ``plate`` (a batch) at ``voltage`` [V peak]."""
+        raise NotImplementedError
+
+    def search(self, problem: DesignProblem, law=None, method: str = "space-mapping") -> tuple[Optimum, dict]:
+        """(the optimum with the constant Q, or with the Q(v) ``law`` solved self-consistently, its record's extra
+        keys: evaluation counts, the accurate check)."""
+        raise NotImplementedError
+
+    def optimum(self, problem: DesignProblem) -> Optimum:
+        """The optimum with the constant Q."""
+        return self.search(problem)[0]
+
+    def optimum_record(self, problem: DesignProblem, posterior=None, method: str = "space-mapping") -> dict:
+        """The optimum's JSON keys (constant Q, or the posterior-median Q(v) and its keys), with the evaluation
+        counts and, for the FEM, the accurate check's error estimate."""
+        optimum, extra = self.search(problem, None if posterior is None else posterior.median_law(), method)
+        record = optimum_record(optimum, **extra)
+        if posterior is not None:
+            record.update(damping_record(posterior, self.response(optimum.plate, problem.voltage)))
+        return record
+
+    def damped(self, posterior, problem: DesignProblem, points: int, draws: int) -> tuple[Optimum, dict, DampedMaps]:
+        """(optimum, its Q(v) keys, the maps) with the posterior-median Q(v) on a points x points grid."""
+        optimum, _ = self.search(problem, posterior.median_law())
+        response = partial(self.response, voltage=problem.voltage)
+        maps = damped_maps(posterior, problem, points, draws=draws, optimum=optimum, response=response,
+                           model_label=self.model_label)
+        return optimum, damping_record(posterior, response(optimum.plate)), maps
+
+
 @dataclass(frozen=True)
-class BeamDesignModel:
+class BeamDesignModel(DesignModel):
     """The calibrated beam model with constant Q (docs/model.md): analytical, vectorised, no discretisation error."""
 
     q: float
@@ -58,6 +87,7 @@ class BeamDesignModel:
     name = "analytical"
     label = "analytical"
     """How help texts name it."""
+    model_label = "beam model"
     default_grid = 81
     """Points per axis of a map (a vectorised evaluation: fine grids cost nothing)."""
     resolves_width = False
@@ -74,45 +104,34 @@ class BeamDesignModel:
     def plate_model(self) -> PlateModel:
         return analytical_model(self.q, self.voltage)
 
+    def response(self, plate: Plate, voltage: float) -> PlateResponse:
+        return analytical.beam_response(plate, voltage)
+
     def evaluate(self, plate: Plate, posterior=None) -> Evaluation:
         record = {"w_dyn_um": float(analytical.dynamic_deflection(plate, self.voltage, self.q)) / UM,
                   "f_r_khz": float(analytical.resonance_frequency(plate)) / KHZ}
         if posterior is not None:
-            record.update(damping_record(posterior, plate, self.voltage))
+            record.update(damping_record(posterior, self.response(plate, self.voltage)))
         return Evaluation(record)
 
-    def optimum_record(self, problem: DesignProblem, posterior=None, method: str | None = None) -> dict:
-        """The optimum's JSON keys with the constant Q, or with the posterior-median Q(v) and its keys."""
-        optimum, keys = (self.optimum(problem), {}) if posterior is None else self._damped_optimum(posterior, problem)
-        return optimum_record(optimum, coarse_evaluations=optimum.evaluations, **keys)
-
-    def optimum(self, problem: DesignProblem) -> Optimum:
-        """The optimum with the constant Q."""
-        return optimise_analytical(problem, self.q)
+    def search(self, problem: DesignProblem, law=None, method: str | None = None) -> tuple[Optimum, dict]:
+        """NLopt on the beam model (``method`` unused: one optimiser)."""
+        optimum = optimise_analytical(problem, self.q) if law is None else damped_optimum(law, problem)
+        return optimum, {"coarse_evaluations": optimum.evaluations}
 
     def design_map(self, problem: DesignProblem, points: int, optimum: Optimum) -> DesignMap:
         """w and f_r over a points x points (lambda, h_i) grid, one vectorised evaluation."""
         return design_map(self.plate_model, problem, points, self.name, optimum)
 
-    def damped(self, posterior, problem: DesignProblem, points: int, draws: int) -> tuple[Optimum, dict, DampedMaps]:
-        """(optimum, its Q(v) keys, the maps) with the posterior-median Q(v) on a points x points grid."""
-        optimum, keys = self._damped_optimum(posterior, problem)
-        return optimum, keys, damped_maps(posterior, problem, points, draws=draws, optimum=optimum)
-
-    @staticmethod
-    def _damped_optimum(posterior, problem: DesignProblem) -> tuple[Optimum, dict]:
-        """The optimum with the posterior-median Q(v) and its Q(v) keys."""
-        optimum = damped_optimum(posterior.median_law(), problem)
-        return optimum, damped_optimum_record(posterior, optimum)
-
 
 @dataclass(frozen=True)
-class FemDesignModel:
+class FemDesignModel(DesignModel):
     """The FEM (:class:`~workflow.optimise.fem_model.FemModel`: cached, refined to its accuracy or on a mesh)."""
 
     fem: Any
     name = "fem"
     label = "FEM"
+    model_label = "FEM"
     default_grid = 12
     """Points per axis of a map (each point one FEM evaluation)."""
     resolves_width = True
@@ -127,6 +146,9 @@ class FemDesignModel:
     def plate_model(self) -> PlateModel:
         return self.fem
 
+    def response(self, plate: Plate, voltage: float) -> PlateResponse:
+        return self.fem.response(plate, voltage)
+
     def evaluate(self, plate: Plate, posterior=None) -> Evaluation:
         from workflow.models.fem import evaluate_fem
 
@@ -136,38 +158,27 @@ class FemDesignModel:
                   "modes": [{"f_khz": m.frequency / KHZ, "w_um": m.deflection / UM, "transverse": m.transverse_indicator}
                             for m in result.modes]}
         if posterior is not None:
-            record.update(fem_damping_record(posterior, result))
+            record.update(damping_record(posterior, result))
         return Evaluation(record, result.best_index)
 
-    def optimum_record(self, problem: DesignProblem, posterior=None, method: str = "space-mapping") -> dict:
-        """The optimum's JSON keys (constant Q, or the posterior-median Q(v) and its keys), with the evaluation counts
-        and the accurate check's error estimate."""
-        found, extra = (optimise_fem(problem, self.fem, method), {}) if posterior is None else \
-            self._damped_optimum(posterior, problem, method)
-        counts = dict(method=found.method, fine_evaluations=found.fine_evaluations, coarse_evaluations=found.coarse_evaluations)
-        accuracy = {}
+    def search(self, problem: DesignProblem, law=None, method: str = "space-mapping") -> tuple[Optimum, dict]:
+        """Space mapping (or NLopt, ``method``) on the FEM; with a Q(v) law the fine model is the FEM with Q(v) solved
+        on each geometry's best mode and the coarse model the beam model with the same law."""
+        if law is None:
+            found = optimise_fem(problem, self.fem, method)
+        else:
+            fine = DampedFemModel(law, self.fem, problem.voltage)
+            found = optimise_fem(problem, fine, method, coarse_model=damped_beam_model(law, problem.voltage))
+        extra = dict(method=found.method, fine_evaluations=found.fine_evaluations,
+                     coarse_evaluations=found.coarse_evaluations)
         if found.error is not None:
-            accuracy = {**fem_accuracy_record(found.error), "verified": found.verified,
-                        "verification_evaluations": found.verification_evaluations}
-        return {**optimum_record(found.optimum, **counts), **accuracy, **extra}
-
-    def optimum(self, problem: DesignProblem) -> Optimum:
-        """The optimum with the constant Q, by space mapping."""
-        return optimise_fem(problem, self.fem, "space-mapping").optimum
+            extra.update(fem_accuracy_record(found.error), verified=found.verified,
+                         verification_evaluations=found.verification_evaluations)
+        return found.optimum, extra
 
     def design_map(self, problem: DesignProblem, points: int, optimum: Optimum) -> DesignMap:
         """w, f_r and every point's modes over a points x points (lambda, h_i) grid, one FEM batch."""
         return design_map(self.fem, problem, points, self.name, optimum, self.fem.results)
-
-    def damped(self, posterior, problem: DesignProblem, points: int, draws: int) -> tuple[Optimum, dict, DampedMaps]:
-        """(optimum, its Q(v) keys, the maps) with the posterior-median Q(v) on a points x points grid."""
-        found, keys = self._damped_optimum(posterior, problem, "space-mapping")
-        return found.optimum, keys, fem_damped_maps(posterior, problem, self.fem, points, draws, found.optimum)
-
-    def _damped_optimum(self, posterior, problem: DesignProblem, method: str) -> tuple:
-        """(FemOptimum with the posterior-median Q(v), the Q(v) keys of its FEM result)."""
-        found, result = damped_fem_optimum(posterior.median_law(), problem, self.fem, method)
-        return found, fem_damping_record(posterior, result)
 
 
 DESIGN_MODELS = {"analytical": BeamDesignModel, "fem": FemDesignModel}

@@ -7,9 +7,9 @@ damping keys added when a posterior Q(v) is used (``--damping``).
 import numpy as np
 
 from workflow.damping.laws import law_parameters
-from workflow.models.analytical import beam_response
-from workflow.models.materials import DESIGN_VOLTAGE, TARGET_DEFLECTION
+from workflow.models.materials import TARGET_DEFLECTION
 from workflow.models.plate import Plate
+from workflow.models.response import PlateResponse
 from workflow.optimise.damped import (
     QUANTILES,
     damped_deflection,
@@ -70,46 +70,20 @@ def fem_coupled_record(result) -> dict:
     }
 
 
-def damping_record(posterior, plate: Plate, voltage: float, draws: int = POSTERIOR_DRAWS) -> dict:
-    """JSON keys for a beam-model evaluation with Q(v): the posterior-median law's deflection,
-    the Q it settles at, 90 % intervals over posterior draws and the voltage for the target."""
+def damping_record(posterior, response: PlateResponse, draws: int = POSTERIOR_DRAWS) -> dict:
+    """JSON keys of a plate with Q(v), from any model's working mode at its drive voltage: the deflection [um]
+    with the posterior-median law and its 90 % interval over posterior draws, the Q it settles at, the voltage for the
+    target deflection (median law and 90 % interval), and the law used: ``law`` and ``median`` the posterior's median
+    law (for a mixture of laws, ``posterior_law`` "stacking", its most frequent law's), which gives ``q``."""
     law, drawn = posterior.median_law(), posterior.draws(draws)
-    response = beam_response(plate, voltage)
     deflection = float(damped_deflection(response, law))
     w05, _, w95 = np.quantile(damped_deflection(response, drawn), QUANTILES)
-    return {
-        "w_dyn_um_p05": w05 / UM,
-        "w_dyn_um_p95": w95 / UM,
-        **damping_keys(posterior, deflection, float(response.frequency), required_voltage(response, drawn)),
-    }
-
-
-def fem_damping_record(posterior, result, draws: int = POSTERIOR_DRAWS) -> dict:
-    """JSON keys for a FEM evaluation with Q(v): the best mode's self-consistent deflection with
-    the posterior-median law, the Q it settles at, and the voltage for the target deflection."""
-    deflection = float(damped_deflection(result, posterior.median_law()))
-    voltages = required_voltage(result, posterior.draws(draws))
-    return damping_keys(posterior, deflection, result.frequency, voltages)
-
-
-def damped_optimum_record(posterior, optimum: Optimum, draws: int = POSTERIOR_DRAWS) -> dict:
-    """Damping keys of a beam optimum found with Q(v): the Q it settles at and the voltage for
-    the target deflection there (median law and 90 % interval over posterior draws)."""
-    voltages = required_voltage(beam_response(optimum.plate, DESIGN_VOLTAGE), posterior.draws(draws))  # any V: linear
-    keys = damping_keys(posterior, optimum.deflection, optimum.frequency, voltages)
-    del keys["w_dyn_um"]
-    return keys
-
-
-def damping_keys(posterior, deflection: float, frequency: float, required_voltages) -> dict:
-    """Deflection [um] and the Q it settles at, the voltage for the target deflection (median
-    and 90 % over posterior draws) and the law used: ``law`` and ``median`` the posterior's median law (for a mixture
-    of laws, ``posterior_law`` "stacking", its most frequent law's), which gives ``q``."""
-    law = posterior.median_law()
-    v05, v50, v95 = np.quantile(required_voltages, QUANTILES)
+    v05, v50, v95 = np.quantile(required_voltage(response, drawn), QUANTILES)
     return {
         "w_dyn_um": deflection / UM,
-        "q": float(law.quality_factor(2 * np.pi * frequency * deflection)),
+        "w_dyn_um_p05": w05 / UM,
+        "w_dyn_um_p95": w95 / UM,
+        "q": float(law.quality_factor(2 * np.pi * float(response.frequency) * deflection)),
         "required_voltage_v": {"target_um": TARGET_DEFLECTION / UM, "p05": v05, "p50": v50, "p95": v95},
         "damping": {"law": law.name, "median": law_parameters(law), "posterior": posterior.source,
                     "posterior_law": posterior.law_name},
