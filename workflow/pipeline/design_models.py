@@ -90,6 +90,8 @@ class BeamDesignModel(DesignModel):
     model_label = "beam model"
     default_grid = 81
     """Points per axis of a map (a vectorised evaluation: fine grids cost nothing)."""
+    sampled_grid = False
+    """A map is one closed-form evaluation over the grid (its contours are exact between the points)."""
     resolves_width = False
     """The beam model does not depend on the plate's width b: no width sweep."""
     calibrated = False
@@ -134,6 +136,8 @@ class FemDesignModel(DesignModel):
     model_label = "FEM"
     default_grid = 12
     """Points per axis of a map (each point one FEM evaluation)."""
+    sampled_grid = True
+    """Each point of a map is its own evaluation: the contours interpolate between them (the figures mark them)."""
     resolves_width = True
     calibrated = True
 

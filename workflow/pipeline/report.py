@@ -1,11 +1,13 @@
 """The design note ``report.md`` written from the results of ``tactile run``."""
 
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 from workflow.models.analytical import BEAM_CALIBRATION
 from workflow.optimise.maps import TRANSVERSE_THRESHOLD
+from workflow.pipeline.design_models import DESIGN_MODELS
 from workflow.pipeline.loop_report import case_study_section, loop_section
 from workflow.pipeline.markdown import relative_link, step_figures, table
 from workflow.pipeline.robust_report import robust_section
@@ -728,16 +730,17 @@ def _fem_optima(context: RunContext, optima) -> str:
     )
 
 
-def _maps(context: RunContext, maps) -> str:
-    model = next(iter(maps.values())).model if maps else ""
-    title = {"analytical": "Analytical maps", "fem": "FEM maps"}.get(model, "Maps")
-    grid = context.config["maps"]["grid" if model == "analytical" else "fem_grid"]
+def _maps(context: RunContext, maps, model: str, grid_key: str, accuracy: bool = False) -> str:
+    """The maps of ``model`` (a name of :data:`~workflow.pipeline.design_models.DESIGN_MODELS`), their grid the
+    configuration's ``[maps] grid_key``, with the FEM survey's accuracy when ``accuracy``."""
+    label = DESIGN_MODELS[model].label
+    grid = context.config["maps"][grid_key]
     return (
-        f"## {title}\n\n"
+        f"## {label[0].upper() + label[1:]} maps\n\n"
         f"Deflection at the design voltage and resonance over a {grid} x {grid} (λ, h_i) grid; the white line is "
         f"f_r = {context.config['design']['min_frequency_khz']:g} kHz, the dashed line h_i = "
         f"{context.config['design']['hi_min_mm']:g} mm, the star the constrained optimum."
-        + (f" {_survey_accuracy(context)}" if model == "fem" else "")
+        + (f" {_survey_accuracy(context)}" if accuracy else "")
         + "\n\n" + step_figures(context, f"{model}_maps")
     )
 
@@ -852,8 +855,8 @@ SECTIONS = [
     ("fem_original", _fem_original),
     ("fem_responses", _fem_responses),
     ("fem_optima", _fem_optima),
-    ("analytical_maps", _maps),
-    ("fem_maps", _maps),
+    ("analytical_maps", partial(_maps, model="analytical", grid_key="grid")),
+    ("fem_maps", partial(_maps, model="fem", grid_key="fem_grid", accuracy=True)),
     ("width_sweep", _width_sweep),
 ]
 """(result key, section writer) in report order."""

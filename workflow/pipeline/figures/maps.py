@@ -9,11 +9,10 @@ import numpy as np  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 
 from workflow.optimise.maps import TRANSVERSE_THRESHOLD, DesignMap, WidthSweep  # noqa: E402
+from workflow.pipeline.design_models import DESIGN_MODELS  # noqa: E402
 from workflow.pipeline.figures.marks import legend_below, mark_design_limits  # noqa: E402
 from workflow.units import KHZ, MM, UM  # noqa: E402
 
-MODEL_NAMES = {"analytical": "beam model", "fem": "FEM"}
-"""DesignMap.model -> what the figure calls it."""
 
 
 def map_figure(design_map: DesignMap):
@@ -40,7 +39,7 @@ def map_figure(design_map: DesignMap):
             problem.min_resonator_thickness,
             design_map.optimum,
         )
-        if design_map.model == "fem":
+        if DESIGN_MODELS[design_map.model].sampled_grid:
             grid_lam, grid_h = np.meshgrid(lam, h_i)
             handles += ax.plot(grid_lam.ravel(), grid_h.ravel(), "o", ms=4, mfc="white", mec="black", ls="none",
                                clip_on=False, label="FEM evaluations (contours interpolate between them)")
@@ -48,7 +47,7 @@ def map_figure(design_map: DesignMap):
     legend_below(figure, handles, columns=len(handles))
     points = f"{len(lam)} x {len(h_i)} grid"
     figure.suptitle(
-        f"{MODEL_NAMES.get(design_map.model, design_map.model)}, {points}: h_p = {problem.ceramic_thickness / MM:g} mm, "
+        f"{DESIGN_MODELS[design_map.model].model_label}, {points}: h_p = {problem.ceramic_thickness / MM:g} mm, "
         f"b = {problem.width / MM:g} mm, {problem.voltage:g} V"
     )
     return figure
