@@ -137,6 +137,14 @@ def test_calibrate_cli_contract_and_evaluate_with_the_calibration(tmp_path, caps
     assert evaluated["w_dyn_um_p05"] <= evaluated["w_dyn_um"] <= evaluated["w_dyn_um_p95"]
     assert evaluated["f_r_khz_p05"] <= measured / KHZ <= evaluated["f_r_khz_p95"]
     assert evaluated["calibration"]["fem_evaluations"] == 12
+    assert main(["evaluate", "--model", "fem", "--lambda-mm", "20.56", "--hi-mm", "0.75", "--hp-mm", "1", "--accuracy",
+                 "0.05", "--calibration", str(tmp_path / "cal")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    # people read the nominal FEM first, then the calibrated prediction with its band
+    assert f"at f_r {evaluated['nominal_f_r_khz']:.3f} kHz" in lines[0]
+    (calibrated,) = [line for line in lines if line.startswith("  calibrated (")]
+    assert (f"f_r {evaluated['f_r_khz']:.3f} kHz (90 %: {evaluated['f_r_khz_p05']:.3f} to "
+            f"{evaluated['f_r_khz_p95']:.3f})") in calibrated
 
 
 @pytest.mark.parametrize(

@@ -24,7 +24,8 @@ from workflow.cli.options import (
 )
 from workflow.errors import TactileError
 from workflow.pipeline.calibration_files import calibrated_record
-from workflow.pipeline.records import geometry_record
+from workflow.pipeline.records import evaluation_record
+from workflow.units import KHZ, MM, UM
 
 
 def register(subparsers) -> None:
@@ -62,37 +63,41 @@ def run(args) -> dict:
             file=sys.stderr,
         )
     evaluation = model.evaluate(plate, load_damping(args))
-    result = {"model": args.model, **geometry_record(plate), "q": args.q, "voltage_v": args.voltage, **evaluation.record}
+    result = evaluation_record(evaluation)
+    prediction = None
     if calibration is not None:
         result["nominal_f_r_khz"], result["nominal_w_dyn_um"] = result["f_r_khz"], result["w_dyn_um"]
         fem = calibration_fem_model(calibration, args.q, args.voltage)
-        result.update(calibrated_record(calibration, plate, fem.design_fem(), args.calibration))
+        prediction = calibrated_record(calibration, plate, fem.design_fem(), args.calibration)
+        result.update(prediction)
     if not args.json:
-        _print_human(result, args.model, evaluation.working_mode)
+        _print_human(evaluation, prediction)
     return result
 
 
-def _print_human(result: dict, model: str, working_mode) -> None:
-    """The evaluation for people; ``working_mode`` is the index of the FEM mode whose deflection is reported."""
-    damped = "damping" in result
-    interval = (f" (90 %: {result['w_dyn_um_p05']:.3f} to {result['w_dyn_um_p95']:.3f} µm)"
-                if "w_dyn_um_p05" in result else "")
+def _print_human(evaluation, prediction: dict | None) -> None:
+    """The evaluation for people (``prediction``: the calibration's keys, or None)."""
+    plate, damped, fem = evaluation.plate, evaluation.q_of_v, evaluation.fem
+    interval = "" if damped is None else " (90 %: {:.3f} to {:.3f} µm)".format(*(w / UM for w in damped.deflection_interval))
+    deflection = evaluation.deflection if damped is None else damped.deflection
     print(
-        f"{model}: lambda {result['lambda_mm']:g} mm, h_i {result['h_i_mm']:g} mm, h_p {result['h_p_mm']:g} mm, "
-        f"b {result['b_mm']:g} mm, {'Q(v)' if damped else 'Q ' + format(result['q'], 'g')}, "
-        f"{result['voltage_v']:g} V -> w_dyn {result['w_dyn_um']:.4f} µm{interval} at f_r {result['f_r_khz']:.3f} kHz"
+        f"{evaluation.model}: lambda {plate.wavelength / MM:g} mm, h_i {plate.resonator_thickness / MM:g} mm, "
+        f"h_p {plate.ceramic_thickness / MM:g} mm, b {plate.width / MM:g} mm, "
+        f"{'Q(v)' if damped else 'Q ' + format(evaluation.q, 'g')}, {evaluation.voltage:g} V -> "
+        f"w_dyn {deflection / UM:.4f} µm{interval} at f_r {evaluation.frequency / KHZ:.3f} kHz"
     )
-    if "f_a_khz" in result:
+    if fem is not None and fem.antiresonances is not None:
         print(
-            f"  coupled piezo model: antiresonance f_a {result['f_a_khz']:.3f} kHz, effective coupling k_eff "
-            f"{result['k_eff']:.3f}, clamped capacitance {result['clamped_capacitance_nf']:.2f} nF"
+            f"  coupled piezo model: antiresonance f_a {fem.antiresonance / KHZ:.3f} kHz, effective coupling k_eff "
+            f"{fem.coupling_factor:.3f}, clamped capacitance {fem.clamped_capacitance * 1e9:.2f} nF"
         )
-    if "f_error_estimate" in result:
-        print(accuracy_line(result))
-    if damped:
-        print(damping_line(result))
-    if "nominal_f_r_khz" in result:
-        print(calibration_line(result))
-    for index, mode in enumerate(result.get("modes", [])):
-        mark = "  <- working mode (reported above)" if index == working_mode else ""
-        print(f"  mode {mode['f_khz']:8.3f} kHz: {mode['w_um']:.4f} µm, transverse indicator {mode['transverse']:.2f}{mark}")
+    if fem is not None and fem.error is not None:
+        print(accuracy_line(fem.error))
+    if damped is not None:
+        print(damping_line(damped))
+    if prediction is not None:
+        print(calibration_line(prediction))
+    for index, mode in enumerate(fem.modes if fem is not None else ()):
+        mark = "  <- working mode (reported above)" if index == evaluation.working_mode else ""
+        print(f"  mode {mode.frequency / KHZ:8.3f} kHz: {mode.deflection / UM:.4f} µm, transverse indicator "
+              f"{mode.transverse_indicator:.2f}{mark}")

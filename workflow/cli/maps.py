@@ -34,6 +34,7 @@ from workflow.optimise.damped import map_draws
 from workflow.optimise.maps import width_sweep
 from workflow.models.limits import LIMITS
 from workflow.pipeline.outputs import output_folder, save_figure
+from workflow.pipeline.records import q_of_v_record
 from workflow.units import KHZ, MM, UM
 
 OUTPUTS = ("*.png",)
@@ -192,7 +193,8 @@ def _damped_record(args, problem, model, points: int, posterior) -> dict:
     from workflow.pipeline.figures.damping import design_map_figure
 
     draws = map_draws(points)
-    optimum, keys, maps = model.damped(posterior, problem, points, draws)
+    found, maps = model.damped(posterior, problem, points, draws)
+    keys = q_of_v_record(found.q_of_v)
     stem = f"map_{args.model}_qv_hp{args.hp_mm:g}mm"
     figures = [
         save_figure(design_map_figure(maps, quantity, design_voltage=args.voltage), args.out / f"{stem}_{quantity}.png") for quantity in ("deflection", "voltage")
@@ -206,6 +208,6 @@ def _damped_record(args, problem, model, points: int, posterior) -> dict:
         "target_um": keys["required_voltage_v"]["target_um"],
         "draws": draws,
         "damping": keys["damping"],
-        "optimum": {**_optimum_keys(optimum), "q": keys["q"], "required_voltage_v": keys["required_voltage_v"]},
+        "optimum": {**_optimum_keys(found.optimum), "q": keys["q"], "required_voltage_v": keys["required_voltage_v"]},
         "figures": figures,
     }

@@ -25,7 +25,8 @@ from workflow.pipeline.design_models import DESIGN_MODELS
 from workflow.errors import TactileError
 from workflow.models.limits import LIMITS
 from workflow.optimise.robust import RobustSettings, Tolerances
-from workflow.units import UM
+from workflow.pipeline.records import design_optimum_record
+from workflow.units import KHZ, MM, UM
 from workflow.optimise.fem_optimum import METHODS
 
 DEFAULT_METHOD = "space-mapping"
@@ -102,28 +103,34 @@ def run(args) -> dict:
         return _robust(args, calibration)
     posterior = load_damping(args)
     model = design_model(args)
-    records = [model.optimum_record(design_problem(args, h_p), posterior, args.method) for h_p in ceramic_thicknesses(args)]
+    optima = [model.design_optimum(design_problem(args, h_p), posterior, args.method) for h_p in ceramic_thicknesses(args)]
     if not args.json:
-        for record in records:
-            _print_human(record)
+        for found in optima:
+            _print_human(found)
+    records = [design_optimum_record(found) for found in optima]
     return records[0] if len(records) == 1 else {"optima": records}
 
 
-def _print_human(record: dict) -> None:
+def _print_human(found) -> None:
     """One optimum for people: geometry, deflection, resonance, evaluation counts, the Q(v) law if used."""
-    names = (("fine_evaluations", "FEM"), ("verification_evaluations", "accurate FEM"), ("coarse_evaluations", "beam"))
-    counts = [f"{record[key]} {name} evaluations" for key, name in names if key in record]
-    method = f"{record['method']}: " if "method" in record else ""
+    optimum, search, damped = found.optimum, found.fem_search, found.q_of_v
+    counts = [] if search is None else [f"{search.fine_evaluations} FEM evaluations"]
+    if search is not None and search.error is not None:
+        counts.append(f"{search.verification_evaluations} accurate FEM evaluations")
+    counts.append(f"{found.coarse_evaluations} beam evaluations")
+    method = "" if search is None else f"{search.method}: "
+    deflection = optimum.deflection if damped is None else damped.deflection
     print(
-        f"h_p {record['h_p_mm']:g} mm: lambda {record['lambda_mm']:.4f} mm, h_i {record['h_i_mm']:.4f} mm -> "
-        f"w_dyn {record['w_dyn_um']:.4f} µm at f_r {record['f_r_khz']:.3f} kHz ({method}{', '.join(counts)})"
+        f"h_p {optimum.plate.ceramic_thickness / MM:g} mm: lambda {optimum.plate.wavelength / MM:.4f} mm, "
+        f"h_i {optimum.plate.resonator_thickness / MM:.4f} mm -> w_dyn {deflection / UM:.4f} µm at "
+        f"f_r {optimum.frequency / KHZ:.3f} kHz ({method}{', '.join(counts)})"
     )
-    if "f_error_estimate" in record:
-        print(accuracy_line(record))
-        if not record["verified"]:
+    if search is not None and search.error is not None:
+        print(accuracy_line(search.error))
+        if not search.verified:
             print("  WARNING: f_r >= limit not verified on the converged model (see the accuracy line)")
-    if "damping" in record:
-        print(damping_line(record))
+    if damped is not None:
+        print(damping_line(damped))
 
 
 def _robust(args, calibration) -> dict:
@@ -133,7 +140,6 @@ def _robust(args, calibration) -> dict:
     from workflow.models.plate import check_design_space
     from workflow.optimise.robust import robust_design
     from workflow.pipeline.calibration_files import robust_record
-    from workflow.units import MM, UM
 
     if not DESIGN_MODELS[args.model].calibrated:
         raise TactileError("--calibration corrects the FEM: give --model fem")

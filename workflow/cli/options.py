@@ -8,6 +8,7 @@ import math
 import signal
 from contextlib import contextmanager
 
+from workflow.damping.laws import law_parameters
 from workflow.damping.posterior import load_posterior
 from workflow.errors import GeometryError, TactileError
 from workflow.models import materials
@@ -258,13 +259,12 @@ def fem_accuracy(args) -> FemAccuracy:
     return FemAccuracy(target=args.accuracy, piezo=args.piezo)
 
 
-def accuracy_line(record: dict) -> str:
-    """The FEM accuracy of a record with ``fem_accuracy_record`` keys, for people."""
-    verdict = "met" if record["accuracy_met"] else "NOT met (finest mesh reached)"
+def accuracy_line(error) -> str:
+    """An FEM :class:`~workflow.models.fem.accuracy.ErrorEstimate` for people."""
+    verdict = "met" if error.met else "NOT met (finest mesh reached)"
     return (
-        f"  FEM accuracy: f_r {record['f_error_estimate'] * 100:+.2f} %, w_dyn {record['w_error_estimate'] * 100:+.2f} % "
-        f"(estimated error of the values above, mesh level {record['mesh_level']}; "
-        f"target {record['accuracy'] * 100:g} % {verdict})"
+        f"  FEM accuracy: f_r {error.frequency * 100:+.2f} %, w_dyn {error.deflection * 100:+.2f} % "
+        f"(estimated error of the values above, mesh level {error.level}; target {error.target * 100:g} % {verdict})"
     )
 
 
@@ -300,16 +300,17 @@ def describe_law(name: str, parameters: dict) -> str:
     return ", ".join(items)
 
 
-def damping_line(record: dict) -> str:
-    """The ``--damping`` keys of a record for people: the Q(v) law used, the Q the plate settles
-    at, and the voltage for the target deflection with its 90 % interval (over draws of the whole posterior)."""
-    damping, voltage = record["damping"], record["required_voltage_v"]
-    median = ("posterior median of" if damping.get("posterior_law", damping["law"]) == damping["law"]
+def damping_line(values) -> str:
+    """A :class:`~workflow.optimise.damped.QOfV` for people: the Q(v) law used, the Q the plate settles at, and the
+    voltage for the target deflection with its 90 % interval (over draws of the whole posterior)."""
+    law, posterior = values.law, values.posterior
+    v05, v50, v95 = values.required_voltage
+    median = ("posterior median of" if posterior.law_name == law.name
               else "posterior median of the mixture's most frequent law in")
     return (
-        f"  Q(v) used: {describe_law(damping['law'], damping['median'])} ({median} {damping['posterior']}); "
-        f"Q settles at {record['q']:.1f}; {voltage['p50']:.2f} V for {voltage['target_um']:g} µm "
-        f"(90 %: {voltage['p05']:.2f} to {voltage['p95']:.2f} V)"
+        f"  Q(v) used: {describe_law(law.name, law_parameters(law))} ({median} {posterior.source}); "
+        f"Q settles at {values.quality_factor:.1f}; {v50:.2f} V for {values.target / UM:g} µm "
+        f"(90 %: {v05:.2f} to {v95:.2f} V)"
     )
 
 

@@ -67,6 +67,57 @@ def required_voltage(response: PlateResponse, law, target: float = materials.TAR
     return response.voltage * target / response.deflection_at_q(q_target)
 
 
+POSTERIOR_DRAWS = 200
+"""Posterior draws behind the intervals of a single evaluation or optimum."""
+
+
+@dataclass(frozen=True)
+class QOfV:
+    """One plate's working mode with the fitted Q(v) (any model's response).
+
+    Attributes
+    ----------
+    deflection : float
+        Self-consistent antinode deflection with the posterior-median law at the response's voltage [m].
+    deflection_interval : tuple of float
+        Its p05 and p95 over posterior draws [m].
+    quality_factor : float
+        The median law's Q at that deflection's velocity [-].
+    required_voltage : tuple of float
+        p05, p50, p95 over posterior draws of the voltage for ``target`` [V peak].
+    target : float
+        Deflection the required voltage aims at [m].
+    law : Q(v) law
+        The posterior-median law (for a mixture of laws, its most frequent law's).
+    posterior : DampingPosterior
+    """
+
+    deflection: float
+    deflection_interval: tuple
+    quality_factor: float
+    required_voltage: tuple
+    target: float
+    law: object
+    posterior: DampingPosterior
+
+
+def q_of_v(posterior: DampingPosterior, response: PlateResponse, draws: int = POSTERIOR_DRAWS,
+           target: float = materials.TARGET_DEFLECTION) -> QOfV:
+    """The :class:`QOfV` of one plate's response (``draws`` posterior draws behind the intervals)."""
+    law, drawn = posterior.median_law(), posterior.draws(draws)
+    deflection = float(damped_deflection(response, law))
+    w05, _, w95 = np.quantile(damped_deflection(response, drawn), QUANTILES)
+    return QOfV(
+        deflection=deflection,
+        deflection_interval=(float(w05), float(w95)),
+        quality_factor=float(law.quality_factor(2 * np.pi * float(response.frequency) * deflection)),
+        required_voltage=tuple(float(v) for v in np.quantile(required_voltage(response, drawn, target), QUANTILES)),
+        target=target,
+        law=law,
+        posterior=posterior,
+    )
+
+
 @dataclass
 class DampedFemModel:
     """The FEM with Q(v) as a :data:`~workflow.optimise.problem.PlateModel`.

@@ -7,41 +7,92 @@ the beam; space mapping or NLopt on the FEM); both give their working mode as a
 (:mod:`workflow.optimise.damped`).
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from typing import Any, Optional
 
 from workflow.models import analytical
 from workflow.models.plate import Plate
 from workflow.models.response import PlateResponse
-from workflow.optimise.damped import DampedFemModel, DampedMaps, damped_beam_model, damped_maps, damped_optimum
-from workflow.optimise.fem_optimum import optimise_fem
+from workflow.optimise.damped import (
+    DampedFemModel,
+    DampedMaps,
+    QOfV,
+    damped_beam_model,
+    damped_maps,
+    damped_optimum,
+    q_of_v,
+)
+from workflow.optimise.fem_optimum import FemOptimum, optimise_fem
 from workflow.optimise.maps import DesignMap, design_map
 from workflow.optimise.problem import DesignProblem, Optimum, PlateModel, analytical_model, optimise_analytical
-from workflow.pipeline.records import damping_record, fem_accuracy_record, fem_coupled_record, optimum_record
-from workflow.units import KHZ, UM
 
 
 @dataclass(frozen=True)
 class Evaluation:
-    """One geometry evaluated by a design model: its JSON keys and, for the FEM, its working mode.
+    """One geometry evaluated by a design model (SI; :func:`~workflow.pipeline.records.evaluation_record` gives its
+    JSON keys).
 
     Attributes
     ----------
-    record : dict
-        ``w_dyn_um``, ``f_r_khz`` and what the model adds (error estimate, electrical keys, modes, Q(v)).
-    working_mode : int or None
-        Index of the mode whose deflection is reported (None for the beam model).
+    model : str
+        The design model's name (``--model``).
+    plate : Plate
+    q : float
+        The constant quality factor the model evaluated with [-] (the FEM: it picks the working mode).
+    voltage : float
+        Drive amplitude [V peak].
+    deflection, frequency : float
+        Working mode's antinode deflection at ``q`` [m] and resonance [Hz].
+    fem : FemResult or None
+        The FEM's result (its modes, working mode, error estimate, electrical quantities); None for the beam model.
+    q_of_v : QOfV or None
+        The working mode with the fitted Q(v) (``--damping``).
     """
 
-    record: dict
-    working_mode: Optional[int] = None
+    model: str
+    plate: Plate
+    q: float
+    voltage: float
+    deflection: float
+    frequency: float
+    fem: Any = None
+    q_of_v: Optional[QOfV] = None
+
+    @property
+    def working_mode(self) -> Optional[int]:
+        """Index of the FEM mode whose deflection is reported (None for the beam model)."""
+        return None if self.fem is None else self.fem.best_index
+
+
+@dataclass(frozen=True)
+class DesignOptimum:
+    """An optimum found by a design model and what it cost (SI; :func:`~workflow.pipeline.records.design_optimum_record`
+    gives its JSON keys).
+
+    Attributes
+    ----------
+    optimum : Optimum
+        With the constant Q, or with the Q(v) law solved self-consistently.
+    coarse_evaluations : int
+        Beam-model geometries evaluated [-].
+    fem_search : FemOptimum or None
+        The FEM's search: its method, FEM evaluation counts, the accurate check's error estimate and verdict.
+    q_of_v : QOfV or None
+        The optimum's working mode with the fitted Q(v) (the posterior's intervals).
+    """
+
+    optimum: Optimum
+    coarse_evaluations: int
+    fem_search: Optional[FemOptimum] = None
+    q_of_v: Optional[QOfV] = None
 
 
 class DesignModel:
-    """What the design models share: the optimum's record and the Q(v) design written once on each model's
-    :meth:`response` (its working mode as a :class:`~workflow.models.response.PlateResponse`) and :meth:`search`
-    (its optimiser, with constant Q or with a Q(v) law)."""
+    """What the design models share: the optimum with the posterior's intervals and the Q(v) maps, written once on
+    each model's :meth:`response` (its working mode as a :class:`~workflow.models.response.PlateResponse`) and
+    :meth:`search` (its optimiser, with constant Q or with a Q(v) law).  Results are typed (:class:`Evaluation`,
+    :class:`DesignOptimum`, SI); their JSON keys are :mod:`workflow.pipeline.records`'."""
 
     name: str
     model_label: str
@@ -51,31 +102,28 @@ class DesignModel:
         """The working mode of ``plate`` (a batch) at ``voltage`` [V peak]."""
         raise NotImplementedError
 
-    def search(self, problem: DesignProblem, law=None, method: str = "space-mapping") -> tuple[Optimum, dict]:
-        """(the optimum with the constant Q, or with the Q(v) ``law`` solved self-consistently, its record's extra
-        keys: evaluation counts, the accurate check)."""
+    def search(self, problem: DesignProblem, law=None, method: str = "space-mapping") -> DesignOptimum:
+        """The optimum with the constant Q, or with the Q(v) ``law`` solved self-consistently, and what it cost."""
         raise NotImplementedError
 
     def optimum(self, problem: DesignProblem) -> Optimum:
         """The optimum with the constant Q."""
-        return self.search(problem)[0]
+        return self.search(problem).optimum
 
-    def optimum_record(self, problem: DesignProblem, posterior=None, method: str = "space-mapping") -> dict:
-        """The optimum's JSON keys (constant Q, or the posterior-median Q(v) and its keys), with the evaluation
-        counts and, for the FEM, the accurate check's error estimate."""
-        optimum, extra = self.search(problem, None if posterior is None else posterior.median_law(), method)
-        record = optimum_record(optimum, **extra)
-        if posterior is not None:
-            record.update(damping_record(posterior, self.response(optimum.plate, problem.voltage)))
-        return record
+    def design_optimum(self, problem: DesignProblem, posterior=None, method: str = "space-mapping") -> DesignOptimum:
+        """The optimum (constant Q, or the posterior-median Q(v) with the posterior's intervals at the optimum), with
+        the evaluation counts and, for the FEM, the accurate check."""
+        found = self.search(problem, None if posterior is None else posterior.median_law(), method)
+        if posterior is None:
+            return found
+        return replace(found, q_of_v=q_of_v(posterior, self.response(found.optimum.plate, problem.voltage)))
 
-    def damped(self, posterior, problem: DesignProblem, points: int, draws: int) -> tuple[Optimum, dict, DampedMaps]:
-        """(optimum, its Q(v) keys, the maps) with the posterior-median Q(v) on a points x points grid."""
-        optimum, _ = self.search(problem, posterior.median_law())
-        response = partial(self.response, voltage=problem.voltage)
-        maps = damped_maps(posterior, problem, points, draws=draws, optimum=optimum, response=response,
-                           model_label=self.model_label)
-        return optimum, damping_record(posterior, response(optimum.plate)), maps
+    def damped(self, posterior, problem: DesignProblem, points: int, draws: int) -> tuple[DesignOptimum, DampedMaps]:
+        """(the optimum with the posterior-median Q(v), the maps) on a points x points grid."""
+        found = self.design_optimum(problem, posterior)
+        maps = damped_maps(posterior, problem, points, draws=draws, optimum=found.optimum,
+                           response=partial(self.response, voltage=problem.voltage), model_label=self.model_label)
+        return found, maps
 
 
 @dataclass(frozen=True)
@@ -110,16 +158,15 @@ class BeamDesignModel(DesignModel):
         return analytical.beam_response(plate, voltage)
 
     def evaluate(self, plate: Plate, posterior=None) -> Evaluation:
-        record = {"w_dyn_um": float(analytical.dynamic_deflection(plate, self.voltage, self.q)) / UM,
-                  "f_r_khz": float(analytical.resonance_frequency(plate)) / KHZ}
-        if posterior is not None:
-            record.update(damping_record(posterior, self.response(plate, self.voltage)))
-        return Evaluation(record)
+        damped = None if posterior is None else q_of_v(posterior, self.response(plate, self.voltage))
+        return Evaluation(self.name, plate, self.q, self.voltage,
+                          float(analytical.dynamic_deflection(plate, self.voltage, self.q)),
+                          float(analytical.resonance_frequency(plate)), q_of_v=damped)
 
-    def search(self, problem: DesignProblem, law=None, method: str | None = None) -> tuple[Optimum, dict]:
+    def search(self, problem: DesignProblem, law=None, method: str | None = None) -> DesignOptimum:
         """NLopt on the beam model (``method`` unused: one optimiser)."""
         optimum = optimise_analytical(problem, self.q) if law is None else damped_optimum(law, problem)
-        return optimum, {"coarse_evaluations": optimum.evaluations}
+        return DesignOptimum(optimum, optimum.evaluations)
 
     def design_map(self, problem: DesignProblem, points: int, optimum: Optimum) -> DesignMap:
         """w and f_r over a points x points (lambda, h_i) grid, one vectorised evaluation."""
@@ -157,15 +204,11 @@ class FemDesignModel(DesignModel):
         from workflow.models.fem import evaluate_fem
 
         result = evaluate_fem(plate, q=self.fem.q, voltage=self.fem.voltage, settings=self.fem.settings)
-        record = {"w_dyn_um": result.deflection / UM, "f_r_khz": result.frequency / KHZ,
-                  **fem_accuracy_record(result.error), **fem_coupled_record(result),
-                  "modes": [{"f_khz": m.frequency / KHZ, "w_um": m.deflection / UM, "transverse": m.transverse_indicator}
-                            for m in result.modes]}
-        if posterior is not None:
-            record.update(damping_record(posterior, result))
-        return Evaluation(record, result.best_index)
+        damped = None if posterior is None else q_of_v(posterior, result)
+        return Evaluation(self.name, plate, self.fem.q, self.fem.voltage, result.deflection, result.frequency, result,
+                          damped)
 
-    def search(self, problem: DesignProblem, law=None, method: str = "space-mapping") -> tuple[Optimum, dict]:
+    def search(self, problem: DesignProblem, law=None, method: str = "space-mapping") -> DesignOptimum:
         """Space mapping (or NLopt, ``method``) on the FEM; with a Q(v) law the fine model is the FEM with Q(v) solved
         on each geometry's best mode and the coarse model the beam model with the same law."""
         if law is None:
@@ -173,12 +216,7 @@ class FemDesignModel(DesignModel):
         else:
             fine = DampedFemModel(law, self.fem, problem.voltage)
             found = optimise_fem(problem, fine, method, coarse_model=damped_beam_model(law, problem.voltage))
-        extra = dict(method=found.method, fine_evaluations=found.fine_evaluations,
-                     coarse_evaluations=found.coarse_evaluations)
-        if found.error is not None:
-            extra.update(fem_accuracy_record(found.error), verified=found.verified,
-                         verification_evaluations=found.verification_evaluations)
-        return found.optimum, extra
+        return DesignOptimum(found.optimum, found.coarse_evaluations, found)
 
     def design_map(self, problem: DesignProblem, points: int, optimum: Optimum) -> DesignMap:
         """w, f_r and every point's modes over a points x points (lambda, h_i) grid, one FEM batch."""

@@ -1,25 +1,16 @@
-"""JSON records of the command-line contract (SI inside, mm, um, kHz in the keys).
+"""JSON records of the command-line contract: the design commands' typed results serialised, units applied here
+(SI inside; mm, um, kHz, V in the keys, docs/cli.md).
 
-One place for the keys that several commands print: the geometry, an optimum, and the
-damping keys added when a posterior Q(v) is used (``--damping``).
+One place for the keys that several commands print: the geometry, an evaluation, an optimum, the FEM's accuracy and
+electrical keys, and the keys added when a posterior Q(v) is used (``--damping``).  Nothing here computes physics.
 """
 
-import numpy as np
-
 from workflow.damping.laws import law_parameters
-from workflow.models.materials import TARGET_DEFLECTION
 from workflow.models.plate import Plate
-from workflow.models.response import PlateResponse
-from workflow.optimise.damped import (
-    QUANTILES,
-    damped_deflection,
-    required_voltage,
-)
+from workflow.optimise.damped import QOfV
 from workflow.optimise.problem import Optimum
+from workflow.pipeline.design_models import DesignOptimum, Evaluation
 from workflow.units import KHZ, MM, UM
-
-POSTERIOR_DRAWS = 200
-"""Posterior draws behind the intervals of a single evaluation or optimum."""
 
 
 def geometry_record(plate: Plate) -> dict:
@@ -46,7 +37,7 @@ def optimum_record(optimum: Optimum, **counts) -> dict:
 
 def fem_accuracy_record(error) -> dict:
     """The FEM accuracy keys: the relative error estimates of f_r and w_dyn (v_mesh / v_converged - 1),
-    the accuracy asked for, whether it was met, and the mesh level (elements per ceramic)."""
+    the accuracy asked for, whether it was met, and the mesh level (its elements' polynomial degree)."""
     if error is None:
         return {}
     return {
@@ -70,21 +61,50 @@ def fem_coupled_record(result) -> dict:
     }
 
 
-def damping_record(posterior, response: PlateResponse, draws: int = POSTERIOR_DRAWS) -> dict:
-    """JSON keys of a plate with Q(v), from any model's working mode at its drive voltage: the deflection [um]
-    with the posterior-median law and its 90 % interval over posterior draws, the Q it settles at, the voltage for the
-    target deflection (median law and 90 % interval), and the law used: ``law`` and ``median`` the posterior's median
-    law (for a mixture of laws, ``posterior_law`` "stacking", its most frequent law's), which gives ``q``."""
-    law, drawn = posterior.median_law(), posterior.draws(draws)
-    deflection = float(damped_deflection(response, law))
-    w05, _, w95 = np.quantile(damped_deflection(response, drawn), QUANTILES)
-    v05, v50, v95 = np.quantile(required_voltage(response, drawn), QUANTILES)
+def q_of_v_record(values: QOfV) -> dict:
+    """The ``--damping`` keys: the deflection [um] with the posterior-median law and its 90 % interval over posterior
+    draws, the Q it settles at, the voltage for the target deflection (90 % interval), and the law used: ``law`` and
+    ``median`` the posterior's median law (for a mixture of laws, ``posterior_law`` "stacking", its most frequent
+    law's), which gives ``q``."""
+    v05, v50, v95 = values.required_voltage
     return {
-        "w_dyn_um": deflection / UM,
-        "w_dyn_um_p05": w05 / UM,
-        "w_dyn_um_p95": w95 / UM,
-        "q": float(law.quality_factor(2 * np.pi * float(response.frequency) * deflection)),
-        "required_voltage_v": {"target_um": TARGET_DEFLECTION / UM, "p05": v05, "p50": v50, "p95": v95},
-        "damping": {"law": law.name, "median": law_parameters(law), "posterior": posterior.source,
-                    "posterior_law": posterior.law_name},
+        "w_dyn_um": values.deflection / UM,
+        "w_dyn_um_p05": values.deflection_interval[0] / UM,
+        "w_dyn_um_p95": values.deflection_interval[1] / UM,
+        "q": values.quality_factor,
+        "required_voltage_v": {"target_um": values.target / UM, "p05": v05, "p50": v50, "p95": v95},
+        "damping": {"law": values.law.name, "median": law_parameters(values.law), "posterior": values.posterior.source,
+                    "posterior_law": values.posterior.law_name},
     }
+
+
+def evaluation_record(evaluation: Evaluation) -> dict:
+    """``tactile evaluate``'s keys: the model, geometry, Q, voltage, deflection and resonance; the FEM's accuracy,
+    electrical keys and modes; the Q(v) keys."""
+    record = {"model": evaluation.model, **geometry_record(evaluation.plate), "q": evaluation.q,
+              "voltage_v": evaluation.voltage, "w_dyn_um": evaluation.deflection / UM,
+              "f_r_khz": evaluation.frequency / KHZ}
+    result = evaluation.fem
+    if result is not None:
+        record.update(fem_accuracy_record(result.error), **fem_coupled_record(result), modes=[
+            {"f_khz": m.frequency / KHZ, "w_um": m.deflection / UM, "transverse": m.transverse_indicator}
+            for m in result.modes])
+    if evaluation.q_of_v is not None:
+        record.update(q_of_v_record(evaluation.q_of_v))
+    return record
+
+
+def design_optimum_record(found: DesignOptimum) -> dict:
+    """``tactile optimize``'s keys of one optimum: geometry, deflection, resonance, the evaluation counts, the FEM's
+    accurate check and the Q(v) keys."""
+    search = found.fem_search
+    counts = {"coarse_evaluations": found.coarse_evaluations}
+    if search is not None:
+        counts = {"method": search.method, "fine_evaluations": search.fine_evaluations, **counts}
+        if search.error is not None:
+            counts.update(fem_accuracy_record(search.error), verified=search.verified,
+                          verification_evaluations=search.verification_evaluations)
+    record = optimum_record(found.optimum, **counts)
+    if found.q_of_v is not None:
+        record.update(q_of_v_record(found.q_of_v))
+    return record
