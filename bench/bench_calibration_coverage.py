@@ -154,7 +154,7 @@ def study(n: int, seed: int, fem_settings, sim_settings, settings: CalibrationSe
                         for k, (m, p) in enumerate(zip(built, plates))]
             calibration = calibrate(measured[:2], settings, model.design_fem(), fem)
             target = measured[2]
-            low, mid, high = predict(calibration, target.plate, None, surrogates[plates[2].design])["frequency"]
+            low, mid, high = predict(calibration, target.plate, None, surrogates[plates[2].design]).frequency
             record = {
                 "campaign": index,
                 "designs": [p.design for p in plates],

@@ -102,7 +102,7 @@ def test_known_deviations_are_recovered_along_the_constrained_directions(coarse_
         low, high = np.percentile(projected, [1, 99])
         assert low <= truth <= high
     for plate, surrogate in zip(plates, calibration.surrogates):
-        p05, _, p95 = predict(calibration, plate.plate, None, surrogate)["frequency"]
+        p05, _, p95 = predict(calibration, plate.plate, None, surrogate).frequency
         assert p05 <= plate.frequency <= p95
     nominal = [built_plate_frequency(coarse_model, p.plate, nominal_theta(FAST.names, p.plate)) for p in plates]
     assert all(n > p.frequency for n, p in zip(nominal, plates)), "the deviations lower both frequencies"
@@ -346,9 +346,11 @@ def test_run_step_predicts_the_recommended_designs_with_the_calibration(tmp_path
     context = SimpleNamespace(calibration=Path(files["calibration"]), config=default_config(), cache=None, scheduler=None,
                               results=RunResults(recommended_design=SimpleNamespace(designs=designs)))
     predicted = calibrated_designs(context)[1e-3]
-    assert predicted["f_r_khz_p05"] <= plate.frequency / KHZ <= predicted["f_r_khz_p95"]
+    low, median, high = predicted.frequency
+    assert low <= plate.frequency <= high
     section = _calibrated_designs(context, {1e-3: predicted})
-    assert "as the calibration predicts them" in section and f"{predicted['f_r_khz']:.3f}" in section
+    assert "as the calibration predicts them" in section and str(context.calibration) in section
+    assert f"| 1 | 25.100 | {median / KHZ:.3f} ({low / KHZ:.3f} to {high / KHZ:.3f}) |" in section
     assert calibrated_designs(SimpleNamespace(calibration=None)) == {}
 
 

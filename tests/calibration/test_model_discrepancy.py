@@ -37,7 +37,7 @@ def test_plates_the_parameters_cannot_represent_fail_the_check_and_raise_the_dis
     with_term = calibrate(inconsistent, SHORT, coarse_model.design_fem(), FEM_RECORD)
     term = with_term.check()["discrepancy"]["frequency"]
     assert term["median"] > 3 * term["prior_median"]  # the plates push it well above its prior
-    bands = [predict(c, P1, None, c.surrogates[0])["frequency"] for c in (without, with_term)]
+    bands = [predict(c, P1, None, c.surrogates[0]).frequency for c in (without, with_term)]
     assert (bands[1][2] - bands[1][0]) > 3 * (bands[0][2] - bands[0][0])
     for band, plate in zip(bands[1:], inconsistent[:1]):
         assert band[0] <= plate.frequency <= band[2]

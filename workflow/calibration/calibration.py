@@ -385,15 +385,36 @@ def prediction_surrogate(calibration: Calibration, plate: Plate, fem: DesignFem)
                                  calibration.settings.surrogate_seed)
 
 
-def predict(calibration: Calibration, plate: Plate, fem: DesignFem | None,
-            surrogate: PlateSurrogate | None = None) -> dict:
-    """Posterior predictive f_r and w of a plate.
+@dataclass(frozen=True)
+class Prediction:
+    """A plate's posterior-predictive resonance and deflection under a calibration.
 
-    Returns
-    -------
-    dict
-        ``frequency`` and ``deflection``: arrays (p05, p50, p95) [Hz], [m]; ``surrogate``: the
-        surrogate used (a new one over the posterior's range unless given).
+    Attributes
+    ----------
+    plate : Plate
+    frequency, deflection : numpy.ndarray
+        p05, p50, p95 of f_r [Hz] and of the deflection at the calibration's Q and voltage [m].
+    surrogate : PlateSurrogate
+        The surrogate of the FEM the prediction went through (its leave-one-out error, its FEM evaluations).
+    samples : int
+        Posterior samples behind the quantiles [-].
+    contents : dict
+        What the 90 % band contains and what it does not (:func:`interval_contents`).
     """
+
+    plate: Plate
+    frequency: np.ndarray
+    deflection: np.ndarray
+    surrogate: PlateSurrogate
+    samples: int
+    contents: dict
+
+
+def predict(calibration: Calibration, plate: Plate, fem: DesignFem | None,
+            surrogate: PlateSurrogate | None = None) -> Prediction:
+    """Posterior predictive f_r and w of a plate, through ``surrogate`` (default: a new one over the posterior's range,
+    built with ``fem``)."""
     surrogate = surrogate or prediction_surrogate(calibration, plate, fem)
-    return {**predictive_quantiles(surrogate, calibration.samples, calibration.discrepancy), "surrogate": surrogate}
+    quantiles = predictive_quantiles(surrogate, calibration.samples, calibration.discrepancy)
+    return Prediction(plate, quantiles["frequency"], quantiles["deflection"], surrogate, len(calibration.samples),
+                      interval_contents(calibration.settings))

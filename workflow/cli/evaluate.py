@@ -23,6 +23,7 @@ from workflow.cli.options import (
     positive_float,
 )
 from workflow.errors import TactileError
+from workflow.calibration.calibration import predict
 from workflow.pipeline.calibration_files import calibrated_record
 from workflow.pipeline.records import evaluation_record
 from workflow.units import KHZ, MM, UM
@@ -68,15 +69,15 @@ def run(args) -> dict:
     if calibration is not None:
         result["nominal_f_r_khz"], result["nominal_w_dyn_um"] = result["f_r_khz"], result["w_dyn_um"]
         fem = calibration_fem_model(calibration, args.q, args.voltage)
-        prediction = calibrated_record(calibration, plate, fem.design_fem(), args.calibration)
-        result.update(prediction)
+        prediction = predict(calibration, plate, fem.design_fem())
+        result.update(calibrated_record(prediction, args.calibration))
     if not args.json:
-        _print_human(evaluation, prediction)
+        _print_human(evaluation, prediction, args.calibration)
     return result
 
 
-def _print_human(evaluation, prediction: dict | None) -> None:
-    """The evaluation for people (``prediction``: the calibration's keys, or None)."""
+def _print_human(evaluation, prediction, source: str) -> None:
+    """The evaluation for people, and the calibrated ``prediction`` (or None) of the calibration read from ``source``."""
     plate, damped, fem = evaluation.plate, evaluation.q_of_v, evaluation.fem
     interval = "" if damped is None else " (90 %: {:.3f} to {:.3f} µm)".format(*(w / UM for w in damped.deflection_interval))
     deflection = evaluation.deflection if damped is None else damped.deflection
@@ -96,7 +97,7 @@ def _print_human(evaluation, prediction: dict | None) -> None:
     if damped is not None:
         print(damping_line(damped))
     if prediction is not None:
-        print(calibration_line(prediction))
+        print(calibration_line(prediction, source))
     for index, mode in enumerate(fem.modes if fem is not None else ()):
         mark = "  <- working mode (reported above)" if index == evaluation.working_mode else ""
         print(f"  mode {mode.frequency / KHZ:8.3f} kHz: {mode.deflection / UM:.4f} µm, transverse indicator "

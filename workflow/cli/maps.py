@@ -172,12 +172,14 @@ def calibrated_map(args, result, optimum):
     and the ``calibration`` key stating it (a relative correction from one geometry, docs/calibration.md)."""
     import dataclasses
 
+    from workflow.calibration.calibration import predict
     from workflow.pipeline.calibration_files import calibrated_record
 
     model = calibration_fem_model(args.loaded_calibration, args.q, args.voltage)
-    record = calibrated_record(args.loaded_calibration, optimum.plate, model.design_fem(), args.calibration)
-    f_factor = record["f_r_khz"] * KHZ / optimum.frequency
-    w_factor = record["w_dyn_um"] * UM / optimum.deflection
+    prediction = predict(args.loaded_calibration, optimum.plate, model.design_fem())
+    record = calibrated_record(prediction, args.calibration)
+    f_factor = prediction.frequency[1] / optimum.frequency
+    w_factor = prediction.deflection[1] / optimum.deflection
     result = dataclasses.replace(result, frequency=result.frequency * f_factor, deflection=result.deflection * w_factor)
     optimum = dataclasses.replace(optimum, frequency=optimum.frequency * f_factor, deflection=optimum.deflection * w_factor)
     statement = (f"calibrated: every point scaled by the posterior-median / nominal FEM ratio at the nominal optimum "

@@ -18,7 +18,7 @@ from workflow.pipeline.design_models import DESIGN_MODELS
 from workflow.models.limits import LIMITS, point_problem, problem, unit
 from workflow.models.plate import ORIGINAL_PLATE, Plate, check_design_space
 from workflow.optimise.problem import DesignProblem
-from workflow.units import MM, UM
+from workflow.units import KHZ, MM, UM
 
 MODELS = tuple(DESIGN_MODELS)
 
@@ -592,13 +592,15 @@ def command_fem_model(q: float, voltage: float, settings, scheduler=None):
     return FemModel(q=q, voltage=voltage, settings=settings, cache=EvaluationCache(), scheduler=scheduler, progress=True)
 
 
-def calibration_line(record: dict) -> str:
-    """The calibrated prediction of a record with ``calibrated_record`` keys, for people."""
-    c = record["calibration"]
+def calibration_line(prediction, source: str) -> str:
+    """A calibrated :class:`~workflow.calibration.calibration.Prediction` for people (the calibration read from
+    ``source``)."""
+    (f05, f50, f95), (w05, w50, w95) = prediction.frequency / KHZ, prediction.deflection / UM
+    surrogate = prediction.surrogate
     return (
-        f"  calibrated ({c['file']}): f_r {record['f_r_khz']:.3f} kHz (90 %: {record['f_r_khz_p05']:.3f} to "
-        f"{record['f_r_khz_p95']:.3f}), w_dyn {record['w_dyn_um']:.4f} µm (90 %: {record['w_dyn_um_p05']:.4f} to "
-        f"{record['w_dyn_um_p95']:.4f}); surrogate error {c['surrogate_error'] * 100:.2f} % from {c['fem_evaluations']} FEM evaluations"
+        f"  calibrated ({source}): f_r {f50:.3f} kHz (90 %: {f05:.3f} to {f95:.3f}), w_dyn {w50:.4f} µm (90 %: "
+        f"{w05:.4f} to {w95:.4f}); surrogate error {surrogate.log_frequency.loo_rms * 100:.2f} % from "
+        f"{surrogate.evaluations} FEM evaluations"
     )
 
 

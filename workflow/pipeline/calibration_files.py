@@ -6,7 +6,14 @@ from pathlib import Path
 
 import numpy as np
 
-from workflow.calibration.calibration import Calibration, MeasuredPlate, interval_contents, measured_plate, predict
+from workflow.calibration.calibration import (
+    Calibration,
+    MeasuredPlate,
+    Prediction,
+    interval_contents,
+    measured_plate,
+    predict,
+)
 from workflow.calibration.logs import read_built_plate
 from workflow.calibration.measurements import scan_shape
 from workflow.calibration.parameters import CalibrationSettings
@@ -121,7 +128,7 @@ def calibration_summary(calibration: Calibration, nominal_frequencies, files: di
     """
     plates = []
     for plate, surrogate, nominal in zip(calibration.plates, calibration.surrogates, nominal_frequencies):
-        predicted = predict(calibration, plate.plate, None, surrogate)["frequency"]
+        predicted = predict(calibration, plate.plate, None, surrogate).frequency
         plates.append({
             "data_used": plate.data_used,
             **measured_terms(calibration, plate, surrogate),
@@ -171,17 +178,17 @@ def measured_terms(calibration: Calibration, plate: MeasuredPlate, surrogate) ->
     return record
 
 
-def calibrated_record(calibration: Calibration, plate, fem, source: str) -> dict:
-    """Posterior-predictive keys of one plate: ``f_r_khz`` (median), ``f_r_khz_p05``/``_p95``, ``w_dyn_um`` likewise
-    (``fem``: the :class:`~workflow.calibration.plate_surrogate.DesignFem` of its prediction surrogate)."""
-    prediction = predict(calibration, plate, fem)
-    f, w, surrogate = prediction["frequency"], prediction["deflection"], prediction["surrogate"]
+def calibrated_record(prediction: Prediction, source: str) -> dict:
+    """Posterior-predictive keys of one plate (:func:`~workflow.calibration.calibration.predict`, with the calibration
+    read from ``source``): ``f_r_khz`` (median), ``f_r_khz_p05``/``_p95``, ``w_dyn_um`` likewise, the calibration's
+    file, surrogate error, FEM evaluations and samples, and what the intervals contain."""
+    f, w, surrogate = prediction.frequency, prediction.deflection, prediction.surrogate
     return {
         "f_r_khz": f[1] / KHZ, "f_r_khz_p05": f[0] / KHZ, "f_r_khz_p95": f[2] / KHZ,
         "w_dyn_um": w[1] / UM, "w_dyn_um_p05": w[0] / UM, "w_dyn_um_p95": w[2] / UM,
         "calibration": {"file": source, "surrogate_error": surrogate.log_frequency.loo_rms,
-                        "fem_evaluations": surrogate.evaluations, "samples": len(calibration.samples)},
-        "intervals": interval_contents(calibration.settings),
+                        "fem_evaluations": surrogate.evaluations, "samples": prediction.samples},
+        "intervals": prediction.contents,
     }
 
 

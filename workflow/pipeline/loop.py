@@ -155,7 +155,7 @@ def loop_calibration(context: RunContext):
     (plate,) = measured_plates(logs, settings)
     calibration = calibrate([plate], settings, model.design_fem(), fem)
     prediction = predict(calibration, plate.plate, None, calibration.surrogates[0])
-    return calibration, tuple(float(f) for f in prediction["frequency"])
+    return calibration, tuple(float(f) for f in prediction.frequency)
 
 
 def loop_calibration_files(context: RunContext, result) -> None:

@@ -365,23 +365,25 @@ def _period_text(found: tuple) -> str:
     return {"at most": "≤ ", "extrapolated": "~"}.get(how, "") + f"{period / MM:.3g}"
 
 
-def _calibrated_designs(context: RunContext, designs) -> str:
+def _calibrated_designs(context: RunContext, predictions) -> str:
     """The recommended designs as the calibration predicts them (nothing without ``--calibration``)."""
-    if not designs:
+    if not predictions:
         return ""
-    rows = [
-        (f"{hp / MM:g}", f"{d['nominal_f_r_khz']:.3f}", f"{d['f_r_khz']:.3f} ({d['f_r_khz_p05']:.3f} to {d['f_r_khz_p95']:.3f})",
-         f"{d['w_dyn_um']:.3f} ({d['w_dyn_um_p05']:.3f} to {d['w_dyn_um_p95']:.3f})")
-        for hp, d in sorted(designs.items())
-    ]
-    source = next(iter(designs.values()))["calibration"]["file"]
+    designs = context.results.recommended_design.designs
+
+    def band(values, unit, digits=3) -> str:
+        low, median, high = np.asarray(values) / unit
+        return f"{median:.{digits}f} ({low:.{digits}f} to {high:.{digits}f})"
+
+    rows = [(f"{hp / MM:g}", f"{designs[hp].frequency / KHZ:.3f}", band(p.frequency, KHZ), band(p.deflection, UM))
+            for hp, p in sorted(predictions.items())]
     return (
         "## The designs as the calibration predicts them\n\n"
-        f"With the calibration `{source}` (posterior of `tactile calibrate`, docs/calibration.md), the recommended "
-        "designs above are predicted as follows: posterior median and 90 % interval, through a surrogate of the FEM "
-        "built at each design.  Designs whose interval reaches below the frequency limit need the robust design "
+        f"With the calibration `{context.calibration}` (posterior of `tactile calibrate`, docs/calibration.md), the "
+        "recommended designs above are predicted as follows: posterior median and 90 % interval, through a surrogate of "
+        "the FEM built at each design.  Designs whose interval reaches below the frequency limit need the robust design "
         "(`tactile optimize --model fem --calibration …`).  "
-        + _contents(next(iter(designs.values()))["intervals"]) + "\n\n"
+        + _contents(next(iter(predictions.values())).contents) + "\n\n"
         + table(("h_p [mm]", "nominal FEM f_r [kHz]", "calibrated f_r [kHz] (90 %)", "calibrated w_dyn [µm] (90 %)"), rows)
     )
 

@@ -328,11 +328,13 @@ def texture_rendering_figures(context: RunContext, renderings: dict) -> None:
 
 
 def calibrated_designs(context: RunContext) -> dict:
-    """The recommended designs' f_r and w_dyn as the calibration (``--calibration``) predicts them, with 90 %
-    intervals (docs/calibration.md); empty without a calibration.  Q and voltage are the run's."""
+    """The recommended designs as the calibration (``--calibration``) predicts them: h_p [m] -> its
+    :class:`~workflow.calibration.calibration.Prediction` (f_r and w_dyn with 90 % intervals, docs/calibration.md);
+    empty without a calibration.  Q and voltage are the run's."""
     from dataclasses import replace
 
-    from workflow.pipeline.calibration_files import calibrated_record, calibration_accuracy, load_calibration
+    from workflow.calibration.calibration import predict
+    from workflow.pipeline.calibration_files import calibration_accuracy, load_calibration
 
     if context.calibration is None:
         return {}
@@ -340,9 +342,7 @@ def calibrated_designs(context: RunContext) -> dict:
     model = replace(fem_model(context, settings=calibration_accuracy(calibration.fem)), scheduler="synchronous",
                     progress=False)
     designs = context.results.recommended_design.designs
-    return {hp: {"nominal_f_r_khz": d.frequency / KHZ,
-                 **calibrated_record(calibration, d.plate, model.design_fem(), str(context.calibration))}
-            for hp, d in designs.items()}
+    return {hp: predict(calibration, d.plate, model.design_fem()) for hp, d in designs.items()}
 
 
 def analytical_maps(context: RunContext):
