@@ -34,8 +34,8 @@ from workflow.optimise.damped import map_draws
 from workflow.optimise.maps import width_sweep
 from workflow.models.limits import LIMITS
 from workflow.pipeline.outputs import output_folder, save_figure
-from workflow.pipeline.records import q_of_v_record
-from workflow.units import KHZ, MM, UM
+from workflow.pipeline.records import grid_record, point_record, q_of_v_record, width_sweep_record
+from workflow.units import MM
 
 OUTPUTS = ("*.png",)
 """Glob patterns of the files the command writes into --out (:mod:`workflow.pipeline.outputs`)."""
@@ -118,35 +118,8 @@ def _maps(args, model, problem, posterior, points: int) -> dict:
         sweep = width_sweep(model.plate_model, plate, sweep_widths(default_config()["fem"], plate.width))
         figure = width_sweep_figure(sweep, design_width=args.b_mm * MM)
         record["figures"].append(save_figure(figure, args.out / "width_sweep_fem.png"))
-        record["width_sweep"] = {
-            "b_mm": (sweep.width / MM).tolist(),
-            "w_dyn_um": (sweep.deflection / UM).tolist(),
-            "f_r_khz": (sweep.frequency / KHZ).tolist(),
-            "transverse": sweep.transverse.tolist(),
-        }
+        record["width_sweep"] = width_sweep_record(sweep)
     return record
-
-
-def _map_keys(args, wavelength, resonator_thickness, deflection, frequency) -> dict:
-    """The docs/cli.md keys of a map (grids indexed [lambda, h_i])."""
-    return {
-        "model": args.model,
-        "h_p_mm": args.hp_mm,
-        "b_mm": args.b_mm,
-        "lambda_mm": (wavelength / MM).tolist(),
-        "h_i_mm": (resonator_thickness / MM).tolist(),
-        "w_dyn_um": (deflection / UM).tolist(),
-        "f_r_khz": (frequency / KHZ).tolist(),
-    }
-
-
-def _optimum_keys(optimum) -> dict:
-    return {
-        "lambda_mm": float(optimum.plate.wavelength) / MM,
-        "h_i_mm": float(optimum.plate.resonator_thickness) / MM,
-        "w_dyn_um": optimum.deflection / UM,
-        "f_r_khz": optimum.frequency / KHZ,
-    }
 
 
 def _constant_q_record(args, problem, model, points: int) -> dict:
@@ -160,8 +133,8 @@ def _constant_q_record(args, problem, model, points: int) -> dict:
         result, optimum, correction = calibrated_map(args, result, optimum)
     figure = save_figure(map_figure(result), args.out / f"map_{args.model}_hp{args.hp_mm:g}mm.png")
     return {
-        **_map_keys(args, result.wavelength, result.resonator_thickness, result.deflection, result.frequency),
-        "optimum": _optimum_keys(optimum),
+        **grid_record(args.model, problem, result),
+        "optimum": point_record(optimum),
         "figures": [figure],
         **correction,
     }
@@ -203,13 +176,13 @@ def _damped_record(args, problem, model, points: int, posterior) -> dict:
     ]
     p05, _, p95 = maps.required_voltage_interval
     return {
-        **_map_keys(args, maps.wavelength, maps.resonator_thickness, maps.deflection, maps.frequency),
+        **grid_record(args.model, problem, maps),
         "required_voltage_v": maps.required_voltage.tolist(),
         "required_voltage_v_p05": p05.tolist(),
         "required_voltage_v_p95": p95.tolist(),
         "target_um": keys["required_voltage_v"]["target_um"],
         "draws": draws,
         "damping": keys["damping"],
-        "optimum": {**_optimum_keys(found.optimum), "q": keys["q"], "required_voltage_v": keys["required_voltage_v"]},
+        "optimum": {**point_record(found.optimum), "q": keys["q"], "required_voltage_v": keys["required_voltage_v"]},
         "figures": figures,
     }

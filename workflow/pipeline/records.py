@@ -8,7 +8,8 @@ electrical keys, and the keys added when a posterior Q(v) is used (``--damping``
 from workflow.damping.laws import law_parameters
 from workflow.models.plate import Plate
 from workflow.optimise.damped import QOfV
-from workflow.optimise.problem import Optimum
+from workflow.optimise.maps import WidthSweep
+from workflow.optimise.problem import DesignProblem, Optimum
 from workflow.pipeline.design_models import DesignOptimum, Evaluation
 from workflow.units import KHZ, MM, UM
 
@@ -32,6 +33,41 @@ def optimum_record(optimum: Optimum, **counts) -> dict:
         "constraint_active": optimum.constraint_active,
         "status": optimum.status,
         **counts,
+    }
+
+
+def point_record(optimum: Optimum) -> dict:
+    """The optimum marked on a map: lambda and h_i [mm], deflection [um], resonance [kHz]."""
+    return {
+        "lambda_mm": float(optimum.plate.wavelength) / MM,
+        "h_i_mm": float(optimum.plate.resonator_thickness) / MM,
+        "w_dyn_um": optimum.deflection / UM,
+        "f_r_khz": optimum.frequency / KHZ,
+    }
+
+
+def grid_record(model: str, problem: DesignProblem, grids) -> dict:
+    """The keys of a map (docs/cli.md): the model, h_p and b [mm], the axes [mm] and the grids of w_dyn [um] and f_r
+    [kHz] indexed [lambda, h_i]; ``grids`` a :class:`~workflow.optimise.maps.DesignMap` or
+    :class:`~workflow.optimise.damped.DampedMaps`."""
+    return {
+        "model": model,
+        "h_p_mm": problem.ceramic_thickness / MM,
+        "b_mm": problem.width / MM,
+        "lambda_mm": (grids.wavelength / MM).tolist(),
+        "h_i_mm": (grids.resonator_thickness / MM).tolist(),
+        "w_dyn_um": (grids.deflection / UM).tolist(),
+        "f_r_khz": (grids.frequency / KHZ).tolist(),
+    }
+
+
+def width_sweep_record(sweep: WidthSweep) -> dict:
+    """A width sweep's keys: b [mm], w_dyn [um], f_r [kHz] and whether the working mode is transverse-mixed."""
+    return {
+        "b_mm": (sweep.width / MM).tolist(),
+        "w_dyn_um": (sweep.deflection / UM).tolist(),
+        "f_r_khz": (sweep.frequency / KHZ).tolist(),
+        "transverse": sweep.transverse.tolist(),
     }
 
 
