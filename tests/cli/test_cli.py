@@ -50,7 +50,7 @@ def test_optimize_without_hp_reports_every_ceramic(capsys):
         (["optimize", "--hp-mm", "3"], "commercial"),
         (["optimize", "--hp-mm", "1", "--hi-min-mm", "5"], "--hi-min-mm"),
         (["optimize", "--model", "comsol"], "--model"),
-        (["evaluate", "--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "1", "--b-mm", "200"], "width"),
+        (["evaluate", "--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "1", "--b-mm", "200"], "--b-mm: 200 is outside the accepted range 30 to 100 mm"),
     ],
 )
 def test_bad_input_gives_one_error_line_and_a_non_zero_exit(capsys, argv, words):

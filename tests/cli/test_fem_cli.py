@@ -41,7 +41,7 @@ def test_fem_evaluate_marks_the_working_mode(capsys):
         (["--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "0.7"], "commercial"),
         (["--lambda-mm", "50", "--hi-mm", "2", "--hp-mm", "1"], "wavelength"),
         (["--lambda-mm", "24", "--hi-mm", "5", "--hp-mm", "1"], "resonator thickness"),
-        (["--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "1", "--b-mm", "10"], "width"),
+        (["--lambda-mm", "24", "--hi-mm", "2", "--hp-mm", "1", "--b-mm", "10"], "--b-mm: 10 is outside the accepted range 30 to 100 mm"),
         (["--lambda-mm", "-24", "--hi-mm", "2", "--hp-mm", "1"], "positive"),
     ],
 )

@@ -112,13 +112,8 @@ def add_ceramic_option(parser: argparse.ArgumentParser, required: bool) -> None:
 
 
 def add_width_option(parser: argparse.ArgumentParser) -> None:
-    low, high = (x / MM for x in materials.WIDTH_RANGE)
-    parser.add_argument(
-        "--b-mm",
-        type=positive_float,
-        default=ORIGINAL_PLATE.width / MM,
-        help=f"plate width b [mm], {low:g} to {high:g} (default: {ORIGINAL_PLATE.width / MM:g})",
-    )
+    """``--b-mm``: the configuration's ``[design] width_mm``."""
+    key_option(parser, "design.width_mm", "--b-mm", metavar="B")
 
 
 def key_option(parser: argparse.ArgumentParser, path: str, flag: str | None = None, overrides: bool = False,
@@ -155,14 +150,8 @@ def add_drive_options(parser: argparse.ArgumentParser) -> None:
 
 
 def add_hi_min_option(parser: argparse.ArgumentParser) -> None:
-    low, high = (x / MM for x in materials.RESONATOR_THICKNESS_RANGE)
-    parser.add_argument(
-        "--hi-min-mm",
-        type=positive_float,
-        default=materials.PRACTICAL_MIN_RESONATOR_THICKNESS / MM,
-        help=f"lower bound on the resonator thickness h_i [mm], >= {low:g} "
-        f"(default: the practical minimum {materials.PRACTICAL_MIN_RESONATOR_THICKNESS / MM:g})",
-    )
+    """``--hi-min-mm``: the configuration's ``[design] hi_min_mm``."""
+    key_option(parser, "design.hi_min_mm", metavar="H")
 
 
 def plate_from_args(args) -> Plate:
