@@ -6,20 +6,31 @@ import argparse
 import pytest
 
 from workflow.cli import main
-from workflow.cli.options import RUN_OVERRIDES, add_build_options, add_drive_options, add_fem_options, key_option
+from workflow.cli.options import (
+    RUN_OVERRIDES,
+    add_build_options,
+    add_drive_options,
+    add_fem_options,
+    add_hi_min_option,
+    add_width_option,
+    key_option,
+)
 from workflow.errors import InputFileError
 from workflow.inputfiles import tomllib
 from workflow.pipeline.config import default_config, merge
 from workflow.pipeline.sections import key
 
 SHARED = [("design.q", "--q"), ("design.voltage_v", "--voltage"), ("design.glue_um", "--glue-um"),
-          ("design.ceramic", "--ceramic"), ("design.resonator", "--resonator"), ("fem.piezo", "--piezo")]
+          ("design.ceramic", "--ceramic"), ("design.resonator", "--resonator"), ("fem.piezo", "--piezo"),
+          ("design.width_mm", "--b-mm"), ("design.hi_min_mm", "--hi-min-mm")]
 
 
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser()
     add_drive_options(parser)
     add_fem_options(parser)
+    add_width_option(parser)
+    add_hi_min_option(parser)
     return parser
 
 
