@@ -111,27 +111,27 @@ def _maps(args, model, problem, posterior, points: int) -> dict:
         record = _damped_record(args, problem, model, points, posterior)
     if args.width_sweep:
         from workflow.pipeline.config import default_config
-        from workflow.pipeline.figures.maps import width_sweep_figure
+        from workflow.pipeline.figures.maps import WIDTH_SWEEP_FILE, width_sweep_figure
         from workflow.pipeline.steps import sweep_widths
 
         plate = build_plate(args)
         sweep = width_sweep(model.plate_model, plate, sweep_widths(default_config()["fem"], plate.width))
         figure = width_sweep_figure(sweep, design_width=args.b_mm * MM)
-        record["figures"].append(save_figure(figure, args.out / "width_sweep_fem.png"))
+        record["figures"].append(save_figure(figure, args.out / WIDTH_SWEEP_FILE))
         record["width_sweep"] = width_sweep_record(sweep)
     return record
 
 
 def _constant_q_record(args, problem, model, points: int) -> dict:
     """Map and optimum with the constant --q."""
-    from workflow.pipeline.figures.maps import map_figure
+    from workflow.pipeline.figures.maps import map_figure, map_file
 
     optimum = model.optimum(problem)
     result = model.design_map(problem, points, optimum)
     correction = {}
     if getattr(args, "loaded_calibration", None) is not None:
         result, optimum, correction = calibrated_map(args, result, optimum)
-    figure = save_figure(map_figure(result), args.out / f"map_{args.model}_hp{args.hp_mm:g}mm.png")
+    figure = save_figure(map_figure(result), args.out / map_file(result))
     return {
         **grid_record(args.model, problem, result),
         "optimum": point_record(optimum),

@@ -381,10 +381,10 @@ def fem_maps(context: RunContext):
 
 def maps_figures(context: RunContext, maps) -> None:
     """One two-panel contour figure per map."""
-    from workflow.pipeline.figures.maps import map_figure
+    from workflow.pipeline.figures.maps import map_figure, map_file
 
     for hp, design_map in maps.items():
-        context.save_figure(map_figure(design_map), f"map_{design_map.model}_hp{hp / MM:g}mm.png",
+        context.save_figure(map_figure(design_map), map_file(design_map),
                             f"{design_map.model} model, h_p = {hp / MM:g} mm: w_dyn and f_r")
 
 
@@ -415,10 +415,10 @@ def fem_width_sweep(context: RunContext):
 
 
 def width_sweep_figures(context: RunContext, sweep) -> None:
-    from workflow.pipeline.figures.maps import width_sweep_figure
+    from workflow.pipeline.figures.maps import WIDTH_SWEEP_FILE, width_sweep_figure
 
     design_width = context.config["design"]["width_mm"] * MM
-    context.save_figure(width_sweep_figure(sweep, design_width=design_width), "width_sweep_fem.png",
+    context.save_figure(width_sweep_figure(sweep, design_width=design_width), WIDTH_SWEEP_FILE,
                         "w(b) and f(b); transverse-mixed widths marked")
 
 

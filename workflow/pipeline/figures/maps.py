@@ -15,6 +15,15 @@ from workflow.units import KHZ, MM, UM  # noqa: E402
 
 
 
+WIDTH_SWEEP_FILE = "width_sweep_fem.png"
+"""File name of the width sweep's figure (``tactile maps --width-sweep`` and ``tactile run``)."""
+
+
+def map_file(design_map: DesignMap) -> str:
+    """File name of a map's figure: ``map_<model>_hp<h_p>mm.png`` (``tactile maps`` and ``tactile run``)."""
+    return f"map_{design_map.model}_hp{design_map.problem.ceramic_thickness / MM:g}mm.png"
+
+
 def map_figure(design_map: DesignMap):
     """Two panels: w_dyn [um] and f_r [kHz] over (lambda, h_i), with the limits and the optimum.
 
