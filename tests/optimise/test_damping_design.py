@@ -147,19 +147,6 @@ def test_damped_fem_model_with_constant_q_is_the_fem():
     assert float(damped) == pytest.approx(1.5 * float(result.deflection_at_q(LAW.quality_factor(v))), rel=1e-8)
 
 
-def test_design_summary_is_json_and_in_display_units():
-    import json
-
-    from workflow.optimise.damped import design_summary
-
-    design = design_with_damping(_posterior(), [DesignProblem(ceramic_thickness=1e-3)], draws=4, scheduler="synchronous")
-    summary = json.loads(json.dumps(design_summary(design)))
-    optimum = summary["optima"][0]
-    assert optimum["h_p_mm"] == 1.0
-    assert 15 <= optimum["q_of_v"]["lambda_mm"] <= 40 and optimum["q_of_v"]["f_r_khz"] >= 25 * (1 - 1e-6)
-    assert optimum["q_of_v_intervals"]["required_voltage_v"]["p05"] <= optimum["q_of_v_intervals"]["required_voltage_v"]["p95"]
-
-
 def test_stacked_single_plate_responses_are_the_batched_response():
     """The FEM's maps go through StackedResponse (one response per geometry); on the beam model, stacking the
     scalar responses of a grid must give the vectorised batch's deflections and voltages, draws axis included."""

@@ -413,52 +413,6 @@ def _law_label(posterior: DampingPosterior, law) -> str:
     return f"{posterior.description} Q(v), {median}: {parameters}"
 
 
-def design_summary(design: DampedDesign) -> dict:
-    """JSON-able summary of a :class:`DampedDesign` in mm, um, kHz and V (for reports)."""
-    from workflow.units import KHZ, MM, UM
-
-    def optimum_keys(optimum: Optimum) -> dict:
-        return {
-            "lambda_mm": float(optimum.plate.wavelength) / MM,
-            "h_i_mm": float(optimum.plate.resonator_thickness) / MM,
-            "w_dyn_um": optimum.deflection / UM,
-            "f_r_khz": optimum.frequency / KHZ,
-        }
-
-    def interval(values, unit) -> dict:
-        p05, p50, p95 = np.quantile(values, QUANTILES) / unit
-        return {"p05": p05, "p50": p50, "p95": p95}
-
-    optima = []
-    for h_p, optimum in design.optima.items():
-        draws = optimum.draws
-        optima.append(
-            {
-                "h_p_mm": h_p / MM,
-                "constant_q": optimum_keys(optimum.constant_q),
-                "q_of_v": dict(optimum_keys(optimum.damped), required_voltage_v=optimum.required_voltage),
-                "q_of_v_intervals": {
-                    "lambda_mm": interval(draws["wavelength"], MM),
-                    "h_i_mm": interval(draws["resonator_thickness"], MM),
-                    "w_dyn_um": interval(draws["deflection"], UM),
-                    "required_voltage_v": interval(draws["required_voltage"], 1.0),
-                },
-            }
-        )
-    return {
-        "law": design.posterior.description,
-        "median_law_name": design.median_law.name,
-        "median_law": law_parameters(design.median_law),
-        "target_um": design.target / UM,
-        "draws": int(len(design.original_deflection)),
-        "optima": optima,
-        "original_plate": {
-            "w_dyn_um": interval(design.original_deflection, UM),
-            "required_voltage_v": interval(design.original_required_voltage, 1.0),
-        },
-    }
-
-
 def damped_optimum(law, problem: DesignProblem) -> Optimum:
     """The beam optimum with the Q(v) ``law`` solved self-consistently at ``problem.voltage``."""
     return maximise_deflection(damped_beam_model(law, problem.voltage), problem)

@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 
 from workflow.models.analytical import BEAM_CALIBRATION
+from workflow.optimise.damped import QUANTILES
 from workflow.optimise.maps import TRANSVERSE_THRESHOLD
 from workflow.pipeline.design_models import DESIGN_MODELS
 from workflow.pipeline.loop_report import case_study_section, loop_section
@@ -554,34 +555,32 @@ def _ringdowns(summary: dict) -> str:
 
 
 def _damped_design(context: RunContext, result) -> str:
-    from workflow.optimise.damped import design_summary
-
     design, _ = result
-    summary = design_summary(design)
 
-    def spread(interval, digits=3):
-        return f"{interval['p50']:.{digits}f} [{interval['p05']:.{digits}f}, {interval['p95']:.{digits}f}]"
+    def spread(values, unit=1.0, digits=3):
+        p05, p50, p95 = np.quantile(values, QUANTILES) / unit
+        return f"{p50:.{digits}f} [{p05:.{digits}f}, {p95:.{digits}f}]"
 
     rows = []
-    for o in summary["optima"]:
-        c, q, i = o["constant_q"], o["q_of_v"], o["q_of_v_intervals"]
+    for h_p, o in design.optima.items():
+        constant, damped = o.constant_q, o.damped
         rows.append(
             (
-                f"{o['h_p_mm']:g}",
-                f"{c['lambda_mm']:.2f} / {c['h_i_mm']:.3f}",
-                f"{c['w_dyn_um']:.3f}",
-                f"{spread(i['lambda_mm'], 2)} / {spread(i['h_i_mm'])}",
-                spread(i["w_dyn_um"]),
-                f"{q['f_r_khz']:.2f}",
-                spread(i["required_voltage_v"], 2),
+                f"{h_p / MM:g}",
+                f"{float(constant.plate.wavelength) / MM:.2f} / {float(constant.plate.resonator_thickness) / MM:.3f}",
+                f"{constant.deflection / UM:.3f}",
+                f"{spread(o.draws['wavelength'], MM, 2)} / {spread(o.draws['resonator_thickness'], MM)}",
+                spread(o.draws["deflection"], UM),
+                f"{damped.frequency / KHZ:.2f}",
+                spread(o.draws["required_voltage"], digits=2),
             )
         )
-    original = summary["original_plate"]
+    target = design.target / UM
     return (
         "## Design with Q(v)\n\n"
-        f"The constant Q is replaced by the fitted Q(v) ({summary['law']}) and the deflection is solved "
-        f"self-consistently, w = w(Q(2 pi f_r w)). Intervals are 5-95 % over {summary['draws']} posterior draws, "
-        "each optimised again.\n\n"
+        f"The constant Q is replaced by the fitted Q(v) ({design.posterior.description}) and the deflection is solved "
+        f"self-consistently, w = w(Q(2 pi f_r w)). Intervals are 5-95 % over {len(design.original_deflection)} "
+        "posterior draws, each optimised again.\n\n"
         + table(
             [
                 "h_p [mm]",
@@ -590,13 +589,13 @@ def _damped_design(context: RunContext, result) -> str:
                 "Q(v): λ / h_i [mm]",
                 "Q(v): w [µm]",
                 "f_r [kHz]",
-                f"V for {summary['target_um']:g} µm",
+                f"V for {target:g} µm",
             ],
             rows,
         )
         + "\n\n"
-        f"Original plate (beam model) with Q(v) at the design voltage: w = {spread(original['w_dyn_um'])} µm; "
-        f"voltage for {summary['target_um']:g} µm: {spread(original['required_voltage_v'], 2)} V.\n\n"
+        f"Original plate (beam model) with Q(v) at the design voltage: w = {spread(design.original_deflection, UM)} µm; "
+        f"voltage for {target:g} µm: {spread(design.original_required_voltage, digits=2)} V.\n\n"
         + step_figures(context, "damped_design")
     )
 
