@@ -64,7 +64,7 @@ def test_maps_command_json_shape(tmp_path, capsys):
         (["--hp-mm", "0.7"], "not a commercial size"),
         (["--hp-mm", "1", "--grid", "1"], "--grid"),
         (["--hp-mm", "1", "--width-sweep"], "--width-sweep needs --model fem"),
-        (["--hp-mm", "1", "--b-mm", "120"], "width b"),
+        (["--hp-mm", "1", "--b-mm", "120"], "--b-mm: 120 is outside the accepted range 30 to 100 mm"),
     ],
 )
 def test_maps_bad_input_is_one_line(argv, message, tmp_path, capsys):
