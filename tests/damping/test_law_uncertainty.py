@@ -92,3 +92,28 @@ def test_a_mixture_describes_itself_by_its_laws_shares():
     assert quadratic.description == "quadratic"
     mixed = stacked_posterior({"quadratic": quadratic, "linear": linear}, {"quadratic": 0.25, "linear": 0.75}, 4000)
     assert re.fullmatch(r"mixture of linear 7\d %, quadratic 2\d %", mixed.description), mixed.description
+
+
+@pytest.mark.parametrize("stacked", [False, True])
+def test_the_shape_discrepancy_scales_each_samples_q_at_every_velocity_and_keeps_the_median(stacked):
+    from workflow.damping.posterior import with_shape_discrepancy
+
+    rng = np.random.default_rng(3)
+    n = 4000
+    quadratic = DampingPosterior("quadratic", {"q0": rng.normal(150, 3, n), "alpha": rng.normal(0.25, 0.01, n)})
+    threshold = DampingPosterior("threshold", {"q0": rng.normal(150, 3, n), "alpha": rng.normal(2.0, 0.1, n),
+                                               "v_t": rng.normal(0.1, 0.005, n), "onset": np.full(n, 0.3)})
+    posterior = (stacked_posterior({"quadratic": quadratic, "threshold": threshold}, {"quadratic": 0.5, "threshold": 0.5}, n)
+                 if stacked else quadratic)
+    widened = with_shape_discrepancy(posterior, 0.01, seed=5)
+    velocity = np.array([0.0, 0.05, 0.12, 0.25])[:, None]
+    before = posterior.law_from_samples().quality_factor(velocity)
+    after = widened.law_from_samples().quality_factor(velocity)
+    ratio = after / before
+    np.testing.assert_allclose(ratio, np.broadcast_to(ratio[:1], ratio.shape), rtol=1e-12)  # one factor per sample, the same at every velocity
+    assert np.std(np.log(ratio[0])) == pytest.approx(0.01, rel=0.05)
+    assert abs(np.median(np.log(ratio[0]))) < 0.001
+    assert with_shape_discrepancy(posterior, 0.0) is posterior
+    if stacked:
+        np.testing.assert_array_equal(widened.parameters["component"], posterior.parameters["component"])
+        assert widened.parameters["threshold_v_t"] is posterior.parameters["threshold_v_t"]

@@ -43,6 +43,8 @@ class QuadraticLoss:
     alpha: float
     name: ClassVar[str] = "quadratic"
     velocity_exponent: ClassVar[int] = 2
+    loss_terms: ClassVar[tuple] = ("alpha",)
+    """Parameters that 1/Q is linear in, besides 1/Q0 [-]."""
     """p of the law's loss term alpha |v|^p [-]."""
     units: ClassVar[dict] = {"q0": "-", "alpha": "s^2/m^2"}
     """Parameter -> unit."""
@@ -74,6 +76,7 @@ class LinearLoss:
     alpha: float
     name: ClassVar[str] = "linear"
     velocity_exponent: ClassVar[int] = 1
+    loss_terms: ClassVar[tuple] = ("alpha",)
     units: ClassVar[dict] = {"q0": "-", "alpha": "s/m"}
 
     prior_box = classmethod(_loss_coefficient_box)
@@ -100,6 +103,7 @@ class ConstantQ:
     q0: float
     name: ClassVar[str] = "constant"
     velocity_exponent: ClassVar[int] = 0
+    loss_terms: ClassVar[tuple] = ()
     units: ClassVar[dict] = {"q0": "-"}
 
     @classmethod
@@ -147,6 +151,7 @@ class ThresholdLoss:
     onset: float = 0.2
     name: ClassVar[str] = "threshold"
     velocity_exponent: ClassVar[int] = 2
+    loss_terms: ClassVar[tuple] = ("alpha",)
     """p of the loss term far above the threshold, alpha (|v| - v_t)^p [-]."""
     units: ClassVar[dict] = {"q0": "-", "alpha": "s^2/m^2", "v_t": "m/s", "onset": "-"}
     ONSET_RANGE: ClassVar[tuple] = (0.05, 1.0)
@@ -215,6 +220,7 @@ class MonotoneSpline:
     name: ClassVar[str] = "flexible"
     INCREMENTS: ClassVar[tuple] = ("d1", "d2", "d3", "d4", "d5", "d6", "d7", "d8")
     velocity_exponent: ClassVar[int] = 2
+    loss_terms: ClassVar[tuple] = INCREMENTS
     """The law is piecewise linear in v^p [-]."""
     units: ClassVar[dict] = {"q0": "-", **{d: "-" for d in INCREMENTS}, "v_top": "m/s", "v_first": "m/s"}
 
@@ -318,6 +324,20 @@ POSTERIOR_LAWS = {**LAWS, StackedLaws.name: StackedLaws}
 def parameter_names(law_class) -> tuple:
     """Names of a law class's parameters, e.g. ("q0", "alpha")."""
     return tuple(f.name for f in fields(law_class))
+
+
+def scaled_parameters(law_class, parameters: dict, factor) -> dict:
+    """Parameters of the law whose Q is ``factor`` times that of ``parameters`` at every velocity [natural units].
+
+    Every law here is 1/Q = 1/Q0 + terms linear in its :attr:`loss_terms`, so Q0 is multiplied and each loss term
+    divided by ``factor``; the shape parameters (v_t, onset, the knots) are kept.  ``factor`` broadcasts against the
+    parameters (one value per posterior sample).
+    """
+    scaled = dict(parameters)
+    scaled["q0"] = np.asarray(parameters["q0"]) * factor
+    for name in law_class.loss_terms:
+        scaled[name] = np.asarray(parameters[name]) / factor
+    return scaled
 
 
 def law_parameters(law) -> dict:

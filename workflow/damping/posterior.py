@@ -15,7 +15,15 @@ from typing import Dict
 
 import numpy as np
 
-from workflow.damping.laws import LAWS, POSTERIOR_LAWS, STACKED_COMPONENTS, StackedLaws, ThresholdLoss, parameter_names
+from workflow.damping.laws import (
+    LAWS,
+    POSTERIOR_LAWS,
+    STACKED_COMPONENTS,
+    StackedLaws,
+    ThresholdLoss,
+    parameter_names,
+    scaled_parameters,
+)
 from workflow.damping.likelihood import Q0_RANGE
 from workflow.errors import InputFileError
 from workflow.inputfiles import MAX_POSTERIOR_BYTES, open_input
@@ -84,6 +92,27 @@ class DampingPosterior:
     def law_from_samples(self):
         """All samples as one law with (M,) parameters."""
         return POSTERIOR_LAWS[self.law_name](**self.parameters)
+
+
+def with_shape_discrepancy(posterior: DampingPosterior, sigma: float, seed: int = 0) -> DampingPosterior:
+    """The posterior with a law-shape discrepancy: each sample's Q(v) multiplied, at every velocity, by exp(e), e drawn
+    from N(0, ``sigma``^2) (``sigma`` [-], the relative sd of Q).
+
+    The laws are almost, not exactly, the plate's Q(v), by an amount the data cannot show (docs/damping.md, coverage
+    over truths the fit does not contain): this widens every interval drawn from the posterior (the band of Q(v), the
+    design's deflections and voltages) by that amount in quadrature, without moving its median.
+    """
+    if sigma <= 0:
+        return posterior
+    factor = np.exp(np.random.default_rng(seed).normal(0.0, sigma, posterior.n_samples))
+    if posterior.law_name != StackedLaws.name:
+        return DampingPosterior(posterior.law_name,
+                                scaled_parameters(LAWS[posterior.law_name], posterior.parameters, factor), posterior.source)
+    columns = dict(posterior.parameters)
+    for name in STACKED_COMPONENTS:
+        own = {p: columns[f"{name}_{p}"] for p in parameter_names(LAWS[name])}
+        columns.update({f"{name}_{p}": v for p, v in scaled_parameters(LAWS[name], own, factor).items()})
+    return DampingPosterior(posterior.law_name, columns, posterior.source)
 
 
 NEUTRAL_PARAMETERS = {"q0": 1e3, "alpha": 0.0, "v_t": 1.0, "onset": 0.2, "v_top": 1.0, "v_first": 0.5}
