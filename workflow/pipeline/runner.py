@@ -66,7 +66,7 @@ class RunResults:
     texture_rendering: Optional[dict] = None
     """Per h_p: the design's texture rendering and electrical load."""
     calibrated_designs: Optional[dict] = None
-    """Per h_p: the designs as --calibration predicts them."""
+    """Per h_p [m]: the design as --calibration predicts it (a ``Prediction``, :mod:`workflow.calibration.calibration`)."""
     loop_first_plate: Any = None
     loop_calibration: Optional[tuple] = None
     """(the calibration on plate #1, the predicted frequency band of the re-design [Hz])."""
