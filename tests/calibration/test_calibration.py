@@ -189,13 +189,13 @@ def test_case_study_predicts_one_built_plate_from_the_other(coarse_model):
     first = MeasuredPlate("P1", P1, built_plate_frequency(coarse_model, P1))
     second = MeasuredPlate("P2", P2, built_plate_frequency(coarse_model, P2))
     directions = cross_predictions(first, second, SHORT, coarse_model.design_fem(), {})
-    assert [d["predicted"] for d in directions] == ["P2", "P1"]
+    assert [d.predicted for d in directions] == ["P2", "P1"]
     for d in directions:
-        assert d["inside"], d
-        assert d["predicted_hz"][0] < d["predicted_hz"][1] < d["predicted_hz"][2]
-        assert abs(d["error"]) < 0.02
-        source = first if d["calibrated_on"] == "P1" else second
-        assert d["source_fit_hz"] == pytest.approx(source.frequency, rel=3e-3)
+        assert d.inside, d
+        assert d.band[0] < d.band[1] < d.band[2]
+        assert abs(d.error) < 0.02
+        source = first if d.calibrated_on == "P1" else second
+        assert d.source_fit == pytest.approx(source.frequency, rel=3e-3)
 
 
 def test_read_built_plate_takes_materials_and_glue_from_the_metadata(tmp_path):

@@ -109,11 +109,11 @@ def test_the_report_tables_each_stage_and_the_case_study(tmp_path):
     assert "](loop/calibration_pairs.png)" in text and "MAC 0.9994" in text
     assert "it uses its resonance frequency, deflection per volt, scan mode shape;" in text
     assert "glue_um is at upper prior bound: the prior, not the data, limits it." in text
+    from workflow.calibration.case_study import CrossPrediction
+
     directions = [
-        {"calibrated_on": "paper_P1.csv", "predicted": "paper_P2.csv",
-         "measured_hz": 23.95e3, "predicted_hz": (23.37e3, 23.90e3, 24.41e3), "error": -0.002, "inside": True},
-        {"calibrated_on": "paper_P2.csv", "predicted": "paper_P1.csv",
-         "measured_hz": 23.16e3, "predicted_hz": (22.92e3, 23.40e3, 23.93e3), "error": 0.010, "inside": True},
+        CrossPrediction("paper_P1.csv", "paper_P2.csv", 23.95e3, (23.37e3, 23.90e3, 24.41e3), 23.2e3, {}, 0),
+        CrossPrediction("paper_P2.csv", "paper_P1.csv", 23.16e3, (22.92e3, 23.40e3, 23.93e3), 23.9e3, {}, 0),
     ]
     text = writers["case_study"](run, directions)
     assert "## Case study: the published plates" in text and "| paper_P1.csv | paper_P2.csv | 23.950 |" in text

@@ -120,7 +120,7 @@ def test_the_run_calibrates_on_the_published_and_the_users_plates_and_the_case_s
     assert run.figures_of("built_calibration")[0].name == "calibration/calibration_pairs.png"
     directions = loop.case_study(run)
     assert batches == [3 * SHORT.surrogate_points], "the case study evaluates nothing more"
-    assert [d["calibrated_on"] for d in directions] == ["P1", "P2"]
+    assert [d.calibrated_on for d in directions] == ["P1", "P2"]
 
 
 def test_robust_step_without_a_separated_stock_and_without_built_plates(beam_run):

@@ -66,12 +66,12 @@ def case_study_section(context: RunContext, directions) -> str:
     if directions is None:
         return ""
     rows = [
-        (d["calibrated_on"].split("/")[-1], d["predicted"].split("/")[-1], f"{d['measured_hz'] / KHZ:.3f}",
-         _khz(d["predicted_hz"]), f"{d['error'] * 100:+.2f} %", "yes" if d["inside"] else "no")
+        (d.calibrated_on.split("/")[-1], d.predicted.split("/")[-1], f"{d.measured / KHZ:.3f}",
+         _khz(d.band), f"{d.error * 100:+.2f} %", "yes" if d.inside else "no")
         for d in directions
     ]
-    inside = sum(d["inside"] for d in directions)
-    worst = max(abs(d["error"]) for d in directions)
+    inside = sum(d.inside for d in directions)
+    worst = max(abs(d.error) for d in directions)
     return (
         "## Case study: the published plates\n\n"
         "Each published plate's measured resonance (shipped with tactile, docs/calibration.md) calibrates the model "

@@ -73,7 +73,7 @@ class RunResults:
     loop_redesign: Optional["RobustDesign"] = None
     loop_second_plate: Any = None
     case_study: Optional[list] = None
-    """Each published plate calibrated on the other and predicted (a dict per direction)."""
+    """Each published plate calibrated on the other and predicted (a ``CrossPrediction`` per direction)."""
     analytical_maps: Optional[Dict[float, "DesignMap"]] = None
     fem_maps: Optional[Dict[float, "DesignMap"]] = None
     width_sweep: Optional["WidthSweep"] = None
