@@ -19,7 +19,44 @@ def design_envelope(design, law, softening: float) -> EnvelopeModel:
     return EnvelopeModel(frequency, deflection / (q * design.problem.voltage), law, softening)
 
 
-def electrical_load(result, law, deflection: float, voltage: float, voltage_limit: float) -> dict:
+@dataclass(frozen=True)
+class ElectricalLoad:
+    """The amplifier's load of a design at its working amplitude (SI).
+
+    Attributes
+    ----------
+    frequency : float
+        The coupled model's resonance [Hz].
+    q : float
+        Q(v) at the working amplitude [-].
+    voltage : float
+        Drive amplitude for the working deflection [V peak].
+    admittance : float
+        |Y| at the resonance with that Q [S].
+    current : float
+        |Y| V, the current amplitude [A].
+    power : float
+        Re(Y) V^2 / 2, the real power [W].
+    apparent_power : float
+        |Y| V^2 / 2 [VA].
+    peak_current : float
+        Bound on the current of a pre-compensated rise to the voltage limit [A].
+    voltage_limit : float
+        [V peak]
+    """
+
+    frequency: float
+    q: float
+    voltage: float
+    admittance: float
+    current: float
+    power: float
+    apparent_power: float
+    peak_current: float
+    voltage_limit: float
+
+
+def electrical_load(result, law, deflection: float, voltage: float, voltage_limit: float) -> ElectricalLoad:
     """The amplifier's load at the working amplitude, from the coupled FEM's admittance with Q(v) there.
 
     At the working deflection ``deflection`` [m] (reached with ``voltage`` [V peak]) the plate's
@@ -33,17 +70,17 @@ def electrical_load(result, law, deflection: float, voltage: float, voltage_limi
     q = float(law.quality_factor(2 * np.pi * frequency * deflection))
     admittance = complex(result.admittance(frequency, q))
     blocked = 2j * np.pi * frequency * (result.clamped_capacitance + result.charge_residual)
-    return {
-        "frequency_hz": frequency,
-        "q": q,
-        "voltage_v": voltage,
-        "admittance_s": abs(admittance),
-        "current_a": abs(admittance) * voltage,
-        "power_w": admittance.real * voltage**2 / 2,
-        "apparent_power_va": abs(admittance) * voltage**2 / 2,
-        "peak_current_a": abs(blocked) * voltage_limit + abs(admittance - blocked) * voltage,
-        "voltage_limit_v": voltage_limit,
-    }
+    return ElectricalLoad(
+        frequency=frequency,
+        q=q,
+        voltage=voltage,
+        admittance=abs(admittance),
+        current=abs(admittance) * voltage,
+        power=admittance.real * voltage**2 / 2,
+        apparent_power=abs(admittance) * voltage**2 / 2,
+        peak_current=abs(blocked) * voltage_limit + abs(admittance - blocked) * voltage,
+        voltage_limit=voltage_limit,
+    )
 
 
 @dataclass(frozen=True)
@@ -60,7 +97,7 @@ class DesignRendering:
     voltage_limit : float
         [V peak across the ceramics]
     search : PeriodSearch
-    electrical : dict
+    electrical : ElectricalLoad
         :func:`electrical_load` at the target deflection.
     """
 
@@ -68,7 +105,7 @@ class DesignRendering:
     levels: tuple
     voltage_limit: float
     search: object
-    electrical: dict
+    electrical: ElectricalLoad
 
     def periods(self, target: float, speeds=DESIGN_NOTE_SPEEDS) -> dict:
         """Speed [m/s] -> {"precompensated": (period [m], how), "plain": (period, how)}."""

@@ -334,9 +334,9 @@ def _texture_rendering(context: RunContext, renderings) -> str:
         rows.append((f"{hp / MM:g}", f"{float(rendering.model.carrier) / KHZ:.3f}", f"{slow * 1e3:.2f} / {fast * 1e3:.2f}",
                      *cells))
         e = rendering.electrical
-        loads.append((f"{hp / MM:g}", f"{e['frequency_hz'] / KHZ:.3f}", f"{e['voltage_v']:.2f}", f"{e['q']:.1f}",
-                      f"{e['admittance_s'] * 1e3:.1f}", f"{e['current_a']:.3f}", f"{e['power_w']:.2f}",
-                      f"{e['apparent_power_va']:.2f}", f"{e['peak_current_a']:.3f}"))
+        loads.append((f"{hp / MM:g}", f"{e.frequency / KHZ:.3f}", f"{e.voltage:.2f}", f"{e.q:.1f}",
+                      f"{e.admittance * 1e3:.1f}", f"{e.current:.3f}", f"{e.power:.2f}",
+                      f"{e.apparent_power:.2f}", f"{e.peak_current:.3f}"))
     return "\n\n".join([
         "## Texture rendering and the amplifier",
         f"A grating switches the deflection between {low / UM:g} µm (the least useful friction reduction) and "
