@@ -167,6 +167,9 @@ def test_calibrate_refuses_a_bad_settings_file_and_a_missing_calibration(tmp_pat
     assert main(["calibrate", str(log), "--out", str(tmp_path / "out"), "--config", str(config)]) == 2
     assert "low must be below high" in capsys.readouterr().err
     assert main(["evaluate", "--model", "fem", "--lambda-mm", "20", "--hi-mm", "0.7", "--hp-mm", "1",
+                 "--calibration", str(tmp_path / "none.json"), "--damping", str(tmp_path / "none.npz")]) == 2
+    assert "cannot be combined" in capsys.readouterr().err  # the calibrated band and Q(v)'s would share keys
+    assert main(["evaluate", "--model", "fem", "--lambda-mm", "20", "--hi-mm", "0.7", "--hp-mm", "1",
                  "--calibration", str(tmp_path / "none.json")]) == 2
     assert "--calibration" in capsys.readouterr().err
     (tmp_path / "other.json").write_text('{"format": "something else"}', encoding="utf-8")

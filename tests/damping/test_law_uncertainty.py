@@ -117,3 +117,17 @@ def test_the_shape_discrepancy_scales_each_samples_q_at_every_velocity_and_keeps
     if stacked:
         np.testing.assert_array_equal(widened.parameters["component"], posterior.parameters["component"])
         assert widened.parameters["threshold_v_t"] is posterior.parameters["threshold_v_t"]
+
+
+def test_a_posterior_at_the_q0_bound_still_reads_back_with_the_shape_discrepancy(tmp_path):
+    """A flexible law whose Q0 sits at the prior's upper bound (the data not reaching low velocities) is scaled within
+    the accepted range, so that the file fit-damping writes is one --damping reads."""
+    from workflow.damping.likelihood import Q0_RANGE
+    from workflow.damping.posterior import with_shape_discrepancy
+
+    n = 200
+    posterior = DampingPosterior("quadratic", {"q0": np.full(n, Q0_RANGE[1] * 0.999), "alpha": np.full(n, 0.25)})
+    widened = with_shape_discrepancy(posterior, 0.01, seed=1)
+    assert widened.parameters["q0"].max() == Q0_RANGE[1] and widened.parameters["q0"].min() < Q0_RANGE[1] * 0.99
+    path = save_posterior(widened, tmp_path / "posterior.npz", np.zeros((n, 1)), ["q0"])
+    np.testing.assert_array_equal(load_posterior(path).parameters["q0"], widened.parameters["q0"])

@@ -22,8 +22,8 @@ from workflow.cli.options import (
     plate_from_args,
     positive_float,
 )
-from workflow.errors import TactileError
 from workflow.calibration.calibration import predict
+from workflow.errors import TactileError
 from workflow.pipeline.calibration_files import calibrated_record
 from workflow.pipeline.records import evaluation_record
 from workflow.units import KHZ, MM, UM
@@ -52,6 +52,9 @@ def register(subparsers) -> None:
 
 
 def run(args) -> dict:
+    if args.calibration is not None and args.damping is not None:
+        raise TactileError("--calibration and --damping cannot be combined yet: the calibrated prediction uses the "
+                           "constant --q")
     plate = plate_from_args(args)
     calibration = load_calibration_option(args)
     model = design_model(args)

@@ -173,9 +173,10 @@ def ceramic_thicknesses(args) -> tuple:
 def design_problem(args, ceramic_thickness: float) -> DesignProblem:
     """The optimisation problem for one h_p from --b-mm, --hi-min-mm and --voltage."""
     hi_min = args.hi_min_mm * MM
-    low, high = materials.RESONATOR_THICKNESS_RANGE
-    if not low - 1e-12 <= hi_min < high:
-        raise GeometryError(f"--hi-min-mm {args.hi_min_mm:g} is outside {low / MM:g} to {high / MM:g} mm")
+    high = materials.RESONATOR_THICKNESS_RANGE[1]
+    if hi_min >= high:  # the parser checked the declared range; the box must keep some thickness above the minimum
+        raise GeometryError(f"--hi-min-mm {args.hi_min_mm:g} leaves no resonator thickness to optimise: give less than "
+                            f"{high / MM:g} mm")
     return DesignProblem(
         ceramic_thickness=ceramic_thickness,
         width=args.b_mm * MM,

@@ -43,9 +43,9 @@ class QuadraticLoss:
     alpha: float
     name: ClassVar[str] = "quadratic"
     velocity_exponent: ClassVar[int] = 2
-    loss_terms: ClassVar[tuple] = ("alpha",)
-    """Parameters that 1/Q is linear in, besides 1/Q0 [-]."""
     """p of the law's loss term alpha |v|^p [-]."""
+    loss_terms: ClassVar[tuple] = ("alpha",)
+    """Parameters 1/Q is linear in, besides 1/Q0 (:func:`scaled_parameters`)."""
     units: ClassVar[dict] = {"q0": "-", "alpha": "s^2/m^2"}
     """Parameter -> unit."""
 
@@ -151,8 +151,8 @@ class ThresholdLoss:
     onset: float = 0.2
     name: ClassVar[str] = "threshold"
     velocity_exponent: ClassVar[int] = 2
-    loss_terms: ClassVar[tuple] = ("alpha",)
     """p of the loss term far above the threshold, alpha (|v| - v_t)^p [-]."""
+    loss_terms: ClassVar[tuple] = ("alpha",)
     units: ClassVar[dict] = {"q0": "-", "alpha": "s^2/m^2", "v_t": "m/s", "onset": "-"}
     ONSET_RANGE: ClassVar[tuple] = (0.05, 1.0)
     """Range of the onset width the fit explores, s / v_t [-]: from a sharp corner to an onset spread over the whole
@@ -220,8 +220,8 @@ class MonotoneSpline:
     name: ClassVar[str] = "flexible"
     INCREMENTS: ClassVar[tuple] = ("d1", "d2", "d3", "d4", "d5", "d6", "d7", "d8")
     velocity_exponent: ClassVar[int] = 2
-    loss_terms: ClassVar[tuple] = INCREMENTS
     """The law is piecewise linear in v^p [-]."""
+    loss_terms: ClassVar[tuple] = INCREMENTS
     units: ClassVar[dict] = {"q0": "-", **{d: "-" for d in INCREMENTS}, "v_top": "m/s", "v_first": "m/s"}
 
     @classmethod

@@ -33,6 +33,8 @@ POSTERIOR_FILE = "posterior.npz"
 MAX_ALPHA = 1e12
 """Largest accepted loss coefficient alpha [s^2/m^2 or s/m]: the fit's prior bound for the quadratic law
 at the smallest peak velocity a log may have (1e-6 m/s)."""
+SCALED_RANGES = {"q0": Q0_RANGE, "alpha": (0.0, MAX_ALPHA)}
+"""Accepted ranges of the parameters a law-shape discrepancy scales (:func:`with_shape_discrepancy` keeps them)."""
 
 
 @dataclass(frozen=True)
@@ -105,13 +107,18 @@ def with_shape_discrepancy(posterior: DampingPosterior, sigma: float, seed: int 
     if sigma <= 0:
         return posterior
     factor = np.exp(np.random.default_rng(seed).normal(0.0, sigma, posterior.n_samples))
+
+    def scaled(law_name: str, parameters: dict) -> dict:
+        """The law's parameters scaled, Q0 and alpha kept in their accepted ranges (a sample at a bound stays there)."""
+        values = scaled_parameters(LAWS[law_name], parameters, factor)
+        return {p: np.clip(v, *SCALED_RANGES[p]) if p in SCALED_RANGES else v for p, v in values.items()}
+
     if posterior.law_name != StackedLaws.name:
-        return DampingPosterior(posterior.law_name,
-                                scaled_parameters(LAWS[posterior.law_name], posterior.parameters, factor), posterior.source)
+        return DampingPosterior(posterior.law_name, scaled(posterior.law_name, posterior.parameters), posterior.source)
     columns = dict(posterior.parameters)
     for name in STACKED_COMPONENTS:
         own = {p: columns[f"{name}_{p}"] for p in parameter_names(LAWS[name])}
-        columns.update({f"{name}_{p}": v for p, v in scaled_parameters(LAWS[name], own, factor).items()})
+        columns.update({f"{name}_{p}": v for p, v in scaled(name, own).items()})
     return DampingPosterior(posterior.law_name, columns, posterior.source)
 
 
@@ -203,8 +210,7 @@ def load_posterior(path) -> DampingPosterior:
         raise InputFileError(f"{path}: parameters {names} do not match the {law_name} law ({expected})")
     if not np.all(np.isfinite(samples)):
         raise InputFileError(f"{path}: non-finite posterior samples")
-    ranges = {"q0": Q0_RANGE, "alpha": (0.0, MAX_ALPHA), "onset": ThresholdLoss.ONSET_RANGE,
-              "component": (0, len(STACKED_COMPONENTS) - 1)}
+    ranges = {**SCALED_RANGES, "onset": ThresholdLoss.ONSET_RANGE, "component": (0, len(STACKED_COMPONENTS) - 1)}
     for i, name in enumerate(names):
         own = name.split("_", 1)[1] if law_name == StackedLaws.name and name != "component" else name
         low, high = ranges.get(own, (-np.inf, np.inf))

@@ -29,7 +29,7 @@ from workflow.damping.laws import POSTERIOR_LAWS, law_parameters
 from workflow.damping.posterior import DampingPosterior
 from workflow.models import analytical, materials
 from workflow.models.plate import ORIGINAL_PLATE, Plate
-from workflow.models.response import PlateResponse, ScaledResponse, StackedResponse
+from workflow.models.response import PlateResponse, ScaledResponse
 from workflow.optimise.maps import grid_axes
 from workflow.optimise.problem import DesignProblem, Optimum, PlateModel, maximise_deflection
 
@@ -150,10 +150,10 @@ class DampedFemModel:
 
     def responses(self, plate: Plate):
         """Deflection with Q(v) [m], frequency [Hz] and transverse indicator [-] of each plate's best mode."""
-        results = tuple(self.results(plate))
-        response = ScaledResponse(StackedResponse(results, plate.batch_shape), self.voltage / self.fem_model.voltage)
-        indicator = np.reshape([r.best.transverse_indicator for r in results], plate.batch_shape)
-        return damped_deflection(response, self.law), response.frequency, indicator
+        batch = self.fem_model.response(plate)
+        indicator = np.reshape([r.best.transverse_indicator for r in batch.responses], plate.batch_shape)
+        return damped_deflection(ScaledResponse(batch, self.voltage / self.fem_model.voltage), self.law), \
+            batch.frequency, indicator
 
     def __call__(self, plate: Plate):
         return self.responses(plate)[:2]

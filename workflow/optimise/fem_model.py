@@ -153,7 +153,8 @@ class FemModel:
 
     def response(self, plate: Plate, voltage: float | None = None) -> PlateResponse:
         """The working modes of a batch of plates as one batched :class:`~workflow.models.response.PlateResponse`
-        (each geometry's best mode), at ``voltage`` [V peak] (default: the model's)."""
+        (each geometry's best mode), at ``voltage`` [V peak]; without it the
+        :class:`~workflow.models.response.StackedResponse` of the results at the model's voltage."""
         batch = StackedResponse(tuple(self.results(plate)), plate.batch_shape)
         return batch if voltage is None else ScaledResponse(batch, voltage / self.voltage)
 

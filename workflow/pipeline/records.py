@@ -52,8 +52,8 @@ def grid_record(model: str, problem: DesignProblem, grids) -> dict:
     :class:`~workflow.optimise.damped.DampedMaps`."""
     return {
         "model": model,
-        "h_p_mm": problem.ceramic_thickness / MM,
-        "b_mm": problem.width / MM,
+        "h_p_mm": round(problem.ceramic_thickness / MM, 9),  # as given: no rounding noise of the mm -> m -> mm trip
+        "b_mm": round(problem.width / MM, 9),
         "lambda_mm": (grids.wavelength / MM).tolist(),
         "h_i_mm": (grids.resonator_thickness / MM).tolist(),
         "w_dyn_um": (grids.deflection / UM).tolist(),

@@ -13,8 +13,6 @@ from workflow.pipeline.design_models import DESIGN_MODELS  # noqa: E402
 from workflow.pipeline.figures.marks import legend_below, mark_design_limits  # noqa: E402
 from workflow.units import KHZ, MM, UM  # noqa: E402
 
-
-
 WIDTH_SWEEP_FILE = "width_sweep_fem.png"
 """File name of the width sweep's figure (``tactile maps --width-sweep`` and ``tactile run``)."""
 
