@@ -92,7 +92,7 @@ class DesignModel:
     """What the design models share: the optimum with the posterior's intervals and the Q(v) maps, written once on
     each model's :meth:`response` (its working mode as a :class:`~workflow.models.response.PlateResponse`) and
     :meth:`search` (its optimiser, with constant Q or with a Q(v) law).  Results are typed (:class:`Evaluation`,
-    :class:`DesignOptimum`, SI); their JSON keys are :mod:`workflow.pipeline.records`'."""
+    :class:`DesignOptimum`, SI); their JSON keys are written by :mod:`workflow.pipeline.records`."""
 
     name: str
     model_label: str
