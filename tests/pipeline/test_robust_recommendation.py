@@ -104,7 +104,7 @@ def beam_run(tmp_path, monkeypatch):
     config = default_config()
     config["recommendation"].update(built_plates=[str(own)], stock_hi_mm=[0.75, 1.0])
     run = RunContext(config=config, out=tmp_path / "run", cache=EvaluationCache(tmp_path / "cache"))
-    run.results.recommended_design = types.SimpleNamespace(designs={1 * MM: types.SimpleNamespace(plate=NOMINAL, model="FEM")})
+    run.results.recommended_design = types.SimpleNamespace(designs={1 * MM: types.SimpleNamespace(plate=NOMINAL, model="fem")})
     return run, batches
 
 

@@ -144,6 +144,8 @@ class BeamDesignModel(DesignModel):
     """The beam model does not depend on the plate's width b: no width sweep."""
     calibrated = False
     """A calibration corrects the FEM, not this model."""
+    discretised = False
+    """Closed form: no discretisation error to estimate."""
 
     @classmethod
     def for_command(cls, q: float, voltage: float, make_fem) -> "BeamDesignModel":
@@ -187,6 +189,8 @@ class FemDesignModel(DesignModel):
     """Each point of a map is its own evaluation: the contours interpolate between them (the figures mark them)."""
     resolves_width = True
     calibrated = True
+    discretised = True
+    """A mesh: its values carry a discretisation error (estimated when it runs to an accuracy)."""
 
     @classmethod
     def for_command(cls, q: float, voltage: float, make_fem) -> "FemDesignModel":

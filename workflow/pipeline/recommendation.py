@@ -21,6 +21,7 @@ from workflow.optimise.damped import (
 )
 from workflow.optimise.maps import TRANSVERSE_THRESHOLD
 from workflow.optimise.problem import FREQUENCY_SLACK, DesignProblem
+from workflow.pipeline.design_models import DESIGN_MODELS, BeamDesignModel, FemDesignModel
 
 
 
@@ -34,8 +35,9 @@ class RecommendedDesign:
     plate : Plate
         Geometry to build [m].
     model : str
-        "FEM" (the FEM optimum by space mapping, numbers from the FEM at that geometry) or
-        "beam" (the beam optimum with Q(v), numbers from the beam model).
+        The name of the design model (:data:`~workflow.pipeline.design_models.DESIGN_MODELS`) behind the numbers:
+        "fem" (the FEM optimum by space mapping, numbers from the FEM at that geometry) or "analytical" (the beam
+        optimum with Q(v), numbers from the beam model).
     problem : DesignProblem
         Design voltage [V] and frequency limit [Hz].
     target : float
@@ -144,7 +146,7 @@ class Recommendation:
     def margin_within_mesh_error(self, design: RecommendedDesign) -> bool:
         """Whether a FEM design's frequency margin is smaller than its estimated discretisation error
         (or unknown: a FEM design on a fixed mesh)."""
-        if design.model != "FEM":
+        if not DESIGN_MODELS[design.model].discretised:
             return False
         error = design.frequency_error
         return error is None or design.frequency_margin < abs(error) * design.frequency
@@ -184,7 +186,7 @@ def fem_recommendation(result, plate: Plate, problem: DesignProblem, draws, targ
     """
     return RecommendedDesign(
         plate=plate,
-        model="FEM",
+        model=FemDesignModel.name,
         problem=problem,
         target=target,
         frequency=result.frequency,
@@ -221,7 +223,7 @@ def beam_recommendation(plate: Plate, problem: DesignProblem, draws, target: flo
     response = analytical.beam_response(plate, problem.voltage)
     return RecommendedDesign(
         plate=plate,
-        model="beam",
+        model=BeamDesignModel.name,
         problem=problem,
         target=target,
         frequency=float(response.frequency),

@@ -122,11 +122,11 @@ def recommendation_section(recommendation, heading: str = "Recommended design", 
     """The report's "Recommended design" section (or its ``heading``, its text opening with ``preface``) from a
     :class:`~workflow.pipeline.recommendation.Recommendation`."""
     designs = recommendation.designs
-    rows = [(f"{hp / MM:g}", _SOURCES[d.model], d) for hp, d in designs.items()]
+    rows = [(f"{hp / MM:g}", DESIGN_MODELS[d.model].model_label, d) for hp, d in designs.items()]
     original = recommendation.original
     if original is not None:
         label = f"{original.plate.ceramic_thickness / MM:g} (original plate)"
-        rows.append((label, f"{_SOURCES[original.model]} (reference)", original))
+        rows.append((label, f"{DESIGN_MODELS[original.model].model_label} (reference)", original))
     if not rows:
         return ""
     problem, target = rows[0][2].problem, rows[0][2].target / UM
@@ -160,7 +160,7 @@ def recommendation_section(recommendation, heading: str = "Recommended design", 
         "frequency minus the working mode's. A working mode marked *mixed* is itself partly transverse.",
         INTERVAL_MEANING,
     ]
-    fem = [(label, d) for label, _, d in rows if d.model == "FEM"]
+    fem = [(label, d) for label, _, d in rows if DESIGN_MODELS[d.model].discretised]
     if fem:
         text.append(_mesh_accuracy(fem, recommendation))
     text.append(_beam_and_fem(designs))
@@ -176,10 +176,6 @@ INTERVAL_MEANING = (
     "model's, without an interval."
 )
 """What the recommended-design table's intervals contain and not (issue 29)."""
-
-_SOURCES = {"FEM": "FEM", "beam": "beam model"}
-"""How the table names the model behind a row."""
-
 
 def _verdict(recommendation) -> str:
     """Which h_p meet the goal, and why the others do not."""

@@ -21,6 +21,7 @@ from workflow.errors import InfeasibleError
 from workflow.models.materials import WAVELENGTH_RANGE
 from workflow.models.plate import Plate
 from workflow.optimise.robust import RobustCandidate, RobustSettings
+from workflow.pipeline.design_models import DESIGN_MODELS
 from workflow.pipeline.recommendation import RecommendedDesign
 from workflow.pipeline.runner import RunContext
 from workflow.units import KHZ, MM, UM
@@ -262,7 +263,7 @@ def robust_recommendation(context: RunContext) -> Optional[RobustRecommendation]
     nominals = {hp: d.plate for hp, d in designs.items()}
     stock = [t * MM for t in section["stock_hi_mm"] if design["hi_min_mm"] - 1e-9 <= t <= design["hi_max_mm"] + 1e-9]
     wavelengths = (design["wavelength_min_mm"] * MM, design["wavelength_max_mm"] * MM)
-    sources = {hp: "FEM" if d.model == "FEM" else "beam model" for hp, d in designs.items()}
+    sources = {hp: DESIGN_MODELS[d.model].model_label for hp, d in designs.items()}
     choices = robust_choices(built.calibration, nominals, stock, section["stocks_per_design"], settings,
                              model.design_fem(), design["q"], damped_evaluation(context), wavelengths, sources)
     return RobustRecommendation(choices, built.names, settings, design["q"])
