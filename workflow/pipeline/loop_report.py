@@ -1,14 +1,9 @@
 """The report's sections on the loop of ``tactile run`` and on the published plates (:mod:`workflow.pipeline.loop`)."""
 
 from workflow.pipeline.loop import LOOP_FOLDER
-from workflow.pipeline.markdown import step_figures, table
+from workflow.pipeline.markdown import median_band, step_figures, table
 from workflow.pipeline.runner import RunContext
 from workflow.units import KHZ, MM
-
-
-def _khz(values) -> str:
-    """'median (p05 to p95)' of (p05, p50, p95) [Hz] in kHz."""
-    return f"{values[1] / KHZ:.3f} ({values[0] / KHZ:.3f} to {values[2] / KHZ:.3f})"
 
 
 def _geometry(plate) -> str:
@@ -33,8 +28,8 @@ def loop_section(context: RunContext, second) -> str:
         ("1. design (plate #1, nominal FEM)", _geometry(first.plate), f"{first.nominal_frequency / KHZ:.3f}", ""),
         ("2. plate #1 built, measured", "", f"{first.measured_frequency / KHZ:.3f}",
          f"{verdict(first.measured_frequency)} {minimum / KHZ:g} kHz"),
-        ("3. calibrated prediction of plate #1 (90 %)", "", _khz(predicted), ""),
-        (f"4. robust re-design (P ≥ {reliability:g}; stock h_i)", _geometry(best.plate), _khz(best.frequency),
+        ("3. calibrated prediction of plate #1 (90 %)", "", median_band(predicted, KHZ), ""),
+        (f"4. robust re-design (P ≥ {reliability:g}; stock h_i)", _geometry(best.plate), median_band(best.frequency, KHZ),
          f"P(f_r ≥ {minimum / KHZ:g} kHz) = {best.probability:.3f} ± {best.probability_error:.3f}"),
         ("5. re-designed plate built, measured", "", f"{second.measured_frequency / KHZ:.3f}",
          f"{verdict(second.measured_frequency)} {minimum / KHZ:g} kHz"),
@@ -67,7 +62,7 @@ def case_study_section(context: RunContext, directions) -> str:
         return ""
     rows = [
         (d.calibrated_on.split("/")[-1], d.predicted.split("/")[-1], f"{d.measured / KHZ:.3f}",
-         _khz(d.band), f"{d.error * 100:+.2f} %", "yes" if d.inside else "no")
+         median_band(d.band, KHZ), f"{d.error * 100:+.2f} %", "yes" if d.inside else "no")
         for d in directions
     ]
     inside = sum(d.inside for d in directions)

@@ -30,3 +30,9 @@ def relative_link(context: RunContext, path) -> str:
         return path.relative_to(context.out.resolve()).as_posix()
     except ValueError:
         return path.as_uri()
+
+
+def median_band(values, unit: float = 1.0, digits: int = 3) -> str:
+    """'median (p05 to p95)' of (p05, p50, p95) in ``unit``."""
+    low, median, high = (float(v) / unit for v in values)
+    return f"{median:.{digits}f} ({low:.{digits}f} to {high:.{digits}f})"

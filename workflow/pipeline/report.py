@@ -10,7 +10,7 @@ from workflow.optimise.damped import QUANTILES
 from workflow.optimise.maps import TRANSVERSE_THRESHOLD
 from workflow.pipeline.design_models import DESIGN_MODELS
 from workflow.pipeline.loop_report import case_study_section, loop_section
-from workflow.pipeline.markdown import relative_link, step_figures, table
+from workflow.pipeline.markdown import median_band, relative_link, step_figures, table
 from workflow.pipeline.robust_report import robust_section
 from workflow.pipeline.runner import RunContext
 from workflow.units import KHZ, MM, UM
@@ -368,11 +368,8 @@ def _calibrated_designs(context: RunContext, predictions) -> str:
         return ""
     designs = context.results.recommended_design.designs
 
-    def band(values, unit, digits=3) -> str:
-        low, median, high = np.asarray(values) / unit
-        return f"{median:.{digits}f} ({low:.{digits}f} to {high:.{digits}f})"
-
-    rows = [(f"{hp / MM:g}", f"{designs[hp].frequency / KHZ:.3f}", band(p.frequency, KHZ), band(p.deflection, UM))
+    rows = [(f"{hp / MM:g}", f"{designs[hp].frequency / KHZ:.3f}", median_band(p.frequency, KHZ),
+             median_band(p.deflection, UM))
             for hp, p in sorted(predictions.items())]
     return (
         "## The designs as the calibration predicts them\n\n"
@@ -554,8 +551,7 @@ def _damped_design(context: RunContext, result) -> str:
     design, _ = result
 
     def spread(values, unit=1.0, digits=3):
-        p05, p50, p95 = np.quantile(values, QUANTILES) / unit
-        return f"{p50:.{digits}f} [{p05:.{digits}f}, {p95:.{digits}f}]"
+        return _interval(np.quantile(values, QUANTILES), unit, digits)
 
     rows = []
     for h_p, o in design.optima.items():
@@ -565,10 +561,10 @@ def _damped_design(context: RunContext, result) -> str:
                 f"{h_p / MM:g}",
                 f"{float(constant.plate.wavelength) / MM:.2f} / {float(constant.plate.resonator_thickness) / MM:.3f}",
                 f"{constant.deflection / UM:.3f}",
-                f"{spread(o.draws['wavelength'], MM, 2)} / {spread(o.draws['resonator_thickness'], MM)}",
-                spread(o.draws["deflection"], UM),
+                f"{_interval(o.interval('wavelength'), MM, 2)} / {_interval(o.interval('resonator_thickness'), MM, 3)}",
+                _interval(o.interval("deflection"), UM, 3),
                 f"{damped.frequency / KHZ:.2f}",
-                spread(o.draws["required_voltage"], digits=2),
+                _interval(o.interval("required_voltage"), 1.0, 2),
             )
         )
     target = design.target / UM
