@@ -14,6 +14,7 @@ import sys
 
 from workflow.cli.options import Stopped
 from workflow.errors import TactileError
+from workflow.execution.memory import keep_freed_memory
 from workflow.serialise import json_line
 
 COMMANDS = ("evaluate", "optimize", "maps", "fit_damping", "calibrate", "simulate", "measure", "render", "run")
@@ -81,6 +82,7 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(_named_command(argv))
     args = parser.parse_args(argv)
+    keep_freed_memory()  # the FEM's large arrays reused instead of fresh pages (workflow/execution/memory.py)
     try:
         result = args.handler(args)
     except TactileError as error:

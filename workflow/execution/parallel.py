@@ -22,6 +22,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Callable, Iterable, List, Optional
 
 from workflow.errors import TactileError
+from workflow.execution.memory import keep_freed_memory
 from workflow.progress import Progress
 
 SYNCHRONOUS = "synchronous"
@@ -125,6 +126,7 @@ def _share_cores(threads: int) -> None:
     took 40-41 s so, 30-34 s with one thread per worker; docs/scaling.md)."""
     from threadpoolctl import threadpool_limits
 
+    keep_freed_memory()  # inherited from a forked parent that set it; set here for spawned workers
     for name in THREAD_VARIABLES:  # for the libraries this worker loads later (MKL is loaded when first used)
         os.environ[name] = str(threads)
     _worker_limits.append(threadpool_limits(limits=threads))  # for those already loaded
