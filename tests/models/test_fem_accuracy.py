@@ -1,5 +1,7 @@
 """Accuracy control of the FEM: meshes that follow the geometry and error estimates that hold."""
 
+from dataclasses import dataclass
+
 import numpy as np
 import pytest
 
@@ -8,6 +10,7 @@ from workflow.models.fem import evaluate_fem
 from workflow.models.fem.accuracy import (
     LEVELS,
     RICHARDSON_RATE,
+    ErrorEstimate,
     FemAccuracy,
     estimate_error,
     evaluate_to_accuracy,
@@ -115,6 +118,36 @@ def test_evaluate_to_accuracy_refines_until_the_estimate_meets_the_target(small_
     assert asked[:2] == [3, 4] and tight.error.level > 4 and tight.error.met
     assert abs(tight.error.frequency) <= 0.002
     assert tight.frequency == small_thin_ladder[tight.error.level].frequency
+
+
+@dataclass(frozen=True)
+class _Level:
+    """What evaluate_to_accuracy reads of a level's result when the estimate is given."""
+
+    solution: object = None
+    error: object = None
+
+
+def test_an_estimate_against_degree_2_steps_one_level_and_later_ones_jump(monkeypatch):
+    """Degree 2 is not asymptotic: a miss of degree 3 against it goes to degree 4 (not to the degree its estimate
+    predicts, 6 here), and a miss of degree 4 against 3 jumps as far as its estimate says (6)."""
+    from workflow.models.fem import accuracy
+
+    estimates = {(3, 2): 0.03, (4, 3): 0.004}
+    monkeypatch.setattr(accuracy, "estimate_error", lambda fine, coarse, level, coarse_level, target: ErrorEstimate(
+        estimates[level, coarse_level], 0.0, level, coarse_level, 0.0, 0.0, 1.0, target))
+    asked = []
+
+    def evaluate_mesh(mesh, trial):
+        asked.append(int(mesh.element.split("-")[1]))
+        return _Level()
+
+    survey = evaluate_to_accuracy(SMALL_THIN, FemAccuracy(target=0.005, max_level=6), evaluate_mesh)
+    assert next_level(3, 0.03, 0.005, 6) == 6 and asked == [2, 3, 4] and survey.error.level == 4
+    asked.clear()
+    estimates[4, 3], estimates[6, 4] = 0.02, 0.001
+    evaluate_to_accuracy(SMALL_THIN, FemAccuracy(target=0.002, max_level=6), evaluate_mesh)
+    assert asked == [3, 4, 6]
 
 
 def test_an_unmet_accuracy_says_so(small_thin_ladder):

@@ -46,6 +46,11 @@ RICHARDSON_RATE = 2.0
 """Assumed convergence rate p of the frequency and deflection in the degree [-]: below the lowest observed, 2.15 on a
 thin one-ceramic plate at degrees 4-6 (2.5 at degrees 3-5, 3 and more on the designs; tests/models/test_fem_accuracy.py
 checks it)."""
+ASYMPTOTIC_LEVEL = 3
+"""Lowest degree whose pairing with the one below gives a Richardson estimate to extrapolate from [-]: degree 2 is not
+yet asymptotic (the original plate's frequency rises from degree 2 to 3, then falls; docs/fem.md), so an estimate of
+degree 3 against 2 that misses the target only says "one level more", not how many (it predicted degree 5 where
+degree 4 met the target, see :func:`evaluate_to_accuracy`)."""
 DEFAULT_ACCURACY = 2e-3
 """Default target relative frequency error of an FEM evaluation [-] (0.2 %)."""
 SURVEY_ACCURACY = 5e-3
@@ -299,6 +304,9 @@ def next_level(level: int, relative_error: float, target: float, max_level: int)
 def evaluate_to_accuracy(plate: Plate, accuracy: FemAccuracy, evaluate_mesh: Callable, keep_solution: bool = False):
     """Raise the degree of the mesh of ``plate`` until the estimated frequency error meets ``accuracy.target``.
 
+    Each step goes to the lowest degree predicted to meet the target at :data:`RICHARDSON_RATE` (:func:`next_level`),
+    or one degree up after an estimate against a degree below :data:`ASYMPTOTIC_LEVEL`.
+
     Parameters
     ----------
     plate : Plate
@@ -330,8 +338,9 @@ def evaluate_to_accuracy(plate: Plate, accuracy: FemAccuracy, evaluate_mesh: Cal
         estimate = estimate_error(fine, coarse, level, coarse_level, accuracy.target)
         if estimate.met or level >= max_level:
             return replace(fine, error=estimate, solution=fine.solution if keep_solution else None)
+        asymptotic = coarse_level >= ASYMPTOTIC_LEVEL
         coarse, coarse_level = fine, level
-        level = next_level(level, estimate.frequency, accuracy.target, max_level)
+        level = next_level(level, estimate.frequency, accuracy.target, max_level if asymptotic else level + 1)
 
 
 def _fits(plate: Plate, level: int, accuracy: FemAccuracy) -> bool:
