@@ -37,10 +37,10 @@ from workflow.models.plate import Plate
 from workflow.optimise.fem_model import FemModel
 from workflow.optimise.robust import (
     RobustSettings,
-    _robust_plate,
     fit_robust_surrogate,
     robust_design_points,
     robust_inputs,
+    robust_plate,
 )
 
 NOMINAL_HP1 = Plate(21.577e-3, 0.930e-3, 1.0e-3, 49e-3)
@@ -124,7 +124,7 @@ def main() -> dict:
         design = robust_design_points(calibration, nominal, RobustSettings(), True)
         fresh = latin_hypercube(args.fresh + 1, design.bounds, 101)[1:]
         boxes[f"robust h_p 1 mm, h_i {stock * 1e3:g} mm"] = compare(
-            work, f"robust{stock * 1e3:g}", design, [_robust_plate(nominal, names, t) for t in fresh], fresh,
+            work, f"robust{stock * 1e3:g}", design, [robust_plate(nominal, names, t) for t in fresh], fresh,
             robust_fit)
     total = {way: sum(box[way]["seconds"] for box in boxes.values()) for way in ("survey", "accurate", "two_level")}
     result = {"boxes": boxes, "total_seconds": total,

@@ -183,8 +183,9 @@ def scattered_draws(calibration: Calibration, plate: Plate, tolerances: Toleranc
     return np.column_stack([log_lambda, theta, offset, rng.normal(0, calibration.discrepancy[chosen])])
 
 
-def _robust_plate(plate: Plate, names: Sequence[str], point) -> Plate:
-    """The plate at one robust input (ln lambda, parameters..., h_p offset)."""
+def robust_plate(plate: Plate, names: Sequence[str], point) -> Plate:
+    """The plate at one robust input: ``point`` = (ln(lambda [m]), the calibration parameters ``names`` in their units,
+    the ceramic thickness's offset [m]) applied to ``plate`` [m]."""
     moved = plate.with_(wavelength=float(np.exp(point[0])), ceramic_thickness=float(plate.ceramic_thickness) + point[-1])
     return deviated_plate(moved, names, point[1:-1])
 
@@ -262,7 +263,7 @@ def robust_design_points(calibration: Calibration, plate: Plate, settings: Robus
     half_hp = max(3 * tol.ceramic_thickness, 1e-6)
     bounds = np.vstack([np.log(np.array(LAMBDA_BOX) * guess), np.column_stack([low, high]), [-half_hp, half_hp]])
     points = latin_hypercube(prediction_points(len(bounds) - 1), bounds, settings.seed)
-    return SurrogateDesign(points, bounds, tuple(_robust_plate(plate, names, point) for point in points))
+    return SurrogateDesign(points, bounds, tuple(robust_plate(plate, names, point) for point in points))
 
 
 def fit_robust_surrogate(design: SurrogateDesign, values: DesignValues) -> RobustSurrogate:
