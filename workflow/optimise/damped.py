@@ -152,8 +152,8 @@ class DampedFemModel:
         """Deflection with Q(v) [m], frequency [Hz] and transverse indicator [-] of each plate's best mode."""
         batch = self.fem_model.response(plate)
         indicator = np.reshape([r.best.transverse_indicator for r in batch.responses], plate.batch_shape)
-        return damped_deflection(ScaledResponse(batch, self.voltage / self.fem_model.voltage), self.law), \
-            batch.frequency, indicator
+        deflection = damped_deflection(ScaledResponse(batch, self.voltage / self.fem_model.voltage), self.law)
+        return deflection, batch.frequency, indicator
 
     def __call__(self, plate: Plate):
         return self.responses(plate)[:2]

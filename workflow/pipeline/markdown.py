@@ -33,6 +33,12 @@ def relative_link(context: RunContext, path) -> str:
 
 
 def median_band(values, unit: float = 1.0, digits: int = 3) -> str:
-    """'median (p05 to p95)' of (p05, p50, p95) in ``unit``."""
+    """'median (p05 to p95)' of (p05, p50, p95) in ``unit`` (the calibrated predictions' notation)."""
     low, median, high = (float(v) / unit for v in values)
     return f"{median:.{digits}f} ({low:.{digits}f} to {high:.{digits}f})"
+
+
+def median_interval(values, unit: float = 1.0, digits: int = 3) -> str:
+    """'median [p05, p95]' of (p05, p50, p95) in ``unit`` (the designs' and the fit's notation)."""
+    low, median, high = (float(v) / unit for v in values)
+    return f"{median:.{digits}f} [{low:.{digits}f}, {high:.{digits}f}]"

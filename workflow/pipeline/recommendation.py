@@ -25,7 +25,6 @@ from workflow.pipeline.design_models import DESIGN_MODELS, BeamDesignModel, FemD
 
 
 
-
 @dataclass(frozen=True)
 class RecommendedDesign:
     """The plate to build for one h_p and how it performs with the fitted Q(v).

@@ -10,7 +10,7 @@ from workflow.optimise.damped import QUANTILES
 from workflow.optimise.maps import TRANSVERSE_THRESHOLD
 from workflow.pipeline.design_models import DESIGN_MODELS
 from workflow.pipeline.loop_report import case_study_section, loop_section
-from workflow.pipeline.markdown import median_band, relative_link, step_figures, table
+from workflow.pipeline.markdown import median_band, median_interval, relative_link, step_figures, table
 from workflow.pipeline.robust_report import robust_section
 from workflow.pipeline.runner import RunContext
 from workflow.units import KHZ, MM, UM
@@ -210,11 +210,6 @@ def _thicknesses(values) -> str:
     return ", ".join(f"{hp / MM:g}" for hp in values)
 
 
-def _interval(values, unit: float, digits: int) -> str:
-    p05, p50, p95 = (v / unit for v in values)
-    return f"{p50:.{digits}f} [{p05:.{digits}f}, {p95:.{digits}f}]"
-
-
 def _shortfall(design) -> str:
     """Why a design misses the goal."""
     reasons = []
@@ -248,8 +243,8 @@ def _recommendation_row(label: str, source: str, design, recommendation) -> tupl
         f"{plate.resonator_thickness / MM:.3f}",
         f"{plate.length / MM:.1f}",
         f"{plate.width / MM:g}",
-        _interval(design.deflection, UM, 3),
-        _interval(design.required_voltage, 1.0, 2),
+        median_interval(design.deflection, UM, 3),
+        median_interval(design.required_voltage, 1.0, 2),
         f"{design.frequency / KHZ:.3f}" + ("" if design.frequency_error is None else f" (±{100 * abs(design.frequency_error):.2f} %)"),
         margin,
         indicator,
@@ -537,7 +532,7 @@ def _ringdowns(summary: dict) -> str:
     if not len(agreement["v_m_s"]):
         return text + "The sweeps and the ring-downs cover no common velocity range: their Q(v) are not compared.\n\n"
     def band(side, i, digits):
-        return _interval([agreement[side][key][i] for key in ("q_p05", "q_p50", "q_p95")], 1, digits)
+        return median_interval([agreement[side][key][i] for key in ("q_p05", "q_p50", "q_p95")], 1, digits)
 
     compared = [(f"{v:.3f}", band("sweeps", i, 1), band("ringdowns", i, 2), f"{agreement['z'][i]:+.2f}")
                 for i, v in enumerate(agreement["v_m_s"])]
@@ -551,7 +546,7 @@ def _damped_design(context: RunContext, result) -> str:
     design, _ = result
 
     def spread(values, unit=1.0, digits=3):
-        return _interval(np.quantile(values, QUANTILES), unit, digits)
+        return median_interval(np.quantile(values, QUANTILES), unit, digits)
 
     rows = []
     for h_p, o in design.optima.items():
@@ -561,10 +556,11 @@ def _damped_design(context: RunContext, result) -> str:
                 f"{h_p / MM:g}",
                 f"{float(constant.plate.wavelength) / MM:.2f} / {float(constant.plate.resonator_thickness) / MM:.3f}",
                 f"{constant.deflection / UM:.3f}",
-                f"{_interval(o.interval('wavelength'), MM, 2)} / {_interval(o.interval('resonator_thickness'), MM, 3)}",
-                _interval(o.interval("deflection"), UM, 3),
+                f"{median_interval(o.interval('wavelength'), MM, 2)} / "
+                f"{median_interval(o.interval('resonator_thickness'), MM, 3)}",
+                median_interval(o.interval("deflection"), UM, 3),
                 f"{damped.frequency / KHZ:.2f}",
-                _interval(o.interval("required_voltage"), 1.0, 2),
+                median_interval(o.interval("required_voltage"), 1.0, 2),
             )
         )
     target = design.target / UM
