@@ -7,7 +7,7 @@ factor, the Krylov blocks): `tactile run` spent 258 of its 1169 s of CPU time in
 raises the thresholds so that such arrays come from the heap and freed ones are reused: measured with ``python
 bench/bench_allocator.py`` (docs/fem.md, "Speed"), a repeated evaluation at 0.2 % is 1.13-1.17 times faster (system
 time 0.3-0.5 s -> 0.07-0.2 s), a first one gains nothing; a process's peak memory rose by 0.13-0.19 GB and the run's
-by 1.2 GB (10.4 -> 11.6 GB), its wall time 11 min 09 s -> 10 min 46 s.
+by 1.2 GB (10.4 -> 11.6 GB), its wall time (11 min 09 s -> 10 min 38 s to 11 min 13 s) not beyond its scatter.
 """
 
 import ctypes
